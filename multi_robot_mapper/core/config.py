@@ -1,0 +1,222 @@
+"""Typed configuration as data.
+
+Every component has one frozen dataclass whose fields carry their default, unit, meaning and
+bounds. The same functions load it from a flat ``{"section.name": value}`` mapping, whatever
+that mapping came from: ROS parameters, a YAML file in ``config/`` or ``mrm --set`` options.
+Values are validated on load and errors name the parameter, the value and the rule broken.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from collections.abc import Mapping
+from typing import Any, TypeVar
+
+C = TypeVar("C")
+
+_SCALAR_TYPES: dict[str, type] = {"float": float, "int": int, "bool": bool, "str": str}
+
+
+class ConfigError(ValueError):
+    """A configuration value is unknown, of the wrong type or out of bounds."""
+
+
+def param(
+    default: Any,
+    *,
+    unit: str,
+    doc: str,
+    minimum: float | None = None,
+    maximum: float | None = None,
+    exclusive_minimum: bool = False,
+    choices: tuple[str, ...] | None = None,
+) -> Any:
+    """A documented configuration field (use as a dataclass field default)."""
+    metadata = {
+        "unit": unit,
+        "doc": doc,
+        "minimum": minimum,
+        "maximum": maximum,
+        "exclusive_minimum": exclusive_minimum,
+        "choices": choices,
+    }
+    return dataclasses.field(default=default, metadata=metadata)
+
+
+@dataclasses.dataclass(frozen=True)
+class FieldSpec:
+    """Everything known about one scalar configuration field, by its dotted name."""
+
+    name: str
+    kind: type
+    default: Any
+    unit: str
+    doc: str
+    minimum: float | None
+    maximum: float | None
+    exclusive_minimum: bool
+    choices: tuple[str, ...] | None
+
+    def describe(self) -> str:
+        """One line for ROS parameter descriptors and ``--help``."""
+        bounds = ""
+        if self.choices:
+            bounds = f" One of: {', '.join(self.choices)}."
+        elif self.minimum is not None or self.maximum is not None:
+            low = "(" if self.exclusive_minimum else "["
+            lo = "-inf" if self.minimum is None else f"{self.minimum:g}"
+            hi = "inf" if self.maximum is None else f"{self.maximum:g}"
+            bounds = f" Range {low}{lo}, {hi}]."
+        unit = f" [{self.unit}]" if self.unit else ""
+        return f"{self.doc}{unit}.{bounds}"
+
+
+def _resolved_hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def field_specs(cls: type, prefix: str = "") -> list[FieldSpec]:
+    """The scalar fields of a (possibly nested) config dataclass, with dotted names."""
+    specs: list[FieldSpec] = []
+    hints = _resolved_hints(cls)
+    for f in dataclasses.fields(cls):
+        kind = hints[f.name]
+        name = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(kind):
+            specs.extend(field_specs(typing.cast(type, kind), prefix=f"{name}."))
+            continue
+        if kind not in _SCALAR_TYPES.values():
+            raise TypeError(f"config field {name} has unsupported type {kind!r}")
+        md = f.metadata
+        specs.append(
+            FieldSpec(
+                name=name,
+                kind=kind,
+                default=f.default,
+                unit=md.get("unit", ""),
+                doc=md.get("doc", ""),
+                minimum=md.get("minimum"),
+                maximum=md.get("maximum"),
+                exclusive_minimum=bool(md.get("exclusive_minimum", False)),
+                choices=md.get("choices"),
+            )
+        )
+    return specs
+
+
+def _coerce(spec: FieldSpec, value: Any) -> Any:
+    kind = spec.kind
+    ok: bool
+    if kind is bool:
+        ok = isinstance(value, bool)
+    elif kind is int:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif kind is float:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    else:
+        ok = isinstance(value, str)
+    if not ok:
+        raise ConfigError(
+            f"parameter '{spec.name}' must be {kind.__name__}, "
+            f"got {value!r} ({type(value).__name__})"
+        )
+    value = kind(value)
+    if spec.choices is not None and value not in spec.choices:
+        raise ConfigError(
+            f"parameter '{spec.name}' = {value!r} is not one of {', '.join(spec.choices)}"
+        )
+    if kind in (int, float):
+        if spec.minimum is not None:
+            too_low = value <= spec.minimum if spec.exclusive_minimum else value < spec.minimum
+            if too_low:
+                rel = ">" if spec.exclusive_minimum else ">="
+                raise ConfigError(
+                    f"parameter '{spec.name}' = {value!r} {spec.unit} "
+                    f"must be {rel} {spec.minimum:g}"
+                )
+        if spec.maximum is not None and value > spec.maximum:
+            raise ConfigError(
+                f"parameter '{spec.name}' = {value!r} {spec.unit} must be <= {spec.maximum:g}"
+            )
+        if kind is float and value != value:  # NaN
+            raise ConfigError(f"parameter '{spec.name}' is NaN")
+    return value
+
+
+def validate(config: Any) -> None:
+    """Check every scalar field of a config instance against its declared type and bounds."""
+    for spec in field_specs(type(config)):
+        value: Any = config
+        for part in spec.name.split("."):
+            value = getattr(value, part)
+        _coerce(spec, value)
+
+
+def flatten_mapping(mapping: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"a": {"b": 1}}`` -> ``{"a.b": 1}``; dotted keys pass through unchanged."""
+    flat: dict[str, Any] = {}
+    for key, value in mapping.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            flat.update(flatten_mapping(value, prefix=f"{name}."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def config_from_flat(cls: type[C], values: Mapping[str, Any]) -> C:
+    """Build a config of type ``cls`` from dotted names; missing names keep their defaults."""
+    specs = {s.name: s for s in field_specs(cls)}
+    unknown = sorted(set(values) - set(specs))
+    if unknown:
+        raise ConfigError(
+            f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(specs))}"
+        )
+    coerced = {name: _coerce(specs[name], v) for name, v in values.items()}
+    return _build(cls, coerced, prefix="")
+
+
+def _build(cls: type[C], values: Mapping[str, Any], prefix: str) -> C:
+    kwargs: dict[str, Any] = {}
+    hints = _resolved_hints(cls)
+    for f in dataclasses.fields(typing.cast(Any, cls)):
+        kind = hints[f.name]
+        name = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(kind):
+            kwargs[f.name] = _build(typing.cast(type, kind), values, prefix=f"{name}.")
+        elif name in values:
+            kwargs[f.name] = values[name]
+    return cls(**kwargs)
+
+
+def config_to_flat(config: Any) -> dict[str, Any]:
+    """Dotted names and values of a config instance (the inverse of :func:`config_from_flat`)."""
+    flat: dict[str, Any] = {}
+    for spec in field_specs(type(config)):
+        value: Any = config
+        for part in spec.name.split("."):
+            value = getattr(value, part)
+        flat[spec.name] = value
+    return flat
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """Parse a ``name=value`` command-line override; the value is read as YAML would read it."""
+    if "=" not in text:
+        raise ConfigError(f"override {text!r} is not of the form name=value")
+    name, raw = text.split("=", 1)
+    raw = raw.strip()
+    value: Any
+    lowered = raw.lower()
+    if lowered in ("true", "false"):
+        value = lowered == "true"
+    else:
+        try:
+            value = int(raw)
+        except ValueError:
+            try:
+                value = float(raw)
+            except ValueError:
+                value = raw
+    return name.strip(), value

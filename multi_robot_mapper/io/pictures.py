@@ -1,0 +1,70 @@
+"""Pictures of segment maps: PNG/SVG with a 1 m grid, a scale bar and a colour per source."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only; never needs a display
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+
+FloatArray = np.typing.NDArray[np.float64]
+
+PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2")
+
+
+def draw_segments(
+    ax: Axes, segments: FloatArray, color: str, width: float = 1.5, label: str | None = None
+) -> None:
+    """Draw an ``(N, 4)`` segment set as lines."""
+    lines = np.asarray(segments, dtype=np.float64).reshape(-1, 2, 2)
+    ax.add_collection(LineCollection(lines, colors=color, linewidths=width, label=label))
+
+
+def finish_metric_axes(ax: Axes, title: str, extent: FloatArray | None = None) -> None:
+    """Equal axes in metres with a 1 m grid and a scale bar in the lower left corner."""
+    ax.set_aspect("equal")
+    if extent is not None and np.all(np.isfinite(extent)):
+        pad = 0.5
+        ax.set_xlim(extent[0] - pad, extent[2] + pad)
+        ax.set_ylim(extent[1] - pad, extent[3] + pad)
+    else:
+        ax.autoscale_view()
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    ax.set_xticks(np.arange(np.ceil(x0), np.floor(x1) + 1.0, 1.0), minor=True)
+    ax.set_yticks(np.arange(np.ceil(y0), np.floor(y1) + 1.0, 1.0), minor=True)
+    ax.grid(which="minor", color="0.9", linewidth=0.5)
+    ax.grid(which="major", color="0.8", linewidth=0.6)
+    span = x1 - x0
+    bar = max(1.0, float(10 ** np.floor(np.log10(max(span, 1e-3) / 4.0))))
+    bx, by = x0 + 0.04 * span, y0 + 0.05 * (y1 - y0)
+    ax.plot([bx, bx + bar], [by, by], color="k", linewidth=3)
+    ax.text(bx + bar / 2, by + 0.02 * (y1 - y0), f"{bar:g} m", ha="center", va="bottom", fontsize=8)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title, fontsize=10)
+
+
+def segments_extent(segment_sets: Sequence[FloatArray]) -> FloatArray:
+    """``[xmin, ymin, xmax, ymax]`` of all segment end points."""
+    ends = np.vstack(
+        [np.asarray(s).reshape(-1, 2) for s in segment_sets if len(s)] or [np.zeros((1, 2))]
+    )
+    return np.concatenate((ends.min(axis=0), ends.max(axis=0)))
+
+
+def save_figure(fig: Figure, path: str | Path) -> Path:
+    """Write a figure (format from the suffix: .png or .svg) and close it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(fig)
+    return path

@@ -1,0 +1,37 @@
+"""Shared fixtures: data paths, and isolated rclpy contexts for node tests.
+
+Every test session runs on its own ROS domain (``ROS_DOMAIN_ID`` if the caller set one, else
+one derived from the process id) with discovery limited to this machine, so parallel runs
+never see each other's topics.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data" / "carmen"
+CARMEN_LOGS = ("intel", "aces", "fhw", "csail")
+
+
+def carmen_log(name: str) -> Path:
+    """Path of a shared CARMEN log; skips the test with the reason when it is absent."""
+    path = DATA / f"{name}.log.gz"
+    if not path.is_file():
+        pytest.skip(f"real-data log {path} not found (../shared/data is not beside this clone)")
+    return path
+
+
+@pytest.fixture
+def ros_context() -> Iterator[object]:
+    """A fresh rclpy context on this run's isolated domain, shut down after the test."""
+    from multi_robot_mapper.ros.testing import isolated_context
+
+    with isolated_context() as context:
+        yield context

@@ -1,0 +1,46 @@
+"""The front end on real SICK scans from ../shared/data (skipped when the data is absent)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import CARMEN_LOGS, carmen_log
+
+from multi_robot_mapper.core.extraction import (
+    ExtractionConfig,
+    extract_scan,
+    point_segment_distance,
+)
+from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen
+
+pytestmark = pytest.mark.realdata
+DEFAULT = ExtractionConfig()
+
+
+@pytest.mark.parametrize("name", CARMEN_LOGS)
+def test_every_covered_point_lies_within_kappa_plus_1cm_of_its_segment(name: str) -> None:
+    scans = list(read_carmen(carmen_log(name)))
+    assert len(scans) > 300
+    worst = 0.0
+    segment_counts = []
+    for scan in scans:
+        result, valid = extract_scan(carmen_scan_data(scan), DEFAULT)
+        segment_counts.append(len(result))
+        first, last = result.point_span.T
+        # All segments' covered points at once: repeat each segment over its point range.
+        length = last - first + 1
+        owner = np.repeat(np.arange(len(result)), length)
+        index = first[owner] + np.arange(owner.size) - np.repeat(np.cumsum(length) - length, length)
+        seg = result.segments[owner]
+        q = result.points[index]
+        if len(q):
+            worst = max(worst, float(point_segment_distance(q[:, 0], q[:, 1], *seg.T).max()))
+        assert len(valid.points) == len(result.points)
+    assert worst <= DEFAULT.split_tolerance + 0.01, f"{name}: a covered point is {worst:.4f} m away"
+    assert np.median(segment_counts) >= 5, "real indoor scans have walls"
+
+
+def test_intel_has_910_scans_with_180_beams() -> None:
+    scans = list(read_carmen(carmen_log("intel")))
+    assert len(scans) == 910
+    assert {s.ranges.size for s in scans} == {180}

@@ -1,0 +1,134 @@
+"""Beams to points: geometry with known answers, and every kind of bad scan."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from multi_robot_mapper.core.scan import LaserScanData, ScanError, scan_points
+
+ONE_DEGREE = math.radians(1.0)
+
+
+def make_scan(
+    ranges,
+    angle_min=-math.pi / 2,
+    increment=ONE_DEGREE,
+    angle_max=None,
+    range_min=0.05,
+    range_max=30.0,
+    intensities=None,
+) -> LaserScanData:
+    ranges = np.asarray(ranges, dtype=float)
+    if angle_max is None:
+        angle_max = angle_min + increment * (len(ranges) - 1)
+    return LaserScanData(ranges, angle_min, angle_max, increment, range_min, range_max, intensities)
+
+
+def kinds(result) -> set[str]:
+    return {n.kind for n in result.notices}
+
+
+def test_beam_angles_follow_angle_min_plus_i_increment() -> None:
+    result = scan_points(make_scan([1.0, 2.0, 3.0], angle_min=0.0, increment=math.pi / 2))
+    np.testing.assert_allclose(result.points, [[1, 0], [0, 2], [-3, 0]], atol=1e-12)
+    assert result.notices == ()
+
+
+def test_readings_outside_range_limits_are_dropped() -> None:
+    result = scan_points(make_scan([0.01, 0.05, 1.0, 30.0, 31.0], range_min=0.05, range_max=30.0))
+    np.testing.assert_array_equal(result.beam_index, [1, 2])
+    assert result.invalid_count == 3
+
+
+def test_nan_and_inf_are_no_return_with_a_notice() -> None:
+    result = scan_points(make_scan([1.0, np.nan, np.inf, -np.inf, 2.0]))
+    np.testing.assert_array_equal(result.beam_index, [0, 4])
+    assert "non_finite_ranges" in kinds(result)
+    assert "1 NaN and 2 inf" in result.notices[0].message
+
+
+def test_all_invalid_gives_no_points_and_a_notice() -> None:
+    result = scan_points(make_scan([np.nan] * 10))
+    assert result.points.shape == (0, 2)
+    assert "no_valid_ranges" in kinds(result)
+
+
+def test_zero_beams_is_refused() -> None:
+    with pytest.raises(ScanError, match="no beams") as err:
+        scan_points(make_scan([]))
+    assert err.value.kind == "no_beams"
+
+
+def test_ten_thousand_consistent_beams_are_processed() -> None:
+    n = 10_000
+    inc = 2 * math.pi / n
+    result = scan_points(make_scan(np.full(n, 5.0), angle_min=-math.pi, increment=inc))
+    assert len(result.points) == n and result.notices == ()
+    np.testing.assert_allclose(np.hypot(*result.points.T), 5.0)
+
+
+def test_ten_thousand_beams_on_a_180_beam_geometry_are_refused() -> None:
+    scan = make_scan(np.full(10_000, 5.0), angle_max=math.pi / 2)
+    with pytest.raises(ScanError, match="10000 beams") as err:
+        scan_points(scan)
+    assert err.value.kind == "beam_count"
+
+
+def test_more_than_max_beams_is_refused() -> None:
+    with pytest.raises(ScanError, match="max_beams"):
+        scan_points(make_scan(np.ones(50), increment=0.001), max_beams=20)
+
+
+def test_count_mismatch_within_a_turn_is_a_notice() -> None:
+    scan = make_scan(np.ones(200), angle_max=math.pi / 2)  # fields describe 181 beams
+    result = scan_points(scan)
+    assert "beam_count" in kinds(result)
+    assert len(result.points) == 200
+
+
+def test_negative_increment_gives_the_same_points_counter_clockwise() -> None:
+    ranges = np.linspace(1.0, 2.0, 91)
+    forward = scan_points(make_scan(ranges, angle_min=0.0, increment=math.radians(1)))
+    backward = scan_points(
+        make_scan(ranges[::-1], angle_min=math.radians(90), increment=-math.radians(1))
+    )
+    np.testing.assert_allclose(backward.points, forward.points, atol=1e-12)
+    assert "negative_increment" in kinds(backward)
+
+
+def test_intensities_of_another_length_are_ignored_with_a_notice() -> None:
+    result = scan_points(make_scan(np.ones(10), intensities=np.ones(3)))
+    assert len(result.points) == 10
+    assert "intensities_length" in kinds(result)
+
+
+def test_angle_max_below_angle_min_with_positive_increment_is_refused() -> None:
+    scan = LaserScanData(np.ones(10), 1.0, -1.0, 0.01, 0.0, 10.0)
+    with pytest.raises(ScanError, match="opposite sign") as err:
+        scan_points(scan)
+    assert err.value.kind == "angle_order"
+
+
+@pytest.mark.parametrize("range_max", [1.0, 0.5])
+def test_range_max_not_above_range_min_is_refused(range_max: float) -> None:
+    with pytest.raises(ScanError, match="range_max") as err:
+        scan_points(make_scan(np.ones(5), range_min=1.0, range_max=range_max))
+    assert err.value.kind == "range_limits"
+
+
+@pytest.mark.parametrize("field", ["angle_min", "angle_increment", "range_max"])
+def test_non_finite_fields_are_refused(field: str) -> None:
+    values = dict(
+        ranges=np.ones(5),
+        angle_min=0.0,
+        angle_max=0.04,
+        angle_increment=0.01,
+        range_min=0.0,
+        range_max=10.0,
+    )
+    values[field] = float("nan")
+    with pytest.raises(ScanError, match=field):
+        scan_points(LaserScanData(**values))

@@ -1,0 +1,35 @@
+"""SE(2) helpers: known answers and round trips."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+
+from multi_robot_mapper.core import se2
+
+coord = st.floats(-50, 50, allow_nan=False)
+angle = st.floats(-10, 10, allow_nan=False)
+
+
+def test_quarter_turn_maps_x_axis_to_y_axis() -> None:
+    T = se2.matrix_from_pose(1.0, 2.0, np.pi / 2)
+    np.testing.assert_allclose(
+        se2.transform_points(T, np.array([[1.0, 0.0]])), [[1.0, 3.0]], atol=1e-12
+    )
+
+
+@given(coord, coord, angle)
+def test_invert_composes_to_identity_and_pose_round_trips(x: float, y: float, th: float) -> None:
+    T = se2.matrix_from_pose(x, y, th)
+    np.testing.assert_allclose(T @ se2.invert(T), np.eye(3), atol=1e-9)
+    x2, y2, th2 = se2.pose_from_matrix(T)
+    np.testing.assert_allclose([x2, y2], [x, y], atol=1e-9)
+    assert abs(se2.wrap_angle(th2 - th)) < 1e-9
+
+
+def test_transform_segments_moves_both_ends() -> None:
+    T = se2.matrix_from_pose(0.0, 1.0, 0.0)
+    np.testing.assert_allclose(
+        se2.transform_segments(T, np.array([[0.0, 0, 1, 0]])), [[0, 1, 1, 1]]
+    )
