@@ -24,6 +24,7 @@ import numpy as np  # noqa: E402
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
 from multi_robot_mapper.core.scan import LaserScanData  # noqa: E402
 from multi_robot_mapper.core.simulation import (  # noqa: E402
+    ROUTES,
     LaserModel,
     office_world,
     simulate_scan,
@@ -32,12 +33,11 @@ from multi_robot_mapper.core.simulation import (  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
 INTEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen" / "intel.log.gz"
-PATH = [(2.0, 2.5), (18.0, 2.5), (22.0, 7.0), (18.0, 11.0), (10.0, 9.6), (6.0, 8.0), (4.6, 6.0)]
 
 
 def simulated(laser: LaserModel, count: int, seed: int = 0) -> list[LaserScanData]:
     walls = office_world()
-    poses = waypoint_path(PATH, speed=1.0, rate=laser.rate)
+    poses = waypoint_path(ROUTES["office"], speed=1.0, rate=laser.rate)
     poses = poses[np.linspace(0, len(poses) - 1, count).astype(int)]
     rng = np.random.default_rng(seed)
     return [simulate_scan(walls, tuple(p), laser, rng) for p in poses]

@@ -74,11 +74,16 @@ def test_a_gap_wider_than_tau_starts_a_new_cluster_and_tiny_clusters_are_dropped
     wall_a = np.column_stack((np.linspace(0, 1, 21), np.full(21, 2.0)))
     wall_b = np.column_stack((np.linspace(1.5, 2.5, 21), np.full(21, 2.0)))
     speck = np.array([[3.0, 2.0], [3.01, 2.0], [3.02, 2.0]])
-    result = extract_segments(np.vstack((wall_a, wall_b, speck)), DEFAULT)
-    assert len(result) == 2
+    lone = np.array([[4.0, 2.0]])
+    result = extract_segments(np.vstack((wall_a, wall_b, speck, lone)), DEFAULT)
+    assert len(result) == 3  # the default keeps every cluster that can make a segment
     assert not result.joined_to_next.any()
-    assert result.dropped_points == 3
-    np.testing.assert_allclose(result.segments, [[0, 2, 1, 2], [1.5, 2, 2.5, 2]], atol=1e-12)
+    assert result.dropped_points == 1
+    np.testing.assert_allclose(result.segments[:2], [[0, 2, 1, 2], [1.5, 2, 2.5, 2]], atol=1e-12)
+    stricter = extract_segments(
+        np.vstack((wall_a, wall_b, speck, lone)), ExtractionConfig(min_cluster_points=4)
+    )
+    assert len(stricter) == 2 and stricter.dropped_points == 4
 
 
 def test_merge_keeps_a_noisy_straight_wall_in_one_segment() -> None:

@@ -15,12 +15,14 @@ Method (Amigoni et al. 2006, Sec. III-D; Wolter et al., Sec. 3.1):
    polyline is the intersection of their lines when it lies near the scan point they share.
 
 All steps run over every cluster of the scan at once (numpy, no loop over points): the
-split loop runs once per recursion depth, not once per segment.
+split loop runs once per recursion depth, not once per segment. What makes it fast is few
+numpy calls per scan (see the cost model after the imports).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,8 +40,32 @@ BoolArray = NDArray[np.bool_]
 REFIT_SLACK = 0.005  # m
 
 # Below this |sin| between two consecutive segments their lines are too close to parallel for a
-# stable intersection; the corner is then the midpoint of the two projected ends.
-_MIN_CORNER_SINE = np.sin(np.radians(2.0))
+# stable intersection; the corner is then the midpoint of the two projected ends. (A 0-d array:
+# see the cost model just below.)
+_MIN_CORNER_SINE = np.asarray(np.sin(np.radians(2.0)))
+
+# Cost model: a numpy call on a few hundred elements costs about a microsecond whatever it
+# computes, and a 180-beam scan has only ~150 points and ~13 segments, so the front end's speed
+# is the number of numpy calls it makes, not its arithmetic. Hence every step works on all
+# pieces of the scan at once, settled pieces leave the split's working set, numpy's
+# Python-level wrappers (np.clip, np.arange, np.cumsum, np.flatnonzero, ...) give way to the
+# ufuncs and methods underneath, and the constants of the hot loops are 0-d arrays: a Python
+# number as an operand costs a ufunc ~0.3 us more (NEP 50 promotion). None of this changes a
+# single float of the results.
+_TINY, _ZERO, _HALF, _ONE = np.array(1e-18), np.array(0.0), np.array(0.5), np.array(1.0)
+_INT_ONE = np.array(1)
+_COUNTING: list[IntArray] = [np.arange(4096, dtype=np.int64)]
+_COUNTING[0].flags.writeable = False
+
+
+def _arange(n: int) -> IntArray:
+    """``np.arange(n)`` as a read-only view of a cached array."""
+    counting = _COUNTING[0]
+    if n > counting.size:
+        counting = np.arange(max(n, 2 * counting.size), dtype=np.int64)
+        counting.flags.writeable = False
+        _COUNTING[0] = counting
+    return counting[:n]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,9 +87,9 @@ class ExtractionConfig:
         exclusive_minimum=True,
     )
     min_cluster_points: int = param(
-        4,
+        2,
         unit="points",
-        doc="clusters with fewer points are dropped (isolated returns, rain, glass)",
+        doc="clusters with fewer points are dropped (a lone return cannot make a segment)",
         minimum=2,
     )
     simplifier: str = param(
@@ -127,16 +153,19 @@ def empty_segment_scan(points: FloatArray | None = None, dropped_points: int = 0
 def extract_segments(points: FloatArray, config: ExtractionConfig) -> SegmentScan:
     """Turn counter-clockwise scan points into an ordered segment set (the whole front end)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    if len(points) == 0:
+    n = len(points)
+    if n == 0:
         return empty_segment_scan(points)
     cluster_first, cluster_last = cluster_bounds(points, config.cluster_distance)
-    big = (cluster_last - cluster_first + 1) >= config.min_cluster_points
-    dropped = int(np.sum(cluster_last[~big] - cluster_first[~big] + 1))
-    if not np.any(big):
-        return empty_segment_scan(points, dropped)
+    size = cluster_last - cluster_first + 1
+    big = (size >= config.min_cluster_points).nonzero()[0]
+    if big.size == 0:
+        return empty_segment_scan(points, n)
     first, last = cluster_first[big], cluster_last[big]
+    dropped = n - int(np.add.reduce(size[big]))  # clusters tile the points
     # Centred coordinates keep the cumulative moments well conditioned far from the laser.
-    origin = points.mean(axis=0)
+    # (np.add.reduce / n is points.mean(axis=0) bit for bit, without its Python overhead.)
+    origin = np.add.reduce(points, axis=0) / n
     x = points[:, 0] - origin[0]
     y = points[:, 1] - origin[1]
     moments = _cumulative_moments(x, y)
@@ -153,11 +182,14 @@ def extract_segments(points: FloatArray, config: ExtractionConfig) -> SegmentSca
     segments, joined, seg_first, seg_last = refit_segments(
         x, y, moments, first, seg_first, seg_last, tolerance, enforce_tolerance=by_split
     )
-    segments += np.tile(origin, 2)
+    segments.reshape(-1, 2)[...] += origin  # both end points of every segment
+    point_span = np.empty((len(seg_first), 2), dtype=np.int64)
+    point_span[:, 0] = seg_first
+    point_span[:, 1] = seg_last
     return SegmentScan(
         segments=segments,
         joined_to_next=joined,
-        point_span=np.column_stack((seg_first, seg_last)),
+        point_span=point_span,
         points=points,
         dropped_points=dropped,
     )
@@ -165,10 +197,14 @@ def extract_segments(points: FloatArray, config: ExtractionConfig) -> SegmentSca
 
 def cluster_bounds(points: FloatArray, cluster_distance: float) -> tuple[IntArray, IntArray]:
     """First and last point index of each cluster of consecutive points closer than tau."""
-    step = np.hypot(*np.diff(points, axis=0).T)
-    breaks = np.flatnonzero(step > cluster_distance)
-    first = np.concatenate(([0], breaks + 1)).astype(np.int64)
-    last = np.concatenate((breaks, [len(points) - 1])).astype(np.int64)
+    step = points[1:] - points[:-1]
+    breaks = (np.hypot(step[:, 0], step[:, 1]) > cluster_distance).nonzero()[0]
+    first = np.empty(breaks.size + 1, dtype=np.int64)
+    last = np.empty(breaks.size + 1, dtype=np.int64)
+    first[0] = 0
+    np.add(breaks, 1, out=first[1:])
+    last[:-1] = breaks
+    last[-1] = len(points) - 1
     return first, last
 
 
@@ -192,14 +228,36 @@ def point_segment_distance(
 ) -> FloatArray:
     """Element-wise distance from points (px, py) to segments (ax, ay)-(bx, by).
 
-    Coordinates come as separate 1-D arrays: on the few hundred points of a scan this is
-    several times faster than (K, 2) arrays with einsum.
+    Coordinates come as separate arrays (any shapes that broadcast together): on the few
+    hundred points of a scan this is several times faster than (K, 2) arrays with einsum.
+    """
+    arrays = np.broadcast_arrays(px, py, ax, ay, bx, by)
+    flat = [np.array(a, dtype=np.float64).ravel() for a in arrays]
+    return _segment_distance(*flat).reshape(arrays[0].shape)
+
+
+def _segment_distance(
+    px: FloatArray, py: FloatArray, ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray
+) -> FloatArray:
+    """``point_segment_distance`` of 1-D float arrays of one length, as the front end calls it.
+
+    It works in place on its temporaries: on small arrays allocating them is a good part of
+    the cost.
     """
     abx, aby = bx - ax, by - ay
     apx, apy = px - ax, py - ay
-    denom = np.maximum(abx * abx + aby * aby, 1e-18)
-    t = np.clip((apx * abx + apy * aby) / denom, 0.0, 1.0)
-    return np.asarray(np.hypot(apx - t * abx, apy - t * aby))
+    t = apx * abx
+    t += apy * aby
+    denom = abx * abx
+    denom += aby * aby
+    t /= np.maximum(denom, _TINY, out=denom)
+    np.minimum(np.maximum(t, _ZERO, out=t), _ONE, out=t)  # np.clip(t, 0, 1), cheaper
+    abx *= t
+    aby *= t
+    apx -= abx
+    apy -= aby
+    dist: FloatArray = np.hypot(apx, apy, out=apx)
+    return dist
 
 
 def split_vertices(
@@ -216,47 +274,40 @@ def split_vertices(
     corners) unless its points lie within ``tolerance`` of that chord (the classic test) or of
     the piece's total-least-squares line (the segment it will become). The second test keeps a
     noisy end point, whose chord is tilted, from splitting a straight wall; at a true corner the
-    end point lies on the other wall, fails it, and the classic test decides. Points of pieces
-    that pass leave the working set, so each pass costs only what
-    is still open. ``x``, ``y`` are centred coordinates and ``moments`` their cumulative moments.
+    end point lies on the other wall, fails it, and the classic test decides. Pieces that pass
+    are settled and leave the working set, so each pass costs only what is still open.
+    ``x``, ``y`` are centred coordinates and ``moments`` their cumulative moments.
     """
-    n = len(x)
-    vertex = _cluster_vertex_mask(n, first, last)
-    open_points = np.flatnonzero(_interior_mask(n, first, last))
-    while open_points.size:
-        vertices = np.flatnonzero(vertex)
-        piece = np.searchsorted(vertices, open_points) - 1
-        a, b = vertices[:-1], vertices[1:]
+    vertex = _cluster_vertex_mask(len(x), first, last)
+    tol = np.array(tolerance)
+    # The open pieces, as first and last point. A piece without a point between its ends
+    # passes at once; filtering such pieces out would cost more numpy calls than it saves.
+    a, b = first, last
+    while a.size:
+        # Every point of every open piece, end points included: an end point lies on the chord
+        # (distance 0, so it is never the farthest point) and counts towards the line test.
+        stop = b + _INT_ONE
+        index, piece, start = _ranges_index(a, stop)
+        px, py = x[index], y[index]
         pa, pb = a[piece], b[piece]
-        px, py = x[open_points], y[open_points]
-        dist = point_segment_distance(px, py, x[pa], y[pa], x[pb], y[pb])
-        mx, my, ux, uy = _tls_lines(moments, a, b)
+        dist = _segment_distance(px, py, x[pa], y[pa], x[pb], y[pb])
+        farthest = np.maximum.reduceat(dist, start)
+        off_chord = farthest > tol
+        if not np.count_nonzero(off_chord):
+            break  # every open piece is settled (often so in the last pass): no line needed
+        mx, my, ux, uy = _tls_lines(moments, a, stop)
         residual = np.abs((px - mx[piece]) * uy[piece] - (py - my[piece]) * ux[piece])
-        off_chord = np.zeros(len(a), dtype=bool)
-        off_chord[piece[dist > tolerance]] = True
-        off_line = (
-            np.maximum(
-                np.abs((x[a] - mx) * uy - (y[a] - my) * ux),
-                np.abs((x[b] - mx) * uy - (y[b] - my) * ux),
-            )
-            > tolerance
-        )
-        off_line[piece[residual > tolerance]] = True
-        in_failing = (off_chord & off_line)[piece]
-        if not in_failing.any():
+        off_line = np.maximum.reduceat(residual, start) > tol
+        failing = (off_chord & off_line).nonzero()[0]
+        if failing.size == 0:
             break
-        open_points, piece, dist = open_points[in_failing], piece[in_failing], dist[in_failing]
-        # Farthest point from the chord in every failing piece (ties: the first).
-        order = np.lexsort((-dist, piece))
-        ordered_piece = piece[order]
-        leader = np.empty(order.size, dtype=bool)
-        leader[0] = True
-        np.not_equal(ordered_piece[1:], ordered_piece[:-1], out=leader[1:])
-        chosen = order[leader]
-        vertex[open_points[chosen]] = True
-        keep = np.ones(open_points.size, dtype=bool)
-        keep[chosen] = False
-        open_points = open_points[keep]
+        # The farthest point from the chord in every failing piece (ties: the first).
+        count = dist.size
+        at = np.where(dist == farthest[piece], _arange(count), count)
+        new_vertex = index[np.minimum.reduceat(at, start)[failing]]
+        vertex[new_vertex] = True
+        a = np.concatenate((a[failing], new_vertex))
+        b = np.concatenate((new_vertex, b[failing]))
     return vertex
 
 
@@ -296,42 +347,55 @@ def dce_vertices(
     return vertex
 
 
-def _ranges_index(first: IntArray, last: IntArray) -> tuple[IntArray, IntArray]:
-    """Concatenated ``arange(first[k], last[k] + 1)`` for all k, and the k of each entry."""
-    length = last - first + 1
-    owner = np.repeat(np.arange(len(first)), length)
-    offset = np.arange(owner.size) - np.repeat(np.cumsum(length) - length, length)
-    return first[owner] + offset, owner
+def _ranges_index(first: IntArray, stop: IntArray) -> tuple[IntArray, IntArray, IntArray]:
+    """Concatenated ``arange(first[k], stop[k])`` for all k, the k of each entry, and the offset
+    at which each range starts (for ``np.ufunc.reduceat``). No range is empty."""
+    length = stop - first
+    end = np.add.accumulate(length)  # np.cumsum
+    start = end - length
+    entries = _arange(int(end[-1]))
+    owner = end.searchsorted(entries, side="right")
+    index = (first - start)[owner]
+    index += entries
+    return index, owner, start
 
 
 def _tls_lines(
-    moments: FloatArray, first: IntArray, last: IntArray
+    moments: FloatArray, first: IntArray, stop: IntArray
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Centroid and unit direction of the total-least-squares line of each point range.
 
-    ``moments`` are the cumulative sums (with a leading zero row) of x, y, x^2, xy, y^2.
+    The range of line k is ``first[k]`` up to, not including, ``stop[k]``; ``moments`` are
+    the cumulative sums of ``_cumulative_moments``.
     """
-    sums = moments[last + 1] - moments[first]
-    count = (last - first + 1).astype(np.float64)
-    mx = sums[:, 0] / count
-    my = sums[:, 1] / count
-    cxx = sums[:, 2] / count - mx * mx
-    cxy = sums[:, 3] / count - mx * my
-    cyy = sums[:, 4] / count - my * my
-    phi = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)  # direction of largest variance
-    return mx, my, np.cos(phi), np.sin(phi)
+    sums = moments.take(stop, axis=1) - moments.take(first, axis=1)
+    mean = sums[:5] / sums[5]  # of x, y, x^2, xy, y^2
+    # cxx, cxy, cyy in one operation each for all three
+    cov = mean[2:] - mean.take(_COVARIANCE_LEFT, axis=0) * mean.take(_COVARIANCE_RIGHT, axis=0)
+    cxy = cov[1]
+    phi = _HALF * np.arctan2(cxy + cxy, cov[0] - cov[2])  # direction of largest variance
+    return mean[0], mean[1], np.cos(phi), np.sin(phi)
+
+
+# Rows of the means multiplied for the covariances: x x, x y, y y.
+_COVARIANCE_LEFT = np.array([0, 0, 1])
+_COVARIANCE_RIGHT = np.array([0, 1, 1])
 
 
 def _cumulative_moments(x: FloatArray, y: FloatArray) -> FloatArray:
-    """Running sums of x, y, x^2, xy, y^2 with a leading zero row: range sums in O(1)."""
-    moments = np.zeros((len(x) + 1, 5))
-    body = moments[1:]
-    body[:, 0] = x
-    body[:, 1] = y
-    np.multiply(x, x, out=body[:, 2])
-    np.multiply(x, y, out=body[:, 3])
-    np.multiply(y, y, out=body[:, 4])
-    np.cumsum(body, axis=0, out=body)
+    """Running sums of x, y, x^2, xy, y^2 and of the point count, one row each, with a leading
+    zero column: the sums over points i..j-1 are ``moments[:, j] - moments[:, i]``."""
+    n = len(x)
+    moments = np.empty((6, n + 1))
+    moments[:5, 0] = 0.0
+    body = moments[:5, 1:]
+    body[0] = x
+    body[1] = y
+    np.multiply(x, x, out=body[2])
+    np.multiply(x, y, out=body[3])
+    np.multiply(y, y, out=body[4])
+    np.add.accumulate(body, axis=1, out=body)  # np.cumsum
+    moments[5] = _arange(n + 1)
     return moments
 
 
@@ -352,78 +416,89 @@ def merge_collinear(
     merged twice in one pass). Passes repeat only while a qualifying pair was held back by a
     neighbour. ``x``, ``y`` are the points (centred) and ``moments`` their cumulative moments.
     """
-    first, last = seg_first.copy(), seg_last.copy()
+    first, last = seg_first, seg_last
+    tol = np.array(tolerance)
     while len(first) > 1:
-        pair = np.flatnonzero(last[:-1] == first[1:])
+        pair = (last[:-1] == first[1:]).nonzero()[0]
         if pair.size == 0:
             break
-        lo, hi = first[pair], last[pair + 1]
-        mx, my, ux, uy = _tls_lines(moments, lo, hi)
-        idx, owner = _ranges_index(lo, hi)
+        lo, stop = first[pair], last[pair + _INT_ONE] + _INT_ONE
+        mx, my, ux, uy = _tls_lines(moments, lo, stop)
+        idx, owner, start = _ranges_index(lo, stop)
         residual = np.abs((x[idx] - mx[owner]) * uy[owner] - (y[idx] - my[owner]) * ux[owner])
-        worst = np.maximum.reduceat(residual, np.cumsum(hi - lo + 1) - (hi - lo + 1))
-        score = np.where(worst <= tolerance, worst, np.inf)
+        worst = np.maximum.reduceat(residual, start)
+        qualifies = worst <= tol
+        n_qualify = np.count_nonzero(qualifies)
+        if n_qualify == 0:
+            break
+        score = np.where(qualifies, worst, np.inf)
         # Pairs k and k+1 share a segment exactly when pair[k+1] == pair[k] + 1.
         left = np.full(pair.size, np.inf)
         right = np.full(pair.size, np.inf)
         touch = pair[1:] == pair[:-1] + 1
         left[1:] = np.where(touch, score[:-1], np.inf)
         right[:-1] = np.where(touch, score[1:], np.inf)
-        qualifies = score <= tolerance
-        chosen_mask = qualifies & (score < left) & (score <= right)
-        chosen = pair[chosen_mask]
+        chosen = pair[qualifies & (score < left) & (score <= right)]
         if chosen.size == 0:
             break
+        last = last.copy()
         last[chosen] = last[chosen + 1]
         keep = np.ones(len(first), dtype=bool)
         keep[chosen + 1] = False
         first, last = first[keep], last[keep]
-        if np.array_equal(qualifies, chosen_mask):
+        if chosen.size == n_qualify:
             break  # nothing was held back: another pass would find nothing new
     return first, last
 
 
 def _pieces(vertex: BoolArray, first: IntArray, last: IntArray) -> tuple[IntArray, IntArray]:
     """Consecutive vertex pairs inside one cluster: each segment's first and last point."""
-    v = np.flatnonzero(vertex)
-    cluster_of = np.searchsorted(first, v, side="right") - 1
+    v = vertex.nonzero()[0]
+    cluster_of = first.searchsorted(v, side="right")
     same = cluster_of[:-1] == cluster_of[1:]
-    return v[:-1][same].astype(np.int64), v[1:][same].astype(np.int64)
+    return v[:-1][same], v[1:][same]
 
 
-def _max_covered_distance(
-    x: FloatArray, y: FloatArray, segments: FloatArray, first: IntArray, last: IntArray
-) -> FloatArray:
-    """For each segment, the largest distance from one of its points (first..last) to it."""
-    idx, owner = _ranges_index(first, last)
-    seg = segments[owner]
-    dist = point_segment_distance(x[idx], y[idx], seg[:, 0], seg[:, 1], seg[:, 2], seg[:, 3])
-    return np.asarray(np.maximum.reduceat(dist, np.cumsum(last - first + 1) - (last - first + 1)))
+class _LineFit(NamedTuple):
+    """Total-least-squares fit of each segment, and its covered points (see ``_fit_lines``)."""
+
+    mx: FloatArray  # centroid
+    my: FloatArray
+    ux: FloatArray  # unit direction, along the scan
+    uy: FloatArray
+    segments: FloatArray  # (K, 4): the line spanning all projections of the segment's points
+    px: FloatArray  # covered points, segment after segment (a shared corner point twice)
+    py: FloatArray
+    owner: IntArray  # the segment of each covered point
+    start: IntArray  # offset of each segment's first point in px, py
+    across: FloatArray  # distance of each covered point to its segment's line
 
 
 def _fit_lines(
     x: FloatArray, y: FloatArray, moments: FloatArray, seg_first: IntArray, seg_last: IntArray
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, IntArray]:
-    """TLS line of each segment's points, directed along the scan, spanning all their projections.
-
-    Returns the centroids and directions, the segments, each covered point's distance to its
-    line, and the offset of each segment's first point in that distance array.
-    """
-    mx, my, ux, uy = _tls_lines(moments, seg_first, seg_last)
-    flip = ux * (x[seg_last] - x[seg_first]) + uy * (y[seg_last] - y[seg_first]) < 0.0
-    ux[flip] = -ux[flip]
-    uy[flip] = -uy[flip]
+) -> _LineFit:
+    """TLS line of each segment's points, directed along the scan, spanning their projections."""
+    seg_stop = seg_last + _INT_ONE
+    mx, my, ux, uy = _tls_lines(moments, seg_first, seg_stop)
+    flip = ux * (x[seg_last] - x[seg_first]) + uy * (y[seg_last] - y[seg_first]) < _ZERO
+    np.negative(ux, out=ux, where=flip)
+    np.negative(uy, out=uy, where=flip)
     # The segment spans the projections of all its points: in a folded cluster (a chair leg
     # seen edge-on) a middle point can project beyond the first and last ones.
-    idx, owner = _ranges_index(seg_first, seg_last)
-    dx, dy = x[idx] - mx[owner], y[idx] - my[owner]
-    along = dx * ux[owner] + dy * uy[owner]
-    across = np.abs(dx * uy[owner] - dy * ux[owner])
-    offsets = np.cumsum(seg_last - seg_first + 1) - (seg_last - seg_first + 1)
-    t0 = np.minimum.reduceat(along, offsets)
-    t1 = np.maximum.reduceat(along, offsets)
-    segments = np.column_stack((mx + t0 * ux, my + t0 * uy, mx + t1 * ux, my + t1 * uy))
-    return mx, my, ux, uy, segments, across, offsets
+    idx, owner, start = _ranges_index(seg_first, seg_stop)
+    px, py = x[idx], y[idx]
+    dx, dy = px - mx[owner], py - my[owner]
+    uxo, uyo = ux[owner], uy[owner]
+    along = dx * uxo + dy * uyo
+    across = np.abs(dx * uyo - dy * uxo)
+    t0 = np.minimum.reduceat(along, start)
+    t1 = np.maximum.reduceat(along, start)
+    segments = np.empty((len(seg_first), 4))
+    np.add(mx, t0 * ux, out=segments[:, 0])
+    np.add(my, t0 * uy, out=segments[:, 1])
+    np.add(mx, t1 * ux, out=segments[:, 2])
+    np.add(my, t1 * uy, out=segments[:, 3])
+    return _LineFit(mx, my, ux, uy, segments, px, py, owner, start, across)
 
 
 def drop_corner_slivers(seg_first: IntArray, seg_last: IntArray) -> tuple[IntArray, IntArray]:
@@ -435,15 +510,22 @@ def drop_corner_slivers(seg_first: IntArray, seg_last: IntArray) -> tuple[IntArr
     """
     if len(seg_first) < 3:
         return seg_first, seg_last
-    sliver = np.zeros(len(seg_first), dtype=bool)
-    sliver[1:-1] = (
-        (seg_last[1:-1] - seg_first[1:-1] == 1)
-        & (seg_last[:-2] == seg_first[1:-1])
-        & (seg_last[1:-1] == seg_first[2:])
+    inside_first, inside_last = seg_first[1:-1], seg_last[1:-1]
+    sliver = (
+        (inside_last - inside_first == 1)
+        & (seg_last[:-2] == inside_first)
+        & (inside_last == seg_first[2:])
     )
-    # Two slivers in a row are a short wall, not a corner: keep both.
-    sliver[1:] &= ~sliver[:-1]
-    return seg_first[~sliver], seg_last[~sliver]
+    if not np.count_nonzero(sliver):
+        return seg_first, seg_last
+    # Two slivers in a row are a short wall, not a corner: keep both of them.
+    lone = sliver.copy()
+    lone[1:] &= ~sliver[:-1]
+    lone[:-1] &= ~sliver[1:]
+    drop = np.zeros(len(seg_first), dtype=bool)
+    drop[1:-1] = lone
+    keep = ~drop
+    return seg_first[keep], seg_last[keep]
 
 
 def refit_segments(
@@ -461,72 +543,74 @@ def refit_segments(
     With ``enforce_tolerance`` a segment whose fitted line leaves a point farther than
     ``tolerance + REFIT_SLACK`` is split again there, or one point inwards of an end point (the
     split bounded the distance to the chord, and the fitted line may tilt away from it). Sums
-    over each
-    segment's (inclusive) point range come from cumulative sums, so a corner point shared by
-    two segments is fitted by both. Returns the segments, ``joined_to_next`` and the (possibly
-    refined) point spans, in the (centred) frame of ``x``, ``y``.
+    over each segment's (inclusive) point range come from cumulative sums, so a corner point
+    shared by two segments is fitted by both. Returns the segments, ``joined_to_next`` and the
+    (possibly refined) point spans, in the (centred) frame of ``x``, ``y``.
     """
+    tol = np.array(tolerance)
     while True:
-        mx, my, ux, uy, segments, across, offsets = _fit_lines(x, y, moments, seg_first, seg_last)
+        fit = _fit_lines(x, y, moments, seg_first, seg_last)
+        worst = np.maximum.reduceat(fit.across, fit.start)
         if not enforce_tolerance:
             break
-        count = seg_last - seg_first + 1
-        worst = np.maximum.reduceat(across, offsets)
-        over = np.flatnonzero(worst > tolerance + REFIT_SLACK)
-        if over.size == 0:
+        over = worst > tol + REFIT_SLACK
+        if not np.count_nonzero(over):
             break
         # Each offending segment's farthest point (first of ties), as an offset in its range;
-        # an end point is split off by cutting one point inwards.
-        hit = np.flatnonzero(across == np.repeat(worst, count))
-        owner = np.searchsorted(offsets, hit, side="right") - 1
-        wanted = np.isin(owner, over)
-        hit, owner = hit[wanted], owner[wanted]
+        # an end point is split off by cutting one point inwards. (Rare: a few scans a log.)
+        hit = ((fit.across == worst[fit.owner]) & over[fit.owner]).nonzero()[0]
+        owner = fit.owner[hit]
         leader = np.concatenate(([True], owner[1:] != owner[:-1]))
         hit, owner = hit[leader], owner[leader]
-        local = np.clip(hit - offsets[owner], 1, count[owner] - 2)
+        count = seg_last - seg_first + 1
+        local = np.clip(hit - fit.start[owner], 1, count[owner] - 2)
         new_vertex = seg_first[owner] + local
         at = np.searchsorted(seg_first, new_vertex, side="right")
         seg_first = np.insert(seg_first, at, new_vertex)
         seg_last = np.insert(seg_last, at - 1, new_vertex)
+    mx, my, ux, uy, segments = fit.mx, fit.my, fit.ux, fit.uy, fit.segments
 
     # Consecutive pieces of one polyline share a corner point, or (after a corner sliver was
-    # dropped) hold adjacent points of one cluster.
-    cluster_of_first = np.searchsorted(cluster_first, seg_first, side="right")
-    joined = np.zeros(len(seg_first), dtype=bool)
-    joined[:-1] = (seg_first[1:] - seg_last[:-1] <= 1) & (
-        cluster_of_first[1:] == np.searchsorted(cluster_first, seg_last[:-1], side="right")
+    # dropped) hold adjacent points of one cluster. Below, index 0 of every "pair" array is
+    # the pair of segments 0 and 1, and so on.
+    pair = (seg_first[1:] - seg_last[:-1] <= _INT_ONE) & (
+        cluster_first.searchsorted(seg_first[1:], side="right")
+        == cluster_first.searchsorted(seg_last[:-1], side="right")
     )
-    i = np.flatnonzero(joined)
-    if i.size:
-        plain = segments.copy()
-        plain_worst = np.maximum.reduceat(across, offsets)
-        j = i + 1
-        sine = ux[i] * uy[j] - uy[i] * ux[j]
-        steep = np.abs(sine) > _MIN_CORNER_SINE
-        t = ((mx[j] - mx[i]) * uy[j] - (my[j] - my[i]) * ux[j]) / np.where(steep, sine, 1.0)
-        cross_x = mx[i] + t * ux[i]
-        cross_y = my[i] + t * uy[i]
-        # The corner lies near the shared point, or between the two adjacent points.
-        ax, ay = x[seg_last[i]], y[seg_last[i]]
-        bx, by = x[seg_first[j]], y[seg_first[j]]
-        reach = tolerance + 0.5 * np.hypot(bx - ax, by - ay)
-        near = np.hypot(cross_x - 0.5 * (ax + bx), cross_y - 0.5 * (ay + by)) <= reach
-        use_crossing = steep & near
-        corner_x = np.where(use_crossing, cross_x, 0.5 * (segments[i, 2] + segments[j, 0]))
-        corner_y = np.where(use_crossing, cross_y, 0.5 * (segments[i, 3] + segments[j, 1]))
-        segments[i, 2] = corner_x
-        segments[i, 3] = corner_y
-        segments[j, 0] = corner_x
-        segments[j, 1] = corner_y
-        # A short segment between two corners can be dragged off its own points; where a
-        # shared corner pushes a covered point beyond kappa (and the plain fit did not), that
-        # segment keeps its own projected ends and its neighbours keep theirs.
-        worse = _max_covered_distance(x, y, segments, seg_first, seg_last) > np.maximum(
-            plain_worst, tolerance
-        )
-        undo = i[worse[i] | worse[j]]
-        segments[undo, 2:] = plain[undo, 2:]
-        segments[undo + 1, :2] = plain[undo + 1, :2]
+    joined = np.zeros(len(seg_first), dtype=bool)
+    joined[:-1] = pair
+    if not np.count_nonzero(pair):
+        return segments, joined, seg_first, seg_last
+    # Computed for every consecutive pair (slices, no gathers) and applied to joined ones.
+    ux0, uy0, ux1, uy1 = ux[:-1], uy[:-1], ux[1:], uy[1:]
+    sine = ux0 * uy1 - uy0 * ux1
+    steep = np.abs(sine) > _MIN_CORNER_SINE
+    t = ((mx[1:] - mx[:-1]) * uy1 - (my[1:] - my[:-1]) * ux1) / np.where(steep, sine, _ONE)
+    cross_x = mx[:-1] + t * ux0
+    cross_y = my[:-1] + t * uy0
+    # The corner lies near the shared point, or between the two adjacent points.
+    ax, ay = x[seg_last[:-1]], y[seg_last[:-1]]
+    bx, by = x[seg_first[1:]], y[seg_first[1:]]
+    reach = tol + _HALF * np.hypot(bx - ax, by - ay)
+    near = np.hypot(cross_x - _HALF * (ax + bx), cross_y - _HALF * (ay + by)) <= reach
+    use_crossing = steep & near
+    # Otherwise the midpoint of the two projected ends.
+    plain = segments
+    corner = _HALF * (plain[:-1, 2:] + plain[1:, :2])
+    np.copyto(corner[:, 0], cross_x, where=use_crossing)
+    np.copyto(corner[:, 1], cross_y, where=use_crossing)
+    segments = plain.copy()
+    np.copyto(segments[:-1, 2:], corner, where=pair[:, None])
+    np.copyto(segments[1:, :2], corner, where=pair[:, None])
+    # A short segment between two corners can be dragged off its own points; where a
+    # shared corner pushes a covered point beyond kappa (and the plain fit did not), that
+    # segment keeps its own projected ends and its neighbours keep theirs.
+    seg = segments.take(fit.owner, axis=0)
+    dist = _segment_distance(fit.px, fit.py, seg[:, 0], seg[:, 1], seg[:, 2], seg[:, 3])
+    worse = np.maximum.reduceat(dist, fit.start) > np.maximum(worst, tol)
+    undo = (pair & (worse[:-1] | worse[1:]))[:, None]
+    np.copyto(segments[:-1, 2:], plain[:-1, 2:], where=undo)
+    np.copyto(segments[1:, :2], plain[1:, :2], where=undo)
     return segments, joined, seg_first, seg_last
 
 

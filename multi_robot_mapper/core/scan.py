@@ -12,6 +12,7 @@ reported as :class:`ScanNotice` so a node can warn (throttled) and go on.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 from numpy.typing import NDArray
@@ -83,6 +84,7 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
             "too_many_beams",
             f"scan has {n} beams, more than max_beams={max_beams}; refusing it as corrupt",
         )
+    # The scalar checks use math, not numpy: numpy costs about a microsecond per scalar call.
     for name, value in (
         ("angle_min", angle_min),
         ("angle_max", angle_max),
@@ -90,7 +92,7 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
         ("range_min", range_min),
         ("range_max", range_max),
     ):
-        if not np.isfinite(value):
+        if not math.isfinite(value):
             raise ScanError(
                 "non_finite_field", f"scan field {name} is {value}, not a finite number"
             )
@@ -102,7 +104,7 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
     if n > 1 and angle_increment == 0.0:
         raise ScanError("zero_increment", f"angle_increment is 0 for a scan of {n} beams")
     span = angle_max - angle_min
-    if n > 1 and span != 0.0 and np.sign(span) != np.sign(angle_increment):
+    if n > 1 and span != 0.0 and (span > 0.0) != (angle_increment > 0.0):
         raise ScanError(
             "angle_order",
             f"angle_max ({angle_max:.4f} rad) - angle_min ({angle_min:.4f} rad) = {span:.4f} rad "
@@ -113,7 +115,7 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
         raise ScanError(
             "beam_count",
             f"ranges has {n} beams: at angle_increment {angle_increment:.6f} rad they sweep "
-            f"{np.degrees(sweep):.0f} deg, more than a full turn "
+            f"{math.degrees(sweep):.0f} deg, more than a full turn "
             f"(angle_min..angle_max describe {abs(span) / abs(angle_increment) + 1:.0f} beams)",
         )
     if n > 1:
@@ -135,20 +137,24 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
                     f"intensities has {n_int} entries but ranges has {n}; intensities ignored",
                 )
             )
-    n_nan = int(np.count_nonzero(np.isnan(r)))
-    n_inf = int(np.count_nonzero(np.isinf(r)))
-    if n_nan or n_inf:
-        notices.append(
-            ScanNotice(
-                "non_finite_ranges",
-                f"{n_nan} NaN and {n_inf} inf of {n} ranges: treated as no return",
-            )
-        )
 
-    angles = angle_min + angle_increment * np.arange(n, dtype=np.float64)
+    # The range limits are finite (checked above), so NaN and +-inf fail one of the two
+    # comparisons: no separate finiteness test is needed.
     with np.errstate(invalid="ignore"):
-        valid = np.isfinite(r) & (r >= max(range_min, 0.0)) & (r < range_max)
-    index = np.flatnonzero(valid)
+        valid = (r >= max(range_min, 0.0)) & (r < range_max)
+    index = valid.nonzero()[0]
+    if index.size < n:
+        finite = np.isfinite(r)
+        n_finite = int(np.count_nonzero(finite))
+        if n_finite < n:
+            n_nan = int(np.count_nonzero(np.isnan(r)))
+            notices.append(
+                ScanNotice(
+                    "non_finite_ranges",
+                    f"{n_nan} NaN and {n - n_finite - n_nan} inf of {n} ranges: "
+                    "treated as no return",
+                )
+            )
     if angle_increment < 0.0:
         index = index[::-1]
         notices.append(
@@ -165,9 +171,41 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
                 f"[range_min={range_min:g}, range_max={range_max:g}) m",
             )
         )
-    rv = r[index]
-    av = angles[index]
-    points = np.column_stack((rv * np.cos(av), rv * np.sin(av)))
+    cos, sin = _beam_directions(angle_min, angle_increment, n)
+    if index.size == n and angle_increment > 0.0:
+        rv = r  # every beam valid, already counter-clockwise: no gathers
+    else:
+        rv, cos, sin = r[index], cos[index], sin[index]
+    points = np.empty((index.size, 2))
+    np.multiply(rv, cos, out=points[:, 0])
+    np.multiply(rv, sin, out=points[:, 1])
     return ScanPoints(
-        points=points, beam_index=index.astype(np.int64), beam_count=n, notices=tuple(notices)
+        points=points,
+        beam_index=index.astype(np.int64, copy=False),
+        beam_count=n,
+        notices=tuple(notices),
     )
+
+
+# A laser never changes its beam geometry, so the cosine and sine of every beam angle are
+# computed once per (angle_min, angle_increment, beam count) and reused: the trigonometry is
+# the dearest part of the conversion. A few geometries (one per laser) are kept.
+_BEAM_TABLES: dict[tuple[float, float, int], tuple[FloatArray, FloatArray]] = {}
+_MAX_BEAM_TABLES = 16
+
+
+def _beam_directions(
+    angle_min: float, angle_increment: float, n: int
+) -> tuple[FloatArray, FloatArray]:
+    """Cosine and sine of beam i's angle ``angle_min + i * angle_increment`` (read-only, cached)."""
+    key = (float(angle_min), float(angle_increment), n)
+    table = _BEAM_TABLES.get(key)
+    if table is None:
+        angles = angle_min + angle_increment * np.arange(n, dtype=np.float64)
+        cos, sin = np.cos(angles), np.sin(angles)
+        cos.flags.writeable = False
+        sin.flags.writeable = False
+        if len(_BEAM_TABLES) >= _MAX_BEAM_TABLES:
+            _BEAM_TABLES.clear()
+        table = _BEAM_TABLES[key] = (cos, sin)
+    return table
