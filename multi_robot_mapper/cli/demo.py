@@ -21,24 +21,17 @@ from visualization_msgs.msg import Marker
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import extract_segments
 from multi_robot_mapper.core.scan import scan_points
-from multi_robot_mapper.core.simulation import WORLDS, LaserModel, simulate_scan, waypoint_path
+from multi_robot_mapper.core.simulation import (
+    ROUTES,
+    WORLDS,
+    LaserModel,
+    simulate_scan,
+    waypoint_path,
+)
 from multi_robot_mapper.io import pictures
 from multi_robot_mapper.io.messages import scan_to_msg, segments_from_marker, stamp_from_seconds
 from multi_robot_mapper.ros.robot_mapper import RobotMapper
 from multi_robot_mapper.ros.testing import isolated_context, spin_until
-
-# Along the corridor, round the curved hall, through the upper rooms and back through a door.
-DEMO_PATH = [
-    (2.0, 2.5),
-    (18.0, 2.5),
-    (22.0, 7.0),
-    (18.0, 11.0),
-    (10.0, 9.6),
-    (6.0, 8.0),
-    (4.6, 6.0),
-    (4.6, 3.5),
-    (8.0, 3.0),
-]
 
 
 @dataclass
@@ -55,7 +48,7 @@ def run_demo(out_dir: Path, world: str = "office", seed: int = 0, every: int = 4
     walls = WORLDS[world]()
     laser = LaserModel()
     rng = np.random.default_rng(seed)
-    poses = waypoint_path(DEMO_PATH, speed=1.0, rate=laser.rate)[::every]
+    poses = waypoint_path(ROUTES[world], speed=1.0, rate=laser.rate)[::every]
     received: dict[int, np.ndarray] = {}
     latency: list[float] = []
     sent_at: dict[int, float] = {}

@@ -103,6 +103,10 @@ def build_parser() -> argparse.ArgumentParser:
     frontend.add_argument("log", help="CARMEN log (.log or .log.gz)")
     _add_config_options(frontend)
     frontend.set_defaults(func=_cmd_frontend)
+    from multi_robot_mapper.cli import evaluate, import_carmen, replay, simulate
+
+    for command in (import_carmen, simulate, replay, evaluate):
+        command.register(sub)
     return parser
 
 

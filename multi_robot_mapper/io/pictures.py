@@ -44,7 +44,9 @@ def finish_metric_axes(ax: Axes, title: str, extent: FloatArray | None = None) -
     ax.grid(which="minor", color="0.9", linewidth=0.5)
     ax.grid(which="major", color="0.8", linewidth=0.6)
     span = x1 - x0
-    bar = max(1.0, float(10 ** np.floor(np.log10(max(span, 1e-3) / 4.0))))
+    # The longest 1-2-5 length (at least 1 m) within a sixth of the width.
+    nice = np.array([1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0])
+    bar = float(nice[max(0, int(np.searchsorted(nice, span / 6.0, side="right")) - 1)])
     bx, by = x0 + 0.04 * span, y0 + 0.05 * (y1 - y0)
     ax.plot([bx, bx + bar], [by, by], color="k", linewidth=3)
     ax.text(bx + bar / 2, by + 0.02 * (y1 - y0), f"{bar:g} m", ha="center", va="bottom", fontsize=8)
@@ -68,3 +70,32 @@ def save_figure(fig: Figure, path: str | Path) -> Path:
     fig.savefig(path, dpi=150, bbox_inches="tight")
     plt.close(fig)
     return path
+
+
+def draw_map(
+    map_segments: FloatArray,
+    segment_robot: np.typing.NDArray[np.int64],
+    robots: Sequence[str],
+    paths: dict[str, FloatArray],
+    title: str,
+) -> Figure:
+    """A global segment map: a colour per robot, each robot's path, 1 m grid, scale bar."""
+    extent = segments_extent(
+        [map_segments] + [np.hstack((p[:, :2], p[:, :2])) for p in paths.values() if len(p)]
+    )
+    span = max(extent[2] - extent[0], extent[3] - extent[1], 1.0)
+    size = float(np.clip(span / 4.0, 6.0, 16.0))
+    fig, ax = plt.subplots(figsize=(size, size))
+    for index, robot in enumerate(robots):
+        color = PALETTE[index % len(PALETTE)]
+        mine = map_segments[segment_robot == index]
+        if len(mine):
+            draw_segments(ax, mine, color, width=0.8, label=f"{robot} ({len(mine)} segments)")
+        path = paths.get(robot)
+        if path is not None and len(path):
+            ax.plot(path[:, 0], path[:, 1], color=color, linewidth=0.8, linestyle="--", alpha=0.8)
+            ax.plot(path[0, 0], path[0, 1], "o", color=color, markersize=5)
+    if len(robots):
+        ax.legend(loc="upper right", fontsize=8, title="dashed: path, dot: start")
+    finish_metric_axes(ax, title, extent)
+    return fig

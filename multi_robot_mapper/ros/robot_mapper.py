@@ -91,6 +91,11 @@ def main(args: list[str] | None = None) -> int:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        # A SIGTERM can shut the context down while spin() builds its wait set (an rclpy race);
+        # that is a normal shutdown. Anything while the context is still valid is a real error.
+        if rclpy.ok():
+            raise
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

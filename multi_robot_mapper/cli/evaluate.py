@@ -1,0 +1,233 @@
+"""``mrm evaluate DIR --bag BAG [--json]``: score a replay result against the bag's reference.
+
+Each scan of the bag gets the reference pose stamped nearest it (within
+GROUND_TRUTH_MATCH_S, the rule ``mrm replay`` uses) and the estimated pose whose trajectory stamp
+equals its stamp (within STAMP_MATCH_S); scans without a reference pose are left out and
+counted. Reference points are every scan's valid points placed at its reference pose (the
+ground-truth pose is taken as the pose of the scan's laser frame), thinned to every k-th beam
+so at most ``--max-points`` remain. Prints a table (or the JSON with ``--json``) and writes
+``DIR/metrics.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.scan import ScanError, scan_points
+from multi_robot_mapper.evaluation.metrics import Metrics, RobotTrack, evaluate
+from multi_robot_mapper.io.results import ReplayResult
+
+FloatArray = NDArray[np.float64]
+
+STAMP_MATCH_S = 1e-6  # a trajectory stamp belongs to the scan stamped within this
+GROUND_TRUTH_MATCH_S = 0.02  # as mrm replay: the reference pose stamped nearest, within this
+MAX_REFERENCE_POINTS = 200_000
+METRICS_FILE = "metrics.json"
+
+
+class AssociationError(ValueError):
+    """The result folder and the bag do not belong together (message says why)."""
+
+
+@dataclass
+class EvaluationInputs:
+    tracks: dict[str, RobotTrack]
+    reference_points: FloatArray  # (P, 2) in the reference frame
+    beam_stride: int
+    scans_without_reference: dict[str, int]
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "evaluate", help="score a replay result folder against the bag's reference poses"
+    )
+    parser.add_argument("directory", type=Path, help="folder written by mrm replay --out")
+    parser.add_argument(
+        "--bag", type=Path, required=True, help="the bag that was replayed (with ground truth)"
+    )
+    parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    parser.add_argument(
+        "--max-points",
+        type=int,
+        default=MAX_REFERENCE_POINTS,
+        help=f"reference points kept, thinning beams evenly (default {MAX_REFERENCE_POINTS})",
+    )
+    parser.set_defaults(func=run)
+
+
+def _nearest(sorted_stamps: FloatArray, query: FloatArray) -> tuple[NDArray[np.int64], FloatArray]:
+    """Index of the nearest of ``sorted_stamps`` for each query, and the absolute gap."""
+    right = np.clip(np.searchsorted(sorted_stamps, query), 0, len(sorted_stamps) - 1)
+    left = np.maximum(right - 1, 0)
+    use_left = np.abs(sorted_stamps[left] - query) <= np.abs(sorted_stamps[right] - query)
+    index = np.where(use_left, left, right).astype(np.int64)
+    return index, np.abs(sorted_stamps[index] - query)
+
+
+def build_inputs(
+    result: ReplayResult, recordings: Mapping[str, Any], max_points: int = MAX_REFERENCE_POINTS
+) -> EvaluationInputs:
+    """Tracks and reference points from a replay result and the bag's recordings.
+
+    ``recordings`` maps robot -> an object with ``scans`` (``.stamp`` s, ``.scan``
+    LaserScanData) and ``ground_truth`` (``.stamp`` s, ``.pose`` (x, y, theta),
+    ``.frame_id``), as :func:`multi_robot_mapper.io.bags.read_recordings` returns.
+    """
+    missing = [r for r in result.robots if r not in recordings]
+    if missing:
+        raise AssociationError(
+            f"robot(s) {', '.join(missing)} of the result are not in the bag "
+            f"(bag robots: {', '.join(sorted(recordings)) or 'none'})"
+        )
+    robots = sorted(recordings)
+    gt_frames = {g.frame_id for r in robots for g in recordings[r].ground_truth}
+    if len(gt_frames) > 1:
+        raise AssociationError(
+            f"ground truth comes in several frames ({', '.join(sorted(gt_frames))}); "
+            "the evaluation needs one reference frame"
+        )
+    tracks: dict[str, RobotTrack] = {}
+    kept_scans: list[tuple[Any, FloatArray]] = []
+    without: dict[str, int] = {}
+    for robot in robots:
+        rec = recordings[robot]
+        if not rec.scans:
+            continue
+        if not rec.ground_truth:
+            raise AssociationError(f"{robot} has scans but no ground truth in the bag")
+        stamps = np.array([s.stamp for s in rec.scans], dtype=np.float64)
+        estimate = np.full((len(stamps), 3), np.nan)
+        traj_stamps, traj_poses = result.trajectories.get(robot, (np.zeros(0), np.zeros((0, 3))))
+        if len(traj_stamps):
+            scan_order = np.argsort(stamps, kind="stable")
+            nearest, gap = _nearest(stamps[scan_order], np.asarray(traj_stamps))
+            if np.any(gap > STAMP_MATCH_S):
+                bad = float(np.asarray(traj_stamps)[np.argmax(gap)])
+                raise AssociationError(
+                    f"{robot}: trajectory stamp {bad:.9f} s matches no scan of the bag within "
+                    f"{STAMP_MATCH_S * 1e6:g} us (is it the bag that was replayed?)"
+                )
+            target = scan_order[nearest]
+            if len(np.unique(target)) != len(target):
+                raise AssociationError(f"{robot}: two trajectory stamps match the same scan")
+            estimate[target] = traj_poses
+
+        gt_stamps = np.array([g.stamp for g in rec.ground_truth], dtype=np.float64)
+        gt_poses = np.array([g.pose for g in rec.ground_truth], dtype=np.float64).reshape(-1, 3)
+        order = np.argsort(gt_stamps, kind="stable")
+        gt_index, gt_gap = _nearest(gt_stamps[order], stamps)
+        has_ref = gt_gap <= GROUND_TRUTH_MATCH_S
+        without[robot] = int(np.count_nonzero(~has_ref))
+        if not np.any(has_ref):
+            continue
+        reference = gt_poses[order][gt_index[has_ref]]
+        scans = [s for s, ok in zip(rec.scans, has_ref, strict=True) if ok]
+        tracks[robot] = RobotTrack(stamps[has_ref], reference, estimate[has_ref])
+        kept_scans.extend(zip(scans, reference, strict=True))
+
+    beams = sum(len(np.asarray(s.scan.ranges).ravel()) for s, _ in kept_scans)
+    stride = max(1, math.ceil(beams / max(1, max_points)))
+    chunks: list[FloatArray] = []
+    for scan, pose in kept_scans:
+        try:
+            points = scan_points(scan.scan).points
+        except ScanError:
+            continue  # an unusable scan has no points to contribute
+        chunks.append(se2.transform_points(se2.matrix_from_pose(*pose), points[::stride]))
+    reference_points = np.vstack(chunks) if chunks else np.zeros((0, 2))
+    return EvaluationInputs(tracks, reference_points, stride, without)
+
+
+def _fmt(value: float | None, unit: str = "", scale: float = 1.0, digits: int = 3) -> str:
+    if value is None or not math.isfinite(value):
+        return "-"
+    return f"{value * scale:.{digits}f}{unit}"
+
+
+def format_table(metrics: Metrics, method: str = "") -> str:
+    """A human-readable summary: one line per robot, then the totals."""
+    deg = 180.0 / math.pi
+    header = (
+        f"{'robot':<12} {'scans':>6} {'unposed':>7} {'pairs ok':>8} {'strict':>7} "
+        f"{'med dt':>8} {'med dθ':>7} {'RMSE':>8} {'own ATE':>8}  merged"
+    )
+    lines = ([f"method: {method}", ""] if method else []) + [header, "-" * len(header)]
+    for name, m in metrics.robots.items():
+        merged = "yes" if m.merged else ("no (reported unmerged)" if m.reported_unmerged else "no")
+        lines.append(
+            f"{name:<12} {m.scans:>6} {m.scans_unposed:>7} {_fmt(m.pair_success):>8} "
+            f"{_fmt(m.pair_success_strict):>7} {_fmt(m.median_translation_error_m, ' m'):>8} "
+            f"{_fmt(m.median_rotation_error_rad, '°', deg, 2):>7} {_fmt(m.rmse_m, ' m'):>8} "
+            f"{_fmt(m.ate_own_frame_m, ' m'):>8}  {merged}"
+        )
+    lines += [
+        "",
+        f"robots merged      {metrics.robots_merged} / {metrics.robots_total}",
+        f"scans              {metrics.scans_total} ({metrics.scans_unposed} unposed)",
+        f"pair success       {_fmt(metrics.pair_success)} (≤ 0.30 m, ≤ 5°), "
+        f"strict {_fmt(metrics.pair_success_strict)} (≤ 0.10 m, ≤ 2°)",
+        f"median pair error  {_fmt(metrics.median_translation_error_m, ' m')}, "
+        f"{_fmt(metrics.median_rotation_error_rad, '°', deg, 2)}",
+        f"ATE merged robots  {_fmt(metrics.ate_rmse_m, ' m', digits=4)}",
+        f"ATE all robots     {_fmt(metrics.ate_all_rmse_m, ' m', digits=4)}",
+        f"map error          {_fmt(metrics.map_error_m, ' m', digits=4)} "
+        f"(mean distance of {metrics.reference_points} reference points to "
+        f"{metrics.map_segments} segments)",
+        f"map coverage       {_fmt(metrics.map_coverage)} (points within 0.10 m of the map)",
+        f"map precision      {_fmt(metrics.map_precision)} (map length within 0.10 m of a point)",
+    ]
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from multi_robot_mapper.cli.main import CliError
+    from multi_robot_mapper.io.bags import BagError, read_recordings
+    from multi_robot_mapper.io.results import ResultsError, read_results
+
+    if args.max_points < 1:
+        raise CliError(f"--max-points must be at least 1, got {args.max_points}")
+    directory = Path(args.directory)
+    try:
+        result = read_results(directory)
+    except ResultsError as exc:
+        raise CliError(str(exc)) from exc
+    if not Path(args.bag).exists():
+        raise CliError(f"no such bag: {args.bag}")
+    try:
+        recordings = read_recordings(args.bag)
+    except BagError as exc:
+        raise CliError(str(exc)) from exc
+    try:
+        inputs = build_inputs(result, recordings, args.max_points)
+    except AssociationError as exc:
+        raise CliError(f"{directory} and {args.bag}: {exc}") from exc
+    if not inputs.tracks:
+        raise CliError(f"{args.bag} has no scan with a ground-truth pose to evaluate against")
+    metrics = evaluate(
+        inputs.tracks, result.map_segments, inputs.reference_points, result.robot_frames
+    )
+    report = metrics.to_dict()
+    report["method"] = result.method
+    report["bag"] = str(args.bag)
+    report["reference_beam_stride"] = inputs.beam_stride
+    report["scans_without_reference"] = inputs.scans_without_reference
+    (directory / METRICS_FILE).write_text(json.dumps(report, indent=1) + "\n")
+    if args.json:
+        print(json.dumps(report, indent=1))
+    else:
+        print(format_table(metrics, result.method))
+        skipped = sum(inputs.scans_without_reference.values())
+        if skipped:
+            print(f"({skipped} scans without a reference pose within 20 ms were left out)")
+        print(f"-> {directory / METRICS_FILE}")
+    return 0

@@ -1,0 +1,123 @@
+"""The whole pipeline offline: every robot's scans in, a global segment map out.
+
+``run_offline`` is what ``mrm replay`` runs, through the same stage functions the nodes call:
+front end (scan -> segments), then a placement method. Methods:
+
+- ``reference``: each scan placed at its reference (ground-truth) pose. A labelled tool for
+  checking the evaluator and the pictures, never a mapping result.
+- ``pivot`` and ``ffs``: odometry-free local mapping and merging (their own issues); until they
+  exist they raise :class:`MethodNotImplementedError` rather than return anything.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.scan import LaserScanData, ScanError
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+Pose = tuple[float, float, float]
+
+METHODS = ("reference", "pivot", "ffs")
+
+
+class MethodNotImplementedError(NotImplementedError):
+    """The requested placement method is not built yet."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TimedLaserScan:
+    """One scan of a robot's recording, with its reference pose when the recording has one."""
+
+    stamp: float
+    scan: LaserScanData
+    reference_pose: Pose | None = None
+
+
+@dataclasses.dataclass
+class OfflineMap:
+    """The pipeline's output, in the global ``map`` frame."""
+
+    robots: list[str]
+    map_segments: FloatArray  # (M, 4)
+    segment_robot: IntArray  # (M,) index into robots
+    trajectories: dict[str, tuple[FloatArray, FloatArray]]  # robot -> stamps (N,), poses (N, 3)
+    robot_frames: dict[str, Pose | None]  # T_map_robotmap as (x, y, theta); None = unmerged
+    stats: dict[str, object]
+
+
+Progress = Callable[[str, int, int], None]  # (robot, scans done, scans total)
+
+
+def run_offline(
+    recordings: Mapping[str, Sequence[TimedLaserScan]],
+    method: str,
+    extraction: ExtractionConfig,
+    progress: Progress | None = None,
+) -> OfflineMap:
+    """Run the front end on every scan of every robot, then place them with ``method``."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if method != "reference":
+        raise MethodNotImplementedError(
+            f"method '{method}' is not implemented yet (it arrives with the local-mapping and "
+            "merging issues); 'reference' is available"
+        )
+    robots = sorted(recordings)
+    total = sum(len(recordings[r]) for r in robots)
+    done = 0
+    segment_sets: list[FloatArray] = []
+    owners: list[IntArray] = []
+    trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
+    rejected: dict[str, int] = {}
+    started = time.perf_counter()
+    front_end_s = 0.0
+    for index, robot in enumerate(robots):
+        stamps: list[float] = []
+        poses: list[Pose] = []
+        for item in recordings[robot]:
+            done += 1
+            if progress is not None:
+                progress(robot, done, total)
+            if item.reference_pose is None:
+                continue  # 'reference' can only place scans that have one
+            t0 = time.perf_counter()
+            try:
+                segments, _ = extract_scan(item.scan, extraction)
+            except ScanError as exc:
+                rejected[exc.kind] = rejected.get(exc.kind, 0) + 1
+                continue
+            finally:
+                front_end_s += time.perf_counter() - t0
+            T_map_laser = se2.matrix_from_pose(*item.reference_pose)
+            segment_sets.append(se2.transform_segments(T_map_laser, segments.segments))
+            owners.append(np.full(len(segments), index, dtype=np.int64))
+            stamps.append(item.stamp)
+            poses.append(item.reference_pose)
+        trajectories[robot] = (
+            np.asarray(stamps, dtype=np.float64),
+            np.asarray(poses, dtype=np.float64).reshape(-1, 3),
+        )
+    map_segments = np.vstack(segment_sets) if segment_sets else np.zeros((0, 4))
+    segment_robot = np.concatenate(owners) if owners else np.zeros(0, dtype=np.int64)
+    posed = sum(len(t[0]) for t in trajectories.values())
+    stats: dict[str, object] = {
+        "method": method,
+        "scans_total": total,
+        "scans_posed": posed,
+        "scans_rejected": rejected,
+        "segments": len(map_segments),
+        "front_end_s": round(front_end_s, 4),
+        "total_s": round(time.perf_counter() - started, 4),
+    }
+    # With reference poses every robot frame is the reference world frame.
+    frames: dict[str, Pose | None] = {r: (0.0, 0.0, 0.0) for r in robots}
+    return OfflineMap(robots, map_segments, segment_robot, trajectories, frames, stats)

@@ -1,0 +1,1 @@
+"""Evaluation against reference poses (a layer beside ``io``: core, numpy, scipy and evo only)."""

@@ -1,0 +1,460 @@
+"""Metrics of a multi-robot map against reference poses (issue 3, section 5).
+
+Inputs are plain arrays: for every robot the stamp, reference pose (``world`` frame) and
+estimated pose (``map`` frame, NaN rows for scans the method left unposed) of each scan, the
+map's segments in ``map`` and reference-posed scan points in ``world``. ``T_ref_map`` maps
+``map`` coordinates into the reference (``world``) frame.
+
+Where evo is used, and where not:
+
+- SE(2) alignment goes through :func:`evo.core.geometry.umeyama_alignment` called with 2-D
+  points (``2 x N``). evo's Umeyama is dimension-generic and its determinant correction makes
+  the 2x2 result a proper rotation, so the planar fit can never come out as a reflection (which
+  a 3-D fit of z = 0 trajectories may do: a half-turn about an in-plane axis). Degenerate input
+  (one scan, or a robot that never moved) has no position-only solution; there the rotation is
+  the circular mean of the heading differences and the translation matches the centroids.
+- The pair errors are evo's RPE (delta = 1 frame, ``E = rel_ref^-1 rel_est``, translation
+  part and rotation angle) written out in numpy for SE(2): evo pairs consecutive *posed*
+  poses, whereas here a pair is two consecutive *scans* and an unposed scan must fail its
+  pairs. ``test/test_evaluation.py`` checks the numbers equal evo's RPE on a posed track.
+- ATE is the RMSE of aligned positions (evo's APE translation part), a one-liner in numpy.
+
+Point-to-segment distances are exact distances to candidate segments found through a KD-tree
+over samples taken every <= 2 cm along the map: never below the true nearest-segment distance,
+at most 1 cm above it, and equal to it except where many segments overlap (see
+:func:`point_segment_distances`). Map precision is judged on the midpoints of <= 2 cm pieces of
+each segment, weighted by piece length.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from evo.core.geometry import GeometryException, umeyama_alignment
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from multi_robot_mapper.core import se2
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+Pose = tuple[float, float, float]
+
+PAIR_TRANSLATION_M = 0.30
+PAIR_ROTATION_RAD = math.radians(5.0)
+STRICT_TRANSLATION_M = 0.10
+STRICT_ROTATION_RAD = math.radians(2.0)
+MERGE_RMSE_M = 0.30  # a robot is placed by an alignment when its position RMSE is below this
+MAP_TOLERANCE_M = 0.10  # coverage and precision distance
+SEGMENT_STEP_M = 0.02  # map segments are sampled at least this densely
+_DEGENERATE_SPREAD_M = 1e-9
+
+
+@dataclasses.dataclass
+class RobotTrack:
+    """Every scan of one robot, in order: reference pose and estimated pose (NaN = unposed)."""
+
+    stamps: FloatArray  # (N,) s
+    reference: FloatArray  # (N, 3) x, y, theta of each scan in the reference frame
+    estimate: FloatArray  # (N, 3) x, y, theta in map; NaN rows for unposed scans
+
+    def __post_init__(self) -> None:
+        self.stamps = np.asarray(self.stamps, dtype=np.float64).ravel()
+        self.reference = np.asarray(self.reference, dtype=np.float64).reshape(-1, 3)
+        self.estimate = np.asarray(self.estimate, dtype=np.float64).reshape(-1, 3)
+        n = len(self.stamps)
+        if len(self.reference) != n or len(self.estimate) != n:
+            raise ValueError(
+                f"RobotTrack needs one reference and one estimate per stamp: {n} stamps, "
+                f"{len(self.reference)} references, {len(self.estimate)} estimates"
+            )
+        if not np.all(np.isfinite(self.reference)):
+            raise ValueError("RobotTrack reference poses must all be finite")
+
+    @property
+    def posed(self) -> NDArray[np.bool_]:
+        """(N,) True where the method gave the scan a pose."""
+        return np.asarray(np.all(np.isfinite(self.estimate), axis=1))
+
+
+@dataclasses.dataclass
+class RobotMetrics:
+    """One robot's figures. Rates and errors are NaN when there is nothing to measure."""
+
+    scans: int
+    scans_unposed: int
+    pairs: int  # consecutive scan pairs (scans - 1)
+    pair_success: float
+    pair_success_strict: float
+    median_translation_error_m: float  # over pairs with both scans posed
+    median_rotation_error_rad: float
+    rmse_m: float  # position RMSE under the chosen alignment T_ref_map
+    ate_own_frame_m: float  # position RMSE after aligning this robot alone
+    merged: bool
+    reported_unmerged: bool  # the method said "unmerged" for this robot's frame
+
+
+@dataclasses.dataclass
+class Metrics:
+    """Everything ``mrm evaluate`` reports; :meth:`to_dict` gives the JSON form."""
+
+    robots_total: int
+    robots_merged: int
+    merged_robots: list[str]
+    scans_total: int
+    scans_unposed: int
+    pair_success: float
+    pair_success_strict: float
+    median_translation_error_m: float
+    median_rotation_error_rad: float
+    ate_rmse_m: float  # merged robots, own least-squares fit
+    ate_all_rmse_m: float  # every posed scan, own least-squares fit
+    map_error_m: float
+    map_coverage: float
+    map_precision: float
+    map_segments: int
+    reference_points: int
+    T_ref_map: FloatArray  # the chosen alignment (3x3)
+    robots: dict[str, RobotMetrics]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able: NaN becomes None, the alignment becomes ``{"x", "y", "theta"}``."""
+        out: dict[str, Any] = {}
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if field.name == "T_ref_map":
+                x, y, theta = se2.pose_from_matrix(value)
+                out["alignment_T_ref_map"] = {"x": x, "y": y, "theta": theta}
+            elif field.name == "robots":
+                out["robots"] = {
+                    name: {k: _jsonable(v) for k, v in dataclasses.asdict(m).items()}
+                    for name, m in value.items()
+                }
+            else:
+                out[field.name] = _jsonable(value)
+        out["thresholds"] = {
+            "pair_translation_m": PAIR_TRANSLATION_M,
+            "pair_rotation_rad": PAIR_ROTATION_RAD,
+            "pair_strict_translation_m": STRICT_TRANSLATION_M,
+            "pair_strict_rotation_rad": STRICT_ROTATION_RAD,
+            "merge_rmse_m": MERGE_RMSE_M,
+            "map_tolerance_m": MAP_TOLERANCE_M,
+            "segment_step_m": SEGMENT_STEP_M,
+        }
+        return out
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, list):
+        return [_jsonable(v) for v in value]
+    return value
+
+
+# ----------------------------------------------------------------------------------- alignment
+
+
+def align_se2(estimate: FloatArray, reference: FloatArray) -> FloatArray:
+    """Least-squares SE(2) (no scale) ``T_ref_est`` taking estimated positions onto reference.
+
+    ``estimate`` and ``reference`` are matching ``(N, 3)`` poses, N >= 1, all finite. Positions
+    are fitted with evo's Umeyama in 2-D; without a position spread the headings fix the
+    rotation (circular mean of the differences).
+    """
+    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
+    ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
+    if len(est) == 0 or len(est) != len(ref):
+        raise ValueError(f"align_se2 needs matching non-empty poses ({len(est)}, {len(ref)})")
+    spread = np.max(np.linalg.norm(est[:, :2] - est[:, :2].mean(axis=0), axis=1))
+    if len(est) >= 2 and spread > _DEGENERATE_SPREAD_M:
+        try:
+            r, t, _ = umeyama_alignment(est[:, :2].T, ref[:, :2].T, with_scale=False)
+        except GeometryException:
+            pass
+        else:
+            T = np.eye(3)
+            T[:2, :2] = r
+            T[:2, 2] = t
+            return T
+    dtheta = se2.wrap_angle(ref[:, 2] - est[:, 2])
+    theta = float(np.arctan2(np.sin(dtheta).mean(), np.cos(dtheta).mean()))
+    T = se2.matrix_from_pose(0.0, 0.0, theta)
+    T[:2, 2] = ref[:, :2].mean(axis=0) - T[:2, :2] @ est[:, :2].mean(axis=0)
+    return T
+
+
+def position_rmse(T_ref_est: FloatArray, estimate: FloatArray, reference: FloatArray) -> float:
+    """RMSE (m) of ``T_ref_est``-mapped estimated positions against reference positions."""
+    if len(estimate) == 0:
+        return math.nan
+    moved = se2.transform_points(T_ref_est, np.asarray(estimate)[:, :2])
+    return float(np.sqrt(np.mean(np.sum((moved - np.asarray(reference)[:, :2]) ** 2, axis=1))))
+
+
+# --------------------------------------------------------------------------------------- pairs
+
+
+def pair_errors(track: RobotTrack) -> tuple[NDArray[np.bool_], FloatArray, FloatArray]:
+    """For the N-1 consecutive scan pairs: both posed, translation error (m), rotation error (rad).
+
+    The error of a pair is ``E = rel_ref^-1 rel_est`` with ``rel = T_i^-1 T_i+1``; its
+    translation is ``|t_rel_est - t_rel_ref|`` and its rotation ``|wrap(dtheta_est -
+    dtheta_ref)|``. Errors are NaN where a scan of the pair is unposed.
+    """
+
+    def relative(poses: FloatArray) -> tuple[FloatArray, FloatArray]:
+        step = poses[1:, :2] - poses[:-1, :2]
+        c, s = np.cos(poses[:-1, 2]), np.sin(poses[:-1, 2])
+        local = np.column_stack((c * step[:, 0] + s * step[:, 1], -s * step[:, 0] + c * step[:, 1]))
+        return local, se2.wrap_angle(poses[1:, 2] - poses[:-1, 2])
+
+    posed = track.posed
+    both = posed[1:] & posed[:-1]
+    t_ref, r_ref = relative(track.reference)
+    t_est, r_est = relative(track.estimate)
+    translation = np.linalg.norm(t_est - t_ref, axis=1)
+    rotation = np.abs(se2.wrap_angle(r_est - r_ref))
+    translation[~both] = np.nan
+    rotation[~both] = np.nan
+    return both, translation, rotation
+
+
+def _pair_summary(
+    both: NDArray[np.bool_], translation: FloatArray, rotation: FloatArray
+) -> tuple[float, float, float, float]:
+    """(success, strict success, median translation error, median rotation error)."""
+    pairs = len(both)
+    if pairs == 0:
+        return math.nan, math.nan, math.nan, math.nan
+    with np.errstate(invalid="ignore"):
+        ok = both & (translation <= PAIR_TRANSLATION_M) & (rotation <= PAIR_ROTATION_RAD)
+        strict = both & (translation <= STRICT_TRANSLATION_M) & (rotation <= STRICT_ROTATION_RAD)
+    if np.any(both):
+        med_t, med_r = float(np.median(translation[both])), float(np.median(rotation[both]))
+    else:
+        med_t = med_r = math.nan
+    return float(ok.sum()) / pairs, float(strict.sum()) / pairs, med_t, med_r
+
+
+# ----------------------------------------------------------------------------------------- map
+
+
+def sample_segments(
+    segments: FloatArray, step: float = SEGMENT_STEP_M, midpoints: bool = False
+) -> tuple[FloatArray, IntArray, FloatArray]:
+    """Points along each segment no further apart than ``step``.
+
+    Segment i of length L is cut into ``n = max(1, ceil(L / step))`` equal pieces. Returns
+    ``(points (S, 2), segment index (S,), weight (S,))``: with ``midpoints=False`` the n + 1 piece
+    ends (so every point of the segment is within step / 2 of a sample), weight 0; with
+    ``midpoints=True`` the n piece midpoints, weight L / n (the length each one stands for).
+    """
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    pieces = np.maximum(1, np.ceil(length / step)).astype(np.int64)
+    count = pieces if midpoints else pieces + 1
+    index = np.repeat(np.arange(len(seg), dtype=np.int64), count)
+    start = np.concatenate(([0], np.cumsum(count)[:-1])).astype(np.int64)
+    k = np.arange(index.size, dtype=np.float64) - np.repeat(start, count)
+    t = ((k + 0.5) if midpoints else k) / pieces[index]
+    a, b = seg[index, :2], seg[index, 2:]
+    points = a + t[:, None] * (b - a)
+    weight = (length / pieces)[index] if midpoints else np.zeros(index.size)
+    return points, index, weight
+
+
+def _distance_to_segments(points: FloatArray, segments: FloatArray) -> FloatArray:
+    """Exact distance from points (..., 2) to segments (..., 4), elementwise (broadcasting)."""
+    a = segments[..., :2]
+    d = segments[..., 2:] - a
+    ap = points - a
+    denom = np.sum(d * d, axis=-1)
+    t = np.clip(np.sum(ap * d, axis=-1) / np.where(denom > 0.0, denom, 1.0), 0.0, 1.0)
+    return np.asarray(np.linalg.norm(ap - t[..., None] * d, axis=-1))
+
+
+def point_segment_distances(
+    points: FloatArray, segments: FloatArray, step: float = SEGMENT_STEP_M, k: int = 8
+) -> FloatArray:
+    """Distance from each point (P, 2) to the nearest of the segments (M, 4), within step / 2.
+
+    Segments are sampled every <= ``step`` (piece ends), so the nearest segment's closest point
+    has a sample within ``step / 2``. The segments owning a point's ``k`` nearest samples are
+    its candidates and the result is the exact point-to-segment distance to the nearest
+    candidate: never below the true distance d and never above d + step / 2 (the nearest
+    sample's own segment is a candidate). It equals d unless more than ``k`` samples of other
+    segments lie closer than the true nearest segment's samples, which happens only where many
+    segments overlap (a map of every scan's segments) and then they are within millimetres of
+    one another. Proving exactness there would cost hundreds of samples per point.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    if len(seg) == 0:
+        return np.full(len(pts), np.inf)
+    if len(pts) == 0:
+        return np.zeros(0)
+    samples, owner, _ = sample_segments(seg, step)
+    k = min(k, len(samples))
+    tree = cKDTree(samples, balanced_tree=False, compact_nodes=False)  # faster build, same answer
+    _, sample_idx = tree.query(pts, k=k, workers=-1)
+    candidates = seg[owner[np.asarray(sample_idx).reshape(len(pts), k)]]  # (P, k, 4)
+    return np.asarray(_distance_to_segments(pts[:, None, :], candidates).min(axis=1))
+
+
+def map_scores(segments: FloatArray, reference_points: FloatArray) -> tuple[float, float, float]:
+    """``(map_error_m, map_coverage, map_precision)`` of segments and points in one frame.
+
+    - error: mean distance from the points to the nearest segment (point_segment_distances);
+    - coverage: fraction of points within MAP_TOLERANCE_M of a segment;
+    - precision: fraction of segment length within MAP_TOLERANCE_M of a point (midpoints of
+      <= SEGMENT_STEP_M pieces, weighted by piece length).
+    NaN where undefined (no points; no map for error and precision, coverage is then 0).
+    """
+    pts = np.asarray(reference_points, dtype=np.float64).reshape(-1, 2)
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    if len(pts) == 0:
+        return math.nan, math.nan, math.nan
+    if len(seg) == 0:
+        return math.nan, 0.0, math.nan
+    distance = point_segment_distances(pts, seg)
+    error = float(distance.mean())
+    coverage = float(np.mean(distance <= MAP_TOLERANCE_M))
+    mids, _, weight = sample_segments(seg, SEGMENT_STEP_M, midpoints=True)
+    total = float(weight.sum())
+    if total <= 0.0:
+        return error, coverage, math.nan
+    near, _ = cKDTree(pts).query(mids, k=1, distance_upper_bound=2.0 * MAP_TOLERANCE_M, workers=-1)
+    precision = float(weight[near <= MAP_TOLERANCE_M].sum()) / total
+    return error, coverage, precision
+
+
+# ------------------------------------------------------------------------------------ evaluate
+
+
+def _pooled_rmse(squares: Sequence[FloatArray]) -> float:
+    values = np.concatenate(list(squares)) if squares else np.zeros(0)
+    return float(np.sqrt(values.mean())) if values.size else math.nan
+
+
+def evaluate(
+    tracks: Mapping[str, RobotTrack],
+    map_segments: FloatArray,
+    reference_points: FloatArray,
+    robot_frames: Mapping[str, Pose | None] | None = None,
+) -> Metrics:
+    """Every metric of section 5 of the evaluation issue.
+
+    ``map_segments`` (M, 4) are in the ``map`` frame of the estimates, ``reference_points``
+    (P, 2) in the reference frame. ``robot_frames`` as in the replay results: a robot whose
+    frame is ``None`` ("unmerged") is never counted as merged.
+
+    The merged robots are the most that one alignment places (position RMSE < MERGE_RMSE_M).
+    Candidates are the least-squares fit to all posed scans and to each robot's own posed scans,
+    then the fit to the best candidate's placed robots; the candidate placing the most robots
+    wins, ties go to the lowest RMSE over the placed robots (then to the earlier candidate, the
+    all-scan fit first). The winner is ``T_ref_map``: per-robot RMSE and the map are scored
+    under it.
+    """
+    names = list(tracks)
+    frames = dict(robot_frames or {})
+    reported_unmerged = {r for r in names if r in frames and frames[r] is None}
+    posed = {r: tracks[r].posed for r in names}
+    est = {r: tracks[r].estimate[posed[r]] for r in names}
+    ref = {r: tracks[r].reference[posed[r]] for r in names}
+    with_poses = [r for r in names if len(est[r])]
+
+    def squares(T: FloatArray, robot: str) -> FloatArray:
+        moved = se2.transform_points(T, est[robot][:, :2])
+        return np.asarray(np.sum((moved - ref[robot][:, :2]) ** 2, axis=1))
+
+    def fit(robots: Sequence[str]) -> FloatArray:
+        return align_se2(np.vstack([est[r] for r in robots]), np.vstack([ref[r] for r in robots]))
+
+    def placement(T: FloatArray) -> tuple[list[str], float]:
+        placed = [
+            r
+            for r in with_poses
+            if r not in reported_unmerged and _pooled_rmse([squares(T, r)]) < MERGE_RMSE_M
+        ]
+        return placed, _pooled_rmse([squares(T, r) for r in placed]) if placed else 0.0
+
+    own_fit = {r: fit([r]) for r in with_poses}
+    T_all = fit(with_poses) if with_poses else np.eye(3)
+    candidates = [T_all, *own_fit.values()]
+
+    def best_of(candidates: Sequence[FloatArray]) -> tuple[FloatArray, list[str]]:
+        best_T, best_placed, best_key = candidates[0], [], (-1, 0.0)
+        for T in candidates:
+            placed, rmse = placement(T)
+            key = (len(placed), -rmse)
+            if key > best_key:
+                best_T, best_placed, best_key = T, placed, key
+        return best_T, best_placed
+
+    T_ref_map, merged = best_of(candidates)
+    if merged:
+        T_ref_map, merged = best_of([*candidates, fit(merged)])
+
+    robot_metrics: dict[str, RobotMetrics] = {}
+    all_both, all_t, all_r = [], [], []
+    for r in names:
+        both, trans, rot = pair_errors(tracks[r])
+        all_both.append(both)
+        all_t.append(trans)
+        all_r.append(rot)
+        success, strict, med_t, med_r = _pair_summary(both, trans, rot)
+        has = r in own_fit
+        robot_metrics[r] = RobotMetrics(
+            scans=len(tracks[r].stamps),
+            scans_unposed=int(np.count_nonzero(~posed[r])),
+            pairs=len(both),
+            pair_success=success,
+            pair_success_strict=strict,
+            median_translation_error_m=med_t,
+            median_rotation_error_rad=med_r,
+            rmse_m=_pooled_rmse([squares(T_ref_map, r)]) if has else math.nan,
+            ate_own_frame_m=_pooled_rmse([squares(own_fit[r], r)]) if has else math.nan,
+            merged=r in merged,
+            reported_unmerged=r in reported_unmerged,
+        )
+    success, strict, med_t, med_r = _pair_summary(
+        np.concatenate(all_both) if all_both else np.zeros(0, dtype=bool),
+        np.concatenate(all_t) if all_t else np.zeros(0),
+        np.concatenate(all_r) if all_r else np.zeros(0),
+    )
+    ate = _pooled_rmse([squares(fit(merged), r) for r in merged]) if merged else math.nan
+    ate_all = _pooled_rmse([squares(T_all, r) for r in with_poses]) if with_poses else math.nan
+
+    segments = np.asarray(map_segments, dtype=np.float64).reshape(-1, 4)
+    points = np.asarray(reference_points, dtype=np.float64).reshape(-1, 2)
+    error, coverage, precision = map_scores(se2.transform_segments(T_ref_map, segments), points)
+
+    return Metrics(
+        robots_total=len(names),
+        robots_merged=len(merged),
+        merged_robots=[r for r in names if r in merged],
+        scans_total=sum(m.scans for m in robot_metrics.values()),
+        scans_unposed=sum(m.scans_unposed for m in robot_metrics.values()),
+        pair_success=success,
+        pair_success_strict=strict,
+        median_translation_error_m=med_t,
+        median_rotation_error_rad=med_r,
+        ate_rmse_m=ate,
+        ate_all_rmse_m=ate_all,
+        map_error_m=error,
+        map_coverage=coverage,
+        map_precision=precision,
+        map_segments=len(segments),
+        reference_points=len(points),
+        T_ref_map=T_ref_map,
+        robots=robot_metrics,
+    )

@@ -1,0 +1,380 @@
+"""rosbag2 recordings of several robots' laser scans (and ground truth), read and written.
+
+A recording holds, per robot ``<name>``, ``/<name>/scan`` (``sensor_msgs/msg/LaserScan``) and
+optionally ``/<name>/ground_truth`` (``geometry_msgs/msg/PoseStamped``). Bags are read and
+written with ``rosbags`` (pure Python, no ROS installation): a rosbag2 directory with
+``metadata.yaml`` in mcap or sqlite3 storage, or a bare ``.mcap`` file. Messages are the
+``rosbags`` dataclasses of the ROS 2 Jazzy typestore, so no rclpy is needed.
+
+Every problem with a file becomes a :class:`BagError` subclass with a one-line message naming
+the file; ``rosbags``' own exceptions never escape.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fnmatch
+import math
+import re
+import shutil
+import sqlite3
+import struct
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Literal
+
+import apsw  # rosbags' sqlite3 storage reads through apsw
+import numpy as np
+from rosbags.interfaces import Connection
+from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterError
+from rosbags.serde import SerdeError
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
+
+from multi_robot_mapper.core.scan import LaserScanData
+
+SCAN_TYPE = "sensor_msgs/msg/LaserScan"
+POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+GROUND_TRUTH = "ground_truth"
+# builtin_interfaces/Time counts seconds in an int32, bags count ns since 1970 unsigned.
+_MAX_STAMP_S = 2.0**31
+# A ROS namespace: tokens of letters, digits and underscores, not starting with a digit.
+_ROBOT_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
+
+# What rosbags (and the storage libraries under it) raise on damaged input. A broken file can
+# fail deep inside a parser, so the usual low-level errors are included; programming errors
+# (AttributeError, NameError, ...) are deliberately not.
+_READ_ERRORS = (
+    ReaderError,
+    SerdeError,
+    OSError,
+    EOFError,
+    ValueError,
+    LookupError,
+    struct.error,
+    sqlite3.Error,
+    apsw.Error,
+    OverflowError,  # a damaged length field
+    MemoryError,  # a damaged length field asking for a huge buffer
+    TypeError,  # e.g. ord() of a missing byte in a file cut short
+    AssertionError,  # rosbags asserts on MCAP record layouts
+)
+
+
+class BagError(Exception):
+    """A bag cannot be read or written; the message names the file and the problem."""
+
+
+class BagNotFoundError(BagError):
+    """The bag path does not exist."""
+
+
+class BagCorruptError(BagError):
+    """The file is empty, truncated, not a bag, or its metadata cannot be read."""
+
+
+class UnknownMessageTypeError(BagError):
+    """A selected topic carries a message type this module cannot read."""
+
+
+class NoScanTopicsError(BagError):
+    """No topic of the bag matches the scan pattern."""
+
+
+@dataclass(frozen=True)
+class TimedScan:
+    """One LaserScan: header stamp, frame and geometry."""
+
+    stamp: float  # header stamp, s
+    frame_id: str
+    scan: LaserScanData
+
+
+@dataclass(frozen=True)
+class TimedPose:
+    """One pose of the robot's laser in ``frame_id``: ``(x, y, theta)`` in m, m, rad."""
+
+    stamp: float  # header stamp, s
+    pose: tuple[float, float, float]
+    frame_id: str
+
+
+@dataclass
+class RobotRecording:
+    """Everything one robot recorded, sorted by stamp."""
+
+    name: str  # the topic namespace: "robot1" for /robot1/scan
+    scans: list[TimedScan]
+    ground_truth: list[TimedPose] = field(default_factory=list)
+
+
+@lru_cache(maxsize=1)
+def _typestore() -> Typestore:
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def robot_name(topic: str) -> str:
+    """The robot a scan topic belongs to: its namespace ("/robot1/scan" -> "robot1").
+
+    A scan topic without a namespace ("/scan") belongs to "robot".
+    """
+    namespace = topic.rsplit("/", 1)[0].strip("/")
+    return namespace or "robot"
+
+
+def _natural_key(name: str) -> list[tuple[int, int | str]]:
+    """Sort key putting "robot2" before "robot10"."""
+    return [(0, int(part)) if part.isdigit() else (1, part) for part in re.split(r"(\d+)", name)]
+
+
+def _stamp_seconds(stamp: Any) -> float:
+    return float(stamp.sec) + float(stamp.nanosec) * 1e-9
+
+
+def _stamp_msg(seconds: float) -> Any:
+    # Split before scaling so ~1e9 s stamps keep nanosecond resolution in the fraction.
+    sec = math.floor(seconds)
+    nanosec = round((seconds - sec) * 1e9)
+    if nanosec >= 1_000_000_000:
+        sec, nanosec = sec + 1, nanosec - 1_000_000_000
+    return _typestore().types["builtin_interfaces/msg/Time"](sec=int(sec), nanosec=int(nanosec))
+
+
+def _stamp_ns(seconds: float) -> int:
+    stamp = _stamp_msg(seconds)
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def _yaw(q: Any) -> float:
+    """Rotation about z of a quaternion (the planar part of any orientation)."""
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def _scan_from_msg(msg: Any) -> TimedScan:
+    intensities = np.asarray(msg.intensities, dtype=np.float64)
+    ranges = np.asarray(msg.ranges, dtype=np.float64)
+    return TimedScan(
+        stamp=_stamp_seconds(msg.header.stamp),
+        frame_id=str(msg.header.frame_id),
+        scan=LaserScanData(
+            ranges=ranges,
+            angle_min=float(msg.angle_min),
+            angle_max=float(msg.angle_max),
+            angle_increment=float(msg.angle_increment),
+            range_min=float(msg.range_min),
+            range_max=float(msg.range_max),
+            intensities=intensities if intensities.size else None,
+        ),
+    )
+
+
+def _pose_from_msg(msg: Any) -> TimedPose:
+    p = msg.pose.position
+    return TimedPose(
+        stamp=_stamp_seconds(msg.header.stamp),
+        pose=(float(p.x), float(p.y), _yaw(msg.pose.orientation)),
+        frame_id=str(msg.header.frame_id),
+    )
+
+
+def _scan_msg(item: TimedScan) -> Any:
+    types = _typestore().types
+    scan = item.scan
+    intensities = (
+        np.asarray(scan.intensities, dtype=np.float32).ravel()
+        if scan.intensities is not None
+        else np.zeros(0, dtype=np.float32)
+    )
+    return types[SCAN_TYPE](
+        header=types["std_msgs/msg/Header"](stamp=_stamp_msg(item.stamp), frame_id=item.frame_id),
+        angle_min=float(scan.angle_min),
+        angle_max=float(scan.angle_max),
+        angle_increment=float(scan.angle_increment),
+        time_increment=0.0,  # unknown: the beams' own timing is not recorded
+        scan_time=0.0,
+        range_min=float(scan.range_min),
+        range_max=float(scan.range_max),
+        ranges=np.asarray(scan.ranges, dtype=np.float32).ravel(),
+        intensities=intensities,
+    )
+
+
+def _pose_msg(item: TimedPose) -> Any:
+    types = _typestore().types
+    x, y, theta = item.pose
+    return types[POSE_TYPE](
+        header=types["std_msgs/msg/Header"](stamp=_stamp_msg(item.stamp), frame_id=item.frame_id),
+        pose=types["geometry_msgs/msg/Pose"](
+            position=types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0),
+            orientation=types["geometry_msgs/msg/Quaternion"](
+                x=0.0, y=0.0, z=math.sin(theta / 2.0), w=math.cos(theta / 2.0)
+            ),
+        ),
+    )
+
+
+def _open_reader(path: Path) -> Reader:
+    """A rosbags reader for a bag directory or a bare ``.mcap``/``.db3`` file."""
+    if path.is_dir():
+        if not (path / "metadata.yaml").is_file():
+            raise BagCorruptError(
+                f"{path}: not a rosbag2 directory (no metadata.yaml; "
+                "`ros2 bag reindex` can rebuild it)"
+            )
+    elif path.suffix not in (".mcap", ".db3"):
+        raise BagCorruptError(
+            f"{path}: not a rosbag2 bag (expected a bag directory or a .mcap file)"
+        )
+    elif path.stat().st_size == 0:
+        raise BagCorruptError(f"{path}: the file is empty")
+    try:
+        reader = Reader(path)
+        reader.open()
+    except _READ_ERRORS as exc:
+        raise BagCorruptError(f"{path}: cannot open the bag ({_reason(exc)})") from None
+    return reader
+
+
+def _reason(exc: BaseException) -> str:
+    """One line for an exception from rosbags or the storage layers."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def read_recordings(path: str | Path, scan_pattern: str = "/*/scan") -> dict[str, RobotRecording]:
+    """Every robot's scans (and ground truth, when recorded) from a rosbag2 bag.
+
+    ``scan_pattern`` is an ``fnmatch`` pattern on topic names; each matching topic is one
+    robot, named by its namespace (:func:`robot_name`). Ground truth is read from
+    ``<namespace>/ground_truth`` when that topic exists. Lists are sorted by header stamp.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise BagNotFoundError(f"{path}: no such bag file or directory")
+    reader = _open_reader(path)
+    try:
+        return _read(reader, path, scan_pattern)
+    except BagError:
+        raise
+    except _READ_ERRORS as exc:
+        raise BagCorruptError(f"{path}: cannot read the bag ({_reason(exc)})") from None
+    finally:
+        # Closing a damaged file may fail too; the read error above is the one to report.
+        with contextlib.suppress(*_READ_ERRORS):
+            reader.close()
+
+
+def _read(reader: Reader, path: Path, scan_pattern: str) -> dict[str, RobotRecording]:
+    topics: dict[str, list[Connection]] = {}
+    for connection in reader.connections:
+        topics.setdefault(connection.topic, []).append(connection)
+    scan_topics = sorted(t for t in topics if fnmatch.fnmatchcase(t, scan_pattern))
+    if not scan_topics:
+        known = ", ".join(sorted(topics)) or "none"
+        raise NoScanTopicsError(f"{path}: no topic matches {scan_pattern!r} (topics: {known})")
+
+    wanted: dict[str, tuple[str, str]] = {}  # topic -> (robot, kind)
+    for topic in scan_topics:
+        name = robot_name(topic)
+        for other, (robot, _) in wanted.items():
+            if robot == name:
+                raise BagError(f"{path}: topics {other} and {topic} both name robot {name!r}")
+        wanted[topic] = (name, "scan")
+        truth = f"{topic.rsplit('/', 1)[0]}/{GROUND_TRUTH}"
+        if truth in topics:
+            wanted[truth] = (name, "truth")
+    for topic, (_, kind) in wanted.items():
+        expected = SCAN_TYPE if kind == "scan" else POSE_TYPE
+        for connection in topics[topic]:
+            if connection.msgtype != expected:
+                raise UnknownMessageTypeError(
+                    f"{path}: topic {topic} has type {connection.msgtype}, expected {expected}"
+                )
+
+    recordings = {
+        name: RobotRecording(name=name, scans=[], ground_truth=[])
+        for name, kind in wanted.values()
+        if kind == "scan"
+    }
+    selected = [c for topic in wanted for c in topics[topic]]
+    deserialize = _typestore().deserialize_cdr
+    for connection, _, raw in reader.messages(connections=selected):
+        name, kind = wanted[connection.topic]
+        msg = deserialize(raw, connection.msgtype)
+        if kind == "scan":
+            recordings[name].scans.append(_scan_from_msg(msg))
+        else:
+            recordings[name].ground_truth.append(_pose_from_msg(msg))
+    for recording in recordings.values():
+        recording.scans.sort(key=lambda item: item.stamp)  # stable: equal stamps keep bag order
+        recording.ground_truth.sort(key=lambda item: item.stamp)
+    return dict(sorted(recordings.items(), key=lambda item: _natural_key(item[0])))
+
+
+def write_recordings(
+    path: str | Path,
+    recordings: Mapping[str, RobotRecording],
+    storage: Literal["mcap", "sqlite3"] = "mcap",
+) -> Path:
+    """Write recordings as a new rosbag2 directory at ``path``; returns ``path``.
+
+    Per robot ``/<name>/scan`` (LaserScan, ``header.frame_id`` of each :class:`TimedScan`) and,
+    when there is ground truth, ``/<name>/ground_truth`` (PoseStamped, ``frame_id`` of each
+    :class:`TimedPose`). Receive timestamps are the header stamps, so replay keeps the timing.
+    An existing ``path`` is never overwritten.
+    """
+    path = Path(path)
+    plugins = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
+    if storage not in plugins:
+        raise BagError(f"{path}: unknown storage {storage!r} (mcap or sqlite3)")
+    if path.exists() or path.is_symlink():
+        raise BagError(f"{path}: already exists; not overwriting it")
+    # Messages go in stamp order across robots, as a recorder would have received them.
+    messages: list[tuple[int, int, str, Any]] = []  # (ns, order, topic, message)
+    for name, recording in recordings.items():
+        if not _ROBOT_NAME.fullmatch(name):
+            raise BagError(f"{path}: robot name {name!r} cannot be a ROS topic namespace")
+        topics = (
+            (f"/{name}/scan", recording.scans),
+            (f"/{name}/{GROUND_TRUTH}", recording.ground_truth),
+        )
+        for topic, items in topics:
+            for item in items:
+                if not 0.0 <= item.stamp < _MAX_STAMP_S:  # also refuses NaN
+                    raise BagError(
+                        f"{path}: a message of {topic} has stamp {item.stamp} s, outside what "
+                        f"a bag stores (0 .. 2^31 s)"
+                    )
+                messages.append((_stamp_ns(item.stamp), len(messages), topic, item))
+    messages.sort(key=lambda m: (m[0], m[1]))
+    serialize = _typestore().serialize_cdr
+    write_errors = (WriterError, OSError, sqlite3.Error, ValueError, OverflowError, struct.error)
+    try:
+        bag = Writer(path, version=Writer.VERSION_LATEST, storage_plugin=plugins[storage])
+        bag.open()
+    except write_errors as exc:
+        raise BagError(f"{path}: cannot create the bag ({_reason(exc)})") from None
+    try:
+        connections: dict[str, Connection] = {}
+        for name, recording in recordings.items():
+            topic = f"/{name}/scan"
+            connections[topic] = bag.add_connection(topic, SCAN_TYPE, typestore=_typestore())
+            if recording.ground_truth:
+                topic = f"/{name}/{GROUND_TRUTH}"
+                connections[topic] = bag.add_connection(topic, POSE_TYPE, typestore=_typestore())
+        for ns, _, topic, item in messages:
+            if isinstance(item, TimedScan):
+                data = serialize(_scan_msg(item), SCAN_TYPE)
+            else:
+                data = serialize(_pose_msg(item), POSE_TYPE)
+            bag.write(connections[topic], ns, data)
+        bag.close()
+    except (*write_errors, SerdeError) as exc:
+        with contextlib.suppress(*write_errors):  # the first error is the one to report
+            bag.abort()
+        # Writer.open created the directory (it refuses existing paths): remove the half bag.
+        shutil.rmtree(path, ignore_errors=True)
+        raise BagError(f"{path}: cannot write the bag ({_reason(exc)})") from None
+    return path

@@ -1,0 +1,289 @@
+"""The replay output folder: what ``mrm replay`` writes and ``mrm evaluate`` reads.
+
+Layout of ``DIR``:
+
+- ``map.json``: ``{"method", "frame": "map", "robots": [...], "segments": [[x1, y1, x2, y2], ...],
+  "segment_robot": [...]}``; segments in metres in the global ``map`` frame, ``segment_robot``
+  the index into ``robots`` of the robot each segment came from;
+- ``trajectories/<robot>.tum``: one line per posed scan, ``stamp x y z qx qy qz qw`` (TUM
+  format; stamp in seconds, z = 0, a yaw-only quaternion), poses in ``map``. Stamps are written
+  with ``%.9f``, enough digits to give back the same float64, so they associate exactly;
+- ``robots.json``: ``{robot: {"x", "y", "theta"}}`` (the pose of ``<robot>/map`` in ``map``) or
+  ``{robot: "unmerged"}``;
+- ``stats.json``: a JSON object of timings and counts.
+
+Pictures (``map.png``, ``map.svg``) live in the same folder but are not this module's business.
+Every problem reading the folder raises :class:`ResultsError` with one line naming the file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+Pose = tuple[float, float, float]
+
+MAP_FILE = "map.json"
+ROBOTS_FILE = "robots.json"
+STATS_FILE = "stats.json"
+TRAJECTORY_DIR = "trajectories"
+UNMERGED = "unmerged"
+
+
+class ResultsError(Exception):
+    """A result folder that is missing a file or holds a malformed one (message names the file)."""
+
+
+@dataclasses.dataclass
+class ReplayResult:
+    """Everything ``mrm replay`` writes except pictures, in the global ``map`` frame."""
+
+    method: str  # "reference", "pivot", "ffs"
+    robots: list[str]
+    map_segments: FloatArray  # (M, 4) [x1, y1, x2, y2] in map
+    segment_robot: IntArray  # (M,) index into robots
+    # robot -> (stamps (N,) s, poses (N, 3) x, y, theta in map); posed scans only
+    trajectories: dict[str, tuple[FloatArray, FloatArray]]
+    robot_frames: dict[str, Pose | None]  # T_map_<robot>/map as (x, y, theta); None = unmerged
+    stats: dict[str, Any]
+
+
+def trajectory_path(directory: Path, robot: str) -> Path:
+    return Path(directory) / TRAJECTORY_DIR / f"{robot}.tum"
+
+
+# --------------------------------------------------------------------------------------- write
+
+
+def write_results(directory: Path, result: ReplayResult) -> None:
+    """Write ``result`` into ``directory`` (created if needed; existing files are replaced)."""
+    directory = Path(directory)
+    segments = np.asarray(result.map_segments, dtype=np.float64).reshape(-1, 4)
+    owners = np.asarray(result.segment_robot, dtype=np.int64).ravel()
+    if len(owners) != len(segments):
+        raise ValueError(f"{len(segments)} segments but {len(owners)} segment_robot entries")
+    if len(owners) and (owners.min() < 0 or owners.max() >= len(result.robots)):
+        raise ValueError("segment_robot holds an index outside robots")
+    directory.mkdir(parents=True, exist_ok=True)
+    (directory / TRAJECTORY_DIR).mkdir(exist_ok=True)
+    _write_json(
+        directory / MAP_FILE,
+        {
+            "method": result.method,
+            "frame": "map",
+            "robots": list(result.robots),
+            # repr-exact floats: json writes the shortest string that reads back the same float
+            "segments": segments.tolist(),
+            "segment_robot": owners.tolist(),
+        },
+    )
+    for robot in result.robots:
+        stamps, poses = result.trajectories.get(robot, (np.zeros(0), np.zeros((0, 3))))
+        write_tum(trajectory_path(directory, robot), stamps, poses)
+    frames: dict[str, Any] = {}
+    for robot in result.robots:
+        frame = result.robot_frames.get(robot)
+        frames[robot] = (
+            UNMERGED
+            if frame is None
+            else {"x": float(frame[0]), "y": float(frame[1]), "theta": float(frame[2])}
+        )
+    _write_json(directory / ROBOTS_FILE, frames)
+    _write_json(directory / STATS_FILE, result.stats)
+
+
+def write_tum(path: Path, stamps: FloatArray, poses: FloatArray) -> None:
+    """Write planar poses ``(N, 3)`` as a TUM trajectory (z = 0, yaw-only quaternion)."""
+    stamps = np.asarray(stamps, dtype=np.float64).ravel()
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if len(stamps) != len(poses):
+        raise ValueError(f"{len(stamps)} stamps but {len(poses)} poses for {path}")
+    half = 0.5 * poses[:, 2]
+    zeros = np.zeros(len(poses))
+    table = np.column_stack(
+        (stamps, poses[:, 0], poses[:, 1], zeros, zeros, zeros, np.sin(half), np.cos(half))
+    )
+    # %.9f for stamps (nanoseconds; exact float64 round trip for epoch stamps), %.17g for the
+    # rest (exact float64 round trip).
+    fmt = ["%.9f"] + ["%.17g"] * 7
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    np.savetxt(path, table, fmt=fmt, header="timestamp x y z qx qy qz qw", comments="# ")
+
+
+def _write_json(path: Path, data: Any) -> None:
+    path.write_text(json.dumps(data, indent=1, default=_json_default) + "\n")
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+# ---------------------------------------------------------------------------------------- read
+
+
+def read_results(directory: Path) -> ReplayResult:
+    """Read a folder written by :func:`write_results`; raises :class:`ResultsError`."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise ResultsError(f"{directory}: no such result folder")
+    map_path = directory / MAP_FILE
+    data = _read_json(map_path)
+    if not isinstance(data, dict):
+        raise ResultsError(f"{map_path}: expected a JSON object")
+    method = data.get("method")
+    if not isinstance(method, str):
+        raise ResultsError(f"{map_path}: 'method' must be a string")
+    if data.get("frame", "map") != "map":
+        raise ResultsError(f"{map_path}: 'frame' is {data.get('frame')!r}, expected 'map'")
+    robots = data.get("robots")
+    if (
+        not isinstance(robots, list)
+        or not all(isinstance(r, str) and _safe_name(r) for r in robots)
+        or len(set(robots)) != len(robots)
+    ):
+        raise ResultsError(f"{map_path}: 'robots' must be a list of distinct robot names")
+    segments = _number_array(data.get("segments"), map_path, "segments")
+    if segments.size == 0:
+        segments = segments.reshape(0, 4)
+    if segments.ndim != 2 or segments.shape[1] != 4 or not np.all(np.isfinite(segments)):
+        raise ResultsError(f"{map_path}: 'segments' must be a list of [x1, y1, x2, y2] numbers")
+    owners = _number_array(data.get("segment_robot"), map_path, "segment_robot")
+    if owners.ndim != 1 or len(owners) != len(segments):
+        raise ResultsError(
+            f"{map_path}: 'segment_robot' must hold one index per segment ({len(segments)})"
+        )
+    if len(owners) and (
+        not np.all(owners == np.round(owners)) or owners.min() < 0 or owners.max() >= len(robots)
+    ):
+        raise ResultsError(
+            f"{map_path}: 'segment_robot' holds an index outside 0..{len(robots) - 1}"
+        )
+
+    trajectories = {robot: read_tum(trajectory_path(directory, robot)) for robot in robots}
+
+    frames_path = directory / ROBOTS_FILE
+    frames_data = _read_json(frames_path)
+    if not isinstance(frames_data, dict):
+        raise ResultsError(f"{frames_path}: expected a JSON object robot -> pose or 'unmerged'")
+    frames: dict[str, Pose | None] = {}
+    for robot in robots:
+        if robot not in frames_data:
+            raise ResultsError(f"{frames_path}: robot {robot!r} is missing")
+        frames[robot] = _parse_frame(frames_data[robot], frames_path, robot)
+
+    stats_path = directory / STATS_FILE
+    stats = _read_json(stats_path)
+    if not isinstance(stats, dict):
+        raise ResultsError(f"{stats_path}: expected a JSON object")
+    return ReplayResult(
+        method=method,
+        robots=list(robots),
+        map_segments=segments.astype(np.float64),
+        segment_robot=owners.astype(np.int64),
+        trajectories=trajectories,
+        robot_frames=frames,
+        stats=stats,
+    )
+
+
+def read_tum(path: Path) -> tuple[FloatArray, FloatArray]:
+    """A TUM trajectory as ``(stamps (N,), poses (N, 3))``; yaw from the quaternion.
+
+    Blank lines and lines starting with ``#`` are skipped. Raises :class:`ResultsError`.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ResultsError(f"{path}: missing trajectory file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ResultsError(f"{path}: cannot read: {exc}") from None
+    rows: list[list[float]] = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        fields = stripped.split()
+        if len(fields) != 8:
+            raise ResultsError(
+                f"{path}:{number}: expected 8 fields 'stamp x y z qx qy qz qw', got {len(fields)}"
+            )
+        try:
+            values = [float(f) for f in fields]
+        except ValueError:
+            raise ResultsError(f"{path}:{number}: not a number in {stripped!r}") from None
+        if not all(math.isfinite(v) for v in values):
+            raise ResultsError(f"{path}:{number}: non-finite value in {stripped!r}")
+        rows.append(values)
+    table = np.asarray(rows, dtype=np.float64).reshape(-1, 8)
+    stamps = table[:, 0]
+    if np.any(np.diff(stamps) <= 0.0):
+        raise ResultsError(f"{path}: stamps are not strictly increasing")
+    qx, qy, qz, qw = table[:, 4], table[:, 5], table[:, 6], table[:, 7]
+    norm = np.sqrt(qx**2 + qy**2 + qz**2 + qw**2)
+    if np.any(np.abs(norm - 1.0) > 1e-6):
+        raise ResultsError(f"{path}: a quaternion is not of unit length")
+    yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy**2 + qz**2))
+    poses = np.column_stack((table[:, 1], table[:, 2], yaw))
+    return stamps.copy(), poses
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ResultsError(f"{path}: missing") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ResultsError(f"{path}: cannot read: {exc}") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ResultsError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+
+
+def _number_array(value: Any, path: Path, key: str) -> FloatArray:
+    if not isinstance(value, list):
+        raise ResultsError(f"{path}: '{key}' must be a list")
+    try:
+        array: FloatArray = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ResultsError(f"{path}: '{key}' must hold only numbers") from None
+    if any(isinstance(v, bool) for v in np.ravel(np.asarray(value, dtype=object))):
+        raise ResultsError(f"{path}: '{key}' must hold only numbers")
+    return array
+
+
+def _parse_frame(value: Any, path: Path, robot: str) -> Pose | None:
+    if value == UNMERGED:
+        return None
+    if isinstance(value, dict) and {"x", "y", "theta"} <= set(value):
+        pose = (value["x"], value["y"], value["theta"])
+        if all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for v in pose
+        ):
+            return (float(pose[0]), float(pose[1]), float(pose[2]))
+    raise ResultsError(
+        f"{path}: robot {robot!r} must be {{'x', 'y', 'theta'}} numbers or 'unmerged'"
+    )
+
+
+def _safe_name(name: str) -> bool:
+    """A robot name usable as a file name (namespaces like 'robot1', never a path)."""
+    return bool(name) and "/" not in name and "\\" not in name and name not in (".", "..")
