@@ -26,9 +26,10 @@ from multi_robot_mapper.core.scan import LaserScanData  # noqa: E402
 from multi_robot_mapper.core.simulation import (  # noqa: E402
     ROUTES,
     LaserModel,
+    _arc_length,
+    drive_path,
     office_world,
     simulate_scan,
-    waypoint_path,
 )
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
@@ -37,7 +38,8 @@ INTEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen
 
 def simulated(laser: LaserModel, count: int, seed: int = 0) -> list[LaserScanData]:
     walls = office_world()
-    poses = waypoint_path(ROUTES["office"], speed=1.0, rate=laser.rate)
+    route = np.asarray(ROUTES["office"], dtype=np.float64)
+    poses = drive_path(route, 1.0, laser.rate, float(_arc_length(route)[-1]))  # once at 1 m/s
     poses = poses[np.linspace(0, len(poses) - 1, count).astype(int)]
     rng = np.random.default_rng(seed)
     return [simulate_scan(walls, tuple(p), laser, rng) for p in poses]

@@ -2,19 +2,14 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
-import sys
-import types
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import LaserModel, polygon, simulate_scan
 from multi_robot_mapper.evaluation.metrics import (
     RobotTrack,
@@ -24,6 +19,7 @@ from multi_robot_mapper.evaluation.metrics import (
     point_segment_distances,
     sample_segments,
 )
+from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan, write_recordings
 from multi_robot_mapper.io.results import ReplayResult, write_results
 
 T_MAP_WORLD = se2.matrix_from_pose(3.0, -7.0, 2.5)  # the method's map frame, arbitrary
@@ -291,64 +287,25 @@ def test_metrics_to_dict_is_json() -> None:
 # ---------------------------------------------------------------------- mrm evaluate (CLI)
 
 
-@dataclass
-class FakeTimedScan:
-    stamp: float
-    frame_id: str
-    scan: LaserScanData
-
-
-@dataclass
-class FakeTimedPose:
-    stamp: float
-    pose: tuple[float, float, float]
-    frame_id: str
-
-
-@dataclass
-class FakeRecording:
-    name: str
-    scans: list[FakeTimedScan]
-    ground_truth: list[FakeTimedPose]
-
-
-class FakeBagError(Exception):
-    pass
-
-
-def fake_bag(tmp_path: Path) -> tuple[Path, dict[str, FakeRecording], dict[str, np.ndarray]]:
+def room_recordings(shift: float = 0.0) -> tuple[dict[str, RobotRecording], dict[str, np.ndarray]]:
+    """Two robots driving circles in ROOM, noise-free scans, reference poses as ground truth."""
     laser = LaserModel(beams=181, range_noise=0.0, dropout=0.0)
     rng = np.random.default_rng(0)
     recordings, references = {}, {}
     for name, cx in (("robot1", 1.3), ("robot2", 2.7)):
         ref = circle_path(cx, 2.0, n=20, radius=0.6)
-        stamps = 1_718_000_000.0 + 0.025 * np.arange(20)
+        stamps = 1_718_000_000.0 + 0.025 * np.arange(20) + shift
         scans = [
-            FakeTimedScan(float(t), f"{name}/laser", simulate_scan(ROOM, tuple(p), laser, rng))
+            TimedScan(float(t), f"{name}/laser", simulate_scan(ROOM, tuple(p), laser, rng))
             for t, p in zip(stamps, ref, strict=True)
         ]
         truth = [
-            FakeTimedPose(float(t), tuple(map(float, p)), "world")
+            TimedPose(float(t), (float(p[0]), float(p[1]), float(p[2])), "world")
             for t, p in zip(stamps, ref, strict=True)
         ]
-        recordings[name] = FakeRecording(name, scans, truth)
+        recordings[name] = RobotRecording(name, scans, truth)
         references[name] = ref
-    bag = tmp_path / "run.mcap"
-    bag.write_bytes(b"fake")
-    return bag, recordings, references
-
-
-def install_fake_bags(monkeypatch: pytest.MonkeyPatch, recordings: dict) -> None:
-    module = types.ModuleType("multi_robot_mapper.io.bags")
-    module.BagError = FakeBagError  # type: ignore[attr-defined]
-
-    def read_recordings(path: Path, **_: object) -> dict:
-        if Path(path).read_bytes() != b"fake":
-            raise FakeBagError(f"{path}: not a bag")
-        return recordings
-
-    module.read_recordings = read_recordings  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "multi_robot_mapper.io.bags", module)
+    return recordings, references
 
 
 def write_estimate(out: Path, references: dict[str, np.ndarray], drop: int = 0) -> None:
@@ -370,61 +327,56 @@ def write_estimate(out: Path, references: dict[str, np.ndarray], drop: int = 0) 
     )
 
 
-def cli_args(out: Path, bag: Path, as_json: bool = False) -> argparse.Namespace:
-    from multi_robot_mapper.cli import evaluate as cli
+def mrm_evaluate(
+    capsys: pytest.CaptureFixture[str], out: Path, bag: Path, *extra: str
+) -> tuple[int, str, str]:
+    from multi_robot_mapper.cli.main import main
 
-    parser = argparse.ArgumentParser()
-    cli.register(parser.add_subparsers())
-    return parser.parse_args(["evaluate", str(out), "--bag", str(bag)] + ["--json"] * as_json)
+    code = main(["evaluate", str(out), "--bag", str(bag), *extra])
+    printed, err = capsys.readouterr()
+    return code, printed, err
 
 
-def test_cli_scores_a_reference_replay(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    bag, recordings, references = fake_bag(tmp_path)
-    install_fake_bags(monkeypatch, recordings)
+def test_cli_scores_a_reference_replay(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    recordings, references = room_recordings()
+    bag = write_recordings(tmp_path / "run", recordings)
     out = tmp_path / "out"
     write_estimate(out, references, drop=2)  # first two scans of each robot left unposed
-    args = cli_args(out, bag, as_json=True)
-    assert args.func(args) == 0
-    printed = json.loads(capsys.readouterr().out)
+    code, printed, err = mrm_evaluate(capsys, out, bag, "--json")
+    assert code == 0, err
     saved = json.loads((out / "metrics.json").read_text())
-    assert printed == saved
+    assert json.loads(printed) == saved
     assert saved["robots_merged"] == 2 and saved["robots_total"] == 2
-    assert saved["ate_rmse_m"] < 1e-9
+    assert saved["ate_rmse_m"] < 1e-6
     assert (saved["scans_total"], saved["scans_unposed"]) == (40, 4)
     assert saved["pair_success"] == pytest.approx(34 / 38)
-    # Noise-free scans of the room, map = the room's walls: every point lies on the map.
-    assert saved["map_error_m"] < 1e-9 and saved["map_coverage"] == 1.0
+    # Noise-free scans of the room, map = the room's walls: every point lies on the map
+    # (ranges go through the bag as float32, hence micrometres, not zero).
+    assert saved["map_error_m"] < 1e-5 and saved["map_coverage"] == 1.0
     assert saved["reference_points"] == 40 * 181
     assert saved["method"] == "reference"
 
-    args = cli_args(out, bag)
-    assert args.func(args) == 0
-    table = capsys.readouterr().out
+    code, table, _ = mrm_evaluate(capsys, out, bag)
+    assert code == 0
     assert "robots merged      2 / 2" in table and "robot2" in table
 
 
-def test_cli_user_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from multi_robot_mapper.cli.main import CliError
-
-    bag, recordings, references = fake_bag(tmp_path)
-    install_fake_bags(monkeypatch, recordings)
+def test_cli_user_errors_are_one_line_with_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    recordings, references = room_recordings()
+    bag = write_recordings(tmp_path / "run", recordings)
     out = tmp_path / "out"
-    args = cli_args(out, bag)
-    with pytest.raises(CliError, match="no such result folder"):
-        args.func(args)
+
+    def refused(bag_path: Path, words: str) -> None:
+        code, _, err = mrm_evaluate(capsys, out, bag_path)
+        assert code == 2 and err.count("\n") == 1 and words in err, err
+
+    refused(bag, "no such result folder")
     write_estimate(out, references)
     (tmp_path / "broken.mcap").write_bytes(b"junk")
-    args = cli_args(out, tmp_path / "broken.mcap")
-    with pytest.raises(CliError, match="not a bag"):
-        args.func(args)
-    for rec in recordings.values():  # another bag: stamps shifted by 1 ms
-        for item in rec.scans:
-            item.stamp += 1e-3
-    args = cli_args(out, bag)
-    with pytest.raises(CliError, match="matches no scan"):
-        args.func(args)
+    refused(tmp_path / "broken.mcap", "broken.mcap")
+    shifted, _ = room_recordings(shift=1e-3)  # another bag: stamps 1 ms later
+    refused(write_recordings(tmp_path / "shifted", shifted), "matches no scan")
     del recordings["robot2"]
-    with pytest.raises(CliError, match="robot2"):
-        args.func(args)
+    refused(write_recordings(tmp_path / "one_robot", recordings), "robot2")

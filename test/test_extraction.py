@@ -8,11 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.extraction import (
-    ExtractionConfig,
-    extract_segments,
-    point_segment_distance,
-)
+from multi_robot_mapper.core.extraction import ExtractionConfig, extract_segments
+from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.simulation import polygon, raycast
 
 ROOM = polygon([(-2.0, -1.5), (3.0, -1.5), (3.0, 2.5), (-2.0, 2.5)])

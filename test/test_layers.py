@@ -21,6 +21,8 @@ FORBIDDEN = (
     "yaml",
     "rosbags",
     "mcap",
+    "evo",
+    "multi_robot_mapper.evaluation",
 )
 
 
@@ -50,3 +52,24 @@ def test_core_sources_import_only_core_numpy_scipy_and_stdlib() -> None:
                 names = [node.module]
             for name in names:
                 assert not name.startswith(FORBIDDEN), f"{path.name} imports {name}"
+
+
+def imports_of(package: str) -> set[str]:
+    names: set[str] = set()
+    for path in (CORE.parent / package).rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names.add(node.module)
+    return names
+
+
+def test_io_and_evaluation_never_import_the_ros_or_cli_layers() -> None:
+    for package in ("io", "evaluation"):
+        bad = {
+            name
+            for name in imports_of(package)
+            if name.startswith(("rclpy", "multi_robot_mapper.ros", "multi_robot_mapper.cli"))
+        }
+        assert not bad, f"{package} imports {sorted(bad)}"

@@ -121,7 +121,7 @@ BAD_SCANS = {
     "inf": (dict(ranges=[float("inf")] * 361), "non_finite_ranges", "inf"),
     "all_invalid": (dict(ranges=[0.0] * 361), "no_valid_ranges", "none of the 361 ranges"),
     "zero_beams": (dict(ranges=[]), "no_beams", "no beams"),
-    "ten_thousand_beams": (dict(ranges=[2.0] * 10_000), "beam_count", "10000 beams"),
+    "ten_thousand_beams": (dict(ranges=[2.0] * 10_000), "beam_span", "10000 beams"),
     "negative_increment": ({}, "negative_increment", "clockwise"),
     "intensities_length": (dict(intensities=[1.0] * 7), "intensities_length", "intensities has 7"),
     "angle_max_below_min": (dict(angle_max=-3.0), "angle_order", "opposite sign"),

@@ -74,7 +74,7 @@ def test_ten_thousand_beams_on_a_180_beam_geometry_are_refused() -> None:
     scan = make_scan(np.full(10_000, 5.0), angle_max=math.pi / 2)
     with pytest.raises(ScanError, match="10000 beams") as err:
         scan_points(scan)
-    assert err.value.kind == "beam_count"
+    assert err.value.kind == "beam_span"
 
 
 def test_more_than_max_beams_is_refused() -> None:

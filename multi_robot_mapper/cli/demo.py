@@ -20,13 +20,15 @@ from visualization_msgs.msg import Marker
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import extract_segments
+from multi_robot_mapper.core.geometry import split_stamp
 from multi_robot_mapper.core.scan import scan_points
 from multi_robot_mapper.core.simulation import (
     ROUTES,
     WORLDS,
     LaserModel,
+    _arc_length,
+    drive_path,
     simulate_scan,
-    waypoint_path,
 )
 from multi_robot_mapper.io import pictures
 from multi_robot_mapper.io.messages import scan_to_msg, segments_from_marker, stamp_from_seconds
@@ -48,10 +50,13 @@ def run_demo(out_dir: Path, world: str = "office", seed: int = 0, every: int = 4
     walls = WORLDS[world]()
     laser = LaserModel()
     rng = np.random.default_rng(seed)
-    poses = waypoint_path(ROUTES[world], speed=1.0, rate=laser.rate)[::every]
-    received: dict[int, np.ndarray] = {}
+    route = np.asarray(ROUTES[world], dtype=np.float64)
+    speed = 1.0  # m/s, once along the route
+    duration = float(_arc_length(route)[-1]) / speed
+    poses = drive_path(route, speed, laser.rate, duration)[::every]
+    received: dict[tuple[int, int], np.ndarray] = {}
     latency: list[float] = []
-    sent_at: dict[int, float] = {}
+    sent_at: dict[tuple[int, int], float] = {}
 
     with isolated_context() as context:
         node = RobotMapper(context=context, namespace="robot1")
@@ -59,7 +64,7 @@ def run_demo(out_dir: Path, world: str = "office", seed: int = 0, every: int = 4
         scan_pub = client.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
 
         def on_segments(msg: Marker) -> None:
-            key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            key = (msg.header.stamp.sec, msg.header.stamp.nanosec)
             received[key] = segments_from_marker(msg)
             if key in sent_at:
                 latency.append(time.monotonic() - sent_at[key])
@@ -70,12 +75,13 @@ def run_demo(out_dir: Path, world: str = "office", seed: int = 0, every: int = 4
         executor.add_node(client)
         spin_until(executor, lambda: scan_pub.get_subscription_count() > 0, timeout=10.0)
 
-        keys: list[int] = []
+        keys: list[tuple[int, int]] = []
         scans = []
         for i, pose in enumerate(poses):
             scan = simulate_scan(walls, tuple(pose), laser, rng)
-            stamp = stamp_from_seconds(100.0 + i * every / laser.rate)
-            key = stamp.sec * 1_000_000_000 + stamp.nanosec
+            seconds = 100.0 + i * every / laser.rate
+            key = split_stamp(seconds)
+            stamp = stamp_from_seconds(seconds)
             keys.append(key)
             scans.append(scan)
             sent_at[key] = time.monotonic()

@@ -4,7 +4,7 @@ Each scan of the bag gets the reference pose stamped nearest it (within
 GROUND_TRUTH_MATCH_S, the rule ``mrm replay`` uses) and the estimated pose whose trajectory stamp
 equals its stamp (within STAMP_MATCH_S); scans without a reference pose are left out and
 counted. Reference points are every scan's valid points placed at its reference pose (the
-ground-truth pose is taken as the pose of the scan's laser frame), thinned to every k-th beam
+ground-truth pose is taken as the pose of the scan's laser frame), thinned to every k-th valid point
 so at most ``--max-points`` remain. Prints a table (or the JSON with ``--json``) and writes
 ``DIR/metrics.json``.
 """
@@ -22,15 +22,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from multi_robot_mapper.cli.common import CliError
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.scan import ScanError, scan_points
+from multi_robot_mapper.evaluation import metrics as rules
 from multi_robot_mapper.evaluation.metrics import Metrics, RobotTrack, evaluate
+from multi_robot_mapper.io.bags import GROUND_TRUTH_MATCH_S, nearest_stamps, reference_poses
 from multi_robot_mapper.io.results import ReplayResult
 
 FloatArray = NDArray[np.float64]
 
 STAMP_MATCH_S = 1e-6  # a trajectory stamp belongs to the scan stamped within this
-GROUND_TRUTH_MATCH_S = 0.02  # as mrm replay: the reference pose stamped nearest, within this
 MAX_REFERENCE_POINTS = 200_000
 METRICS_FILE = "metrics.json"
 
@@ -63,15 +65,6 @@ def register(subparsers: Any) -> None:
         help=f"reference points kept, thinning beams evenly (default {MAX_REFERENCE_POINTS})",
     )
     parser.set_defaults(func=run)
-
-
-def _nearest(sorted_stamps: FloatArray, query: FloatArray) -> tuple[NDArray[np.int64], FloatArray]:
-    """Index of the nearest of ``sorted_stamps`` for each query, and the absolute gap."""
-    right = np.clip(np.searchsorted(sorted_stamps, query), 0, len(sorted_stamps) - 1)
-    left = np.maximum(right - 1, 0)
-    use_left = np.abs(sorted_stamps[left] - query) <= np.abs(sorted_stamps[right] - query)
-    index = np.where(use_left, left, right).astype(np.int64)
-    return index, np.abs(sorted_stamps[index] - query)
 
 
 def build_inputs(
@@ -110,7 +103,7 @@ def build_inputs(
         traj_stamps, traj_poses = result.trajectories.get(robot, (np.zeros(0), np.zeros((0, 3))))
         if len(traj_stamps):
             scan_order = np.argsort(stamps, kind="stable")
-            nearest, gap = _nearest(stamps[scan_order], np.asarray(traj_stamps))
+            nearest, gap = nearest_stamps(stamps[scan_order], np.asarray(traj_stamps))
             if np.any(gap > STAMP_MATCH_S):
                 bad = float(np.asarray(traj_stamps)[np.argmax(gap)])
                 raise AssociationError(
@@ -122,15 +115,11 @@ def build_inputs(
                 raise AssociationError(f"{robot}: two trajectory stamps match the same scan")
             estimate[target] = traj_poses
 
-        gt_stamps = np.array([g.stamp for g in rec.ground_truth], dtype=np.float64)
-        gt_poses = np.array([g.pose for g in rec.ground_truth], dtype=np.float64).reshape(-1, 3)
-        order = np.argsort(gt_stamps, kind="stable")
-        gt_index, gt_gap = _nearest(gt_stamps[order], stamps)
-        has_ref = gt_gap <= GROUND_TRUTH_MATCH_S
+        reference_all, has_ref = reference_poses(rec, stamps)
         without[robot] = int(np.count_nonzero(~has_ref))
         if not np.any(has_ref):
             continue
-        reference = gt_poses[order][gt_index[has_ref]]
+        reference = reference_all[has_ref]
         scans = [s for s, ok in zip(rec.scans, has_ref, strict=True) if ok]
         tracks[robot] = RobotTrack(stamps[has_ref], reference, estimate[has_ref])
         kept_scans.extend(zip(scans, reference, strict=True))
@@ -174,8 +163,10 @@ def format_table(metrics: Metrics, method: str = "") -> str:
         "",
         f"robots merged      {metrics.robots_merged} / {metrics.robots_total}",
         f"scans              {metrics.scans_total} ({metrics.scans_unposed} unposed)",
-        f"pair success       {_fmt(metrics.pair_success)} (≤ 0.30 m, ≤ 5°), "
-        f"strict {_fmt(metrics.pair_success_strict)} (≤ 0.10 m, ≤ 2°)",
+        f"pair success       {_fmt(metrics.pair_success)} "
+        f"(≤ {rules.PAIR_TRANSLATION_M:.2f} m, ≤ {math.degrees(rules.PAIR_ROTATION_RAD):g}°), "
+        f"strict {_fmt(metrics.pair_success_strict)} "
+        f"(≤ {rules.STRICT_TRANSLATION_M:.2f} m, ≤ {math.degrees(rules.STRICT_ROTATION_RAD):g}°)",
         f"median pair error  {_fmt(metrics.median_translation_error_m, ' m')}, "
         f"{_fmt(metrics.median_rotation_error_rad, '°', deg, 2)}",
         f"ATE merged robots  {_fmt(metrics.ate_rmse_m, ' m', digits=4)}",
@@ -183,30 +174,25 @@ def format_table(metrics: Metrics, method: str = "") -> str:
         f"map error          {_fmt(metrics.map_error_m, ' m', digits=4)} "
         f"(mean distance of {metrics.reference_points} reference points to "
         f"{metrics.map_segments} segments)",
-        f"map coverage       {_fmt(metrics.map_coverage)} (points within 0.10 m of the map)",
-        f"map precision      {_fmt(metrics.map_precision)} (map length within 0.10 m of a point)",
+        f"map coverage       {_fmt(metrics.map_coverage)} "
+        f"(points within {rules.MAP_TOLERANCE_M:.2f} m of the map)",
+        f"map precision      {_fmt(metrics.map_precision)} "
+        f"(map length within {rules.MAP_TOLERANCE_M:.2f} m of a point)",
     ]
     return "\n".join(lines)
 
 
 def run(args: argparse.Namespace) -> int:
-    from multi_robot_mapper.cli.main import CliError
-    from multi_robot_mapper.io.bags import BagError, read_recordings
-    from multi_robot_mapper.io.results import ResultsError, read_results
+    from multi_robot_mapper.io.bags import read_recordings
+    from multi_robot_mapper.io.results import read_results
 
     if args.max_points < 1:
         raise CliError(f"--max-points must be at least 1, got {args.max_points}")
     directory = Path(args.directory)
-    try:
-        result = read_results(directory)
-    except ResultsError as exc:
-        raise CliError(str(exc)) from exc
+    result = read_results(directory)
     if not Path(args.bag).exists():
         raise CliError(f"no such bag: {args.bag}")
-    try:
-        recordings = read_recordings(args.bag)
-    except BagError as exc:
-        raise CliError(str(exc)) from exc
+    recordings = read_recordings(args.bag)
     try:
         inputs = build_inputs(result, recordings, args.max_points)
     except AssociationError as exc:
@@ -228,6 +214,9 @@ def run(args: argparse.Namespace) -> int:
         print(format_table(metrics, result.method))
         skipped = sum(inputs.scans_without_reference.values())
         if skipped:
-            print(f"({skipped} scans without a reference pose within 20 ms were left out)")
+            print(
+                f"({skipped} scans without a reference pose within "
+                f"{GROUND_TRUTH_MATCH_S * 1e3:g} ms were left out)"
+            )
         print(f"-> {directory / METRICS_FILE}")
     return 0

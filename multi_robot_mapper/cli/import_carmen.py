@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from multi_robot_mapper.io.bags import BagError, RobotRecording, TimedPose, TimedScan
+from multi_robot_mapper.cli.common import CliError
+from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan
 from multi_robot_mapper.io.carmen import CarmenFormatError, carmen_scan_data, read_carmen
 
 # Stamps of a run must increase for replay and for sorting by stamp. Some logs repeat or step
@@ -69,7 +70,6 @@ def increasing(stamps: NDArray[np.float64], step: float = MIN_STAMP_STEP_S) -> N
 
 
 def run(args: argparse.Namespace) -> int:
-    from multi_robot_mapper.cli.main import CliError  # here: main imports this module
     from multi_robot_mapper.io.bags import write_recordings
 
     log = Path(args.log)
@@ -120,10 +120,7 @@ def run(args: argparse.Namespace) -> int:
             run_scans.append(TimedScan(stamp, f"{name}/laser", carmen_scan_data(scans[i])))
             truth.append(TimedPose(stamp, scans[i].reference_pose, "world"))
         recordings[name] = RobotRecording(name=name, scans=run_scans, ground_truth=truth)
-    try:
-        write_recordings(out, recordings, storage=args.storage)
-    except BagError as exc:
-        raise CliError(str(exc)) from exc
+    write_recordings(out, recordings, storage=args.storage)
     sizes = ", ".join(f"{r.name} {len(r.scans)}" for r in recordings.values())
     print(f"wrote {out} ({args.storage}): scans per robot: {sizes}")
     if note:  # after writing: an error must stay the only line on stderr

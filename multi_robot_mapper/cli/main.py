@@ -1,7 +1,11 @@
 """``mrm``: the pipeline's command line.
 
-mrm demo      simulated scans through a real robot_mapper node, and a picture
-mrm frontend  the scan-to-segment front end over a CARMEN log, with statistics
+mrm demo           simulated scans through a real robot_mapper node, and a picture
+mrm frontend       the scan-to-segment front end over a CARMEN log, with statistics
+mrm import-carmen  a CARMEN log cut into K robots, written as a rosbag2 file
+mrm simulate       K simulated robots in a built-in world, written as a rosbag2 file
+mrm replay         the pipeline offline on a rosbag2 file: map, trajectories, pictures
+mrm evaluate       a replay's output scored against the bag's reference poses
 """
 
 from __future__ import annotations
@@ -13,32 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multi_robot_mapper.cli.common import CliError, add_config_options, load_mapper_config
 from multi_robot_mapper.core.config import ConfigError
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-
-
-class CliError(Exception):
-    """A user error: printed as one line on stderr, exit code 2."""
-
-
-def _add_config_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--config", type=Path, help="YAML parameters (e.g. config/robot_mapper.yaml)"
-    )
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="override one parameter, e.g. --set extraction.split_tolerance=0.03 (repeatable)",
-    )
-
-
-def _load_mapper_config(args: argparse.Namespace) -> RobotMapperConfig:
-    from multi_robot_mapper.io.config_files import load_config
-
-    return load_config(RobotMapperConfig, args.config, args.overrides, node_name="robot_mapper")
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -65,7 +45,7 @@ def _cmd_frontend(args: argparse.Namespace) -> int:
     from multi_robot_mapper.core.scan import ScanError
     from multi_robot_mapper.io.carmen import CarmenFormatError, carmen_scan_data, read_carmen
 
-    config = _load_mapper_config(args)
+    config = load_mapper_config(args)
     if not Path(args.log).is_file():
         raise CliError(f"no such log file: {args.log}")
     segments, dropped, invalid, rejected = [], [], [], 0
@@ -101,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(func=_cmd_demo)
     frontend = sub.add_parser("frontend", help="front-end statistics over a CARMEN log")
     frontend.add_argument("log", help="CARMEN log (.log or .log.gz)")
-    _add_config_options(frontend)
+    add_config_options(frontend)
     frontend.set_defaults(func=_cmd_frontend)
     from multi_robot_mapper.cli import evaluate, import_carmen, replay, simulate
 
@@ -111,10 +91,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from multi_robot_mapper.io.bags import BagError
+    from multi_robot_mapper.io.results import ResultsError
+
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args))
-    except (CliError, ConfigError) as exc:
+    except (CliError, ConfigError, BagError, ResultsError) as exc:
         print(f"mrm {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

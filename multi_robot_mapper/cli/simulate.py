@@ -12,13 +12,15 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from multi_robot_mapper.cli.common import CliError
+from multi_robot_mapper.core.extraction import ExtractionConfig
 from multi_robot_mapper.core.simulation import ROUTES, LaserModel, simulate_robots
-from multi_robot_mapper.io.bags import BagError, RobotRecording, TimedPose, TimedScan
+from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan
 
 DEFAULT_LASER = LaserModel()  # Hokuyo UTM-30LX
 DEFAULT_DURATION_S = 20.0  # about 16 m of driving per robot at the default speed
 SPEED_M_S = 0.8  # a walking-pace indoor robot
-MAX_BEAMS = 100_000  # the front end refuses larger scans as corrupt (extraction.max_beams)
+MAX_BEAMS = ExtractionConfig().max_beams  # the front end refuses larger scans as corrupt
 
 
 def register(subparsers: Any) -> None:
@@ -56,7 +58,6 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from multi_robot_mapper.cli.main import CliError  # here: main imports this module
     from multi_robot_mapper.io.bags import write_recordings
 
     if args.robots < 1:
@@ -99,10 +100,7 @@ def run(args: argparse.Namespace) -> int:
                 for t, (x, y, theta) in zip(stamps, robot.T_world_laser.tolist(), strict=True)
             ],
         )
-    try:
-        write_recordings(out, recordings, storage=args.storage)
-    except BagError as exc:
-        raise CliError(str(exc)) from exc
+    write_recordings(out, recordings, storage=args.storage)
     count = sum(len(r.scans) for r in recordings.values())
     print(
         f"wrote {out} ({args.storage}): {args.robots} robots in {args.world!r}, {count} scans "

@@ -28,6 +28,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core.config import param, validate
+from multi_robot_mapper.core.geometry import (
+    arange_view as _arange,
+)
+from multi_robot_mapper.core.geometry import (
+    ranges_index as _ranges_index,
+)
+from multi_robot_mapper.core.geometry import (
+    segment_distance_1d as _segment_distance,
+)
 from multi_robot_mapper.core.scan import LaserScanData, ScanPoints, scan_points
 
 FloatArray = NDArray[np.float64]
@@ -52,20 +61,8 @@ _MIN_CORNER_SINE = np.asarray(np.sin(np.radians(2.0)))
 # ufuncs and methods underneath, and the constants of the hot loops are 0-d arrays: a Python
 # number as an operand costs a ufunc ~0.3 us more (NEP 50 promotion). None of this changes a
 # single float of the results.
-_TINY, _ZERO, _HALF, _ONE = np.array(1e-18), np.array(0.0), np.array(0.5), np.array(1.0)
+_ZERO, _HALF, _ONE = np.array(0.0), np.array(0.5), np.array(1.0)
 _INT_ONE = np.array(1)
-_COUNTING: list[IntArray] = [np.arange(4096, dtype=np.int64)]
-_COUNTING[0].flags.writeable = False
-
-
-def _arange(n: int) -> IntArray:
-    """``np.arange(n)`` as a read-only view of a cached array."""
-    counting = _COUNTING[0]
-    if n > counting.size:
-        counting = np.arange(max(n, 2 * counting.size), dtype=np.int64)
-        counting.flags.writeable = False
-        _COUNTING[0] = counting
-    return counting[:n]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -223,43 +220,6 @@ def _interior_mask(n_points: int, first: IntArray, last: IntArray) -> BoolArray:
     return np.cumsum(inside[:-1]) > 0
 
 
-def point_segment_distance(
-    px: FloatArray, py: FloatArray, ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray
-) -> FloatArray:
-    """Element-wise distance from points (px, py) to segments (ax, ay)-(bx, by).
-
-    Coordinates come as separate arrays (any shapes that broadcast together): on the few
-    hundred points of a scan this is several times faster than (K, 2) arrays with einsum.
-    """
-    arrays = np.broadcast_arrays(px, py, ax, ay, bx, by)
-    flat = [np.array(a, dtype=np.float64).ravel() for a in arrays]
-    return _segment_distance(*flat).reshape(arrays[0].shape)
-
-
-def _segment_distance(
-    px: FloatArray, py: FloatArray, ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray
-) -> FloatArray:
-    """``point_segment_distance`` of 1-D float arrays of one length, as the front end calls it.
-
-    It works in place on its temporaries: on small arrays allocating them is a good part of
-    the cost.
-    """
-    abx, aby = bx - ax, by - ay
-    apx, apy = px - ax, py - ay
-    t = apx * abx
-    t += apy * aby
-    denom = abx * abx
-    denom += aby * aby
-    t /= np.maximum(denom, _TINY, out=denom)
-    np.minimum(np.maximum(t, _ZERO, out=t), _ONE, out=t)  # np.clip(t, 0, 1), cheaper
-    abx *= t
-    aby *= t
-    apx -= abx
-    apy -= aby
-    dist: FloatArray = np.hypot(apx, apy, out=apx)
-    return dist
-
-
 def split_vertices(
     x: FloatArray,
     y: FloatArray,
@@ -345,19 +305,6 @@ def dce_vertices(
             break
         vertex[v[remove]] = False
     return vertex
-
-
-def _ranges_index(first: IntArray, stop: IntArray) -> tuple[IntArray, IntArray, IntArray]:
-    """Concatenated ``arange(first[k], stop[k])`` for all k, the k of each entry, and the offset
-    at which each range starts (for ``np.ufunc.reduceat``). No range is empty."""
-    length = stop - first
-    end = np.add.accumulate(length)  # np.cumsum
-    start = end - length
-    entries = _arange(int(end[-1]))
-    owner = end.searchsorted(entries, side="right")
-    index = (first - start)[owner]
-    index += entries
-    return index, owner, start
 
 
 def _tls_lines(

@@ -27,6 +27,7 @@ IntArray = NDArray[np.int64]
 Pose = tuple[float, float, float]
 
 METHODS = ("reference", "pivot", "ffs")
+IMPLEMENTED_METHODS = ("reference",)
 
 
 class MethodNotImplementedError(NotImplementedError):
@@ -57,6 +58,17 @@ class OfflineMap:
 Progress = Callable[[str, int, int], None]  # (robot, scans done, scans total)
 
 
+def require_method(method: str) -> None:
+    """Raise unless ``method`` exists and is built (MethodNotImplementedError if not built yet)."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if method not in IMPLEMENTED_METHODS:
+        raise MethodNotImplementedError(
+            f"method '{method}' is not implemented yet (it arrives with the local-mapping and "
+            f"merging issues); available: {', '.join(IMPLEMENTED_METHODS)}"
+        )
+
+
 def run_offline(
     recordings: Mapping[str, Sequence[TimedLaserScan]],
     method: str,
@@ -64,13 +76,7 @@ def run_offline(
     progress: Progress | None = None,
 ) -> OfflineMap:
     """Run the front end on every scan of every robot, then place them with ``method``."""
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    if method != "reference":
-        raise MethodNotImplementedError(
-            f"method '{method}' is not implemented yet (it arrives with the local-mapping and "
-            "merging issues); 'reference' is available"
-        )
+    require_method(method)
     robots = sorted(recordings)
     total = sum(len(recordings[r]) for r in robots)
     done = 0

@@ -113,7 +113,7 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
     sweep = abs(angle_increment) * (n - 1)
     if sweep > _FULL_TURN + abs(angle_increment):
         raise ScanError(
-            "beam_count",
+            "beam_span",
             f"ranges has {n} beams: at angle_increment {angle_increment:.6f} rad they sweep "
             f"{math.degrees(sweep):.0f} deg, more than a full turn "
             f"(angle_min..angle_max describe {abs(span) / abs(angle_increment) + 1:.0f} beams)",

@@ -12,9 +12,11 @@ import dataclasses
 import numpy as np
 from numpy.typing import NDArray
 
+from multi_robot_mapper.core.geometry import ranges_index
 from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,6 +97,30 @@ def office_world() -> FloatArray:
 WORLDS = {"office": office_world}
 
 
+def _ray_wall_hits(
+    dx: FloatArray,
+    dy: FloatArray,
+    ax: FloatArray,
+    ay: FloatArray,
+    ex: FloatArray,
+    ey: FloatArray,
+    max_range: float,
+) -> tuple[FloatArray, BoolArray]:
+    """Range ``t`` of each (beam, wall) pair and whether the beam hits the wall there.
+
+    Beam directions ``(dx, dy)``, wall starts ``(ax, ay)`` relative to the laser and wall
+    vectors ``(ex, ey)``, element-wise (any shapes that broadcast). The one place the
+    intersection is solved, so :func:`raycast` and :func:`raycast_fan` agree bitwise.
+    """
+    # Solve t * d = a + s * e for range t >= 0 and wall parameter 0 <= s <= 1.
+    denom = dx * ey - dy * ex
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        t = (ax * ey - ay * ex) / denom
+        s = (ax * dy - ay * dx) / denom
+    hit = (np.abs(denom) > 1e-12) & (t > 1e-9) & (s >= 0.0) & (s <= 1.0) & (t <= max_range)
+    return t, hit
+
+
 def raycast(
     walls: FloatArray, pose: tuple[float, float, float], angles: FloatArray, max_range: float
 ) -> FloatArray:
@@ -104,12 +130,7 @@ def raycast(
     dy = np.sin(theta + angles)[:, None]
     ax, ay = walls[:, 0][None, :] - x, walls[:, 1][None, :] - y
     ex, ey = (walls[:, 2] - walls[:, 0])[None, :], (walls[:, 3] - walls[:, 1])[None, :]
-    # Solve t * d = a + s * e for range t >= 0 and wall parameter 0 <= s <= 1.
-    denom = dx * ey - dy * ex
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        t = (ax * ey - ay * ex) / denom
-        s = (ax * dy - ay * dx) / denom
-    hit = (np.abs(denom) > 1e-12) & (t > 1e-9) & (s >= 0.0) & (s <= 1.0) & (t <= max_range)
+    t, hit = _ray_wall_hits(dx, dy, ax, ay, ex, ey, max_range)
     return np.asarray(np.where(hit, t, np.inf).min(axis=1))
 
 
@@ -148,21 +169,17 @@ def raycast_fan(
     first = np.ceil(np.concatenate((lo, lo - turn)) / step).astype(np.int64) - 1
     last = np.floor(np.concatenate((hi, hi - turn)) / step).astype(np.int64) + 1
     start = np.clip(first, 0, beams)
-    counts = np.maximum(np.clip(last + 1, 0, beams) - start, 0)
-    wall = np.repeat(np.tile(np.arange(len(walls)), 2), counts)
-    # A ragged arange: start[w], start[w] + 1, ... for each range in turn.
-    offset = start - np.concatenate(([0], np.cumsum(counts)[:-1]))
-    beam = np.arange(int(counts.sum()), dtype=np.int64) + np.repeat(offset, counts)
+    stop = np.clip(last + 1, 0, beams)
+    ranges = np.full(beams, np.inf)
+    seen = stop > start  # ranges_index takes no empty ranges
+    if not seen.any():
+        return ranges
+    beam, owner, _ = ranges_index(start[seen], stop[seen])
+    wall = np.tile(np.arange(len(walls)), 2)[seen][owner]
     if angle_increment < 0:
         beam = beams - 1 - beam  # counted from the lowest beam, which is the last one
     dx, dy = np.cos(theta + angles)[beam], np.sin(theta + angles)[beam]
-    ax, ay, ex, ey = ax[wall], ay[wall], ex[wall], ey[wall]
-    denom = dx * ey - dy * ex
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        t = (ax * ey - ay * ex) / denom
-        s = (ax * dy - ay * dx) / denom
-    hit = (np.abs(denom) > 1e-12) & (t > 1e-9) & (s >= 0.0) & (s <= 1.0) & (t <= max_range)
-    ranges = np.full(beams, np.inf)
+    t, hit = _ray_wall_hits(dx, dy, ax[wall], ay[wall], ex[wall], ey[wall], max_range)
     np.minimum.at(ranges, beam[hit], t[hit])
     return ranges
 
@@ -188,27 +205,6 @@ def simulate_scan(
         range_min=laser.range_min,
         range_max=laser.range_max,
     )
-
-
-def waypoint_path(waypoints: list[tuple[float, float]], speed: float, rate: float) -> FloatArray:
-    """Poses ``(x, y, theta)`` at ``rate`` Hz driving at ``speed`` m/s through ``waypoints``.
-
-    The heading follows the direction of travel and turns smoothly (a moving average over
-    about one second), as a differential-drive robot would.
-    """
-    wp = np.asarray(waypoints, dtype=np.float64)
-    leg = np.hypot(*np.diff(wp, axis=0).T)
-    distance = np.concatenate(([0.0], np.cumsum(leg)))
-    s = np.arange(0.0, distance[-1], speed / rate)
-    xy = np.column_stack((np.interp(s, distance, wp[:, 0]), np.interp(s, distance, wp[:, 1])))
-    heading = np.unwrap(
-        np.arctan2(*np.diff(xy, axis=0, append=xy[-1:] + (xy[-1:] - xy[-2:-1]))[:, ::-1].T)
-    )
-    window = max(1, int(rate))
-    kernel = np.ones(window) / window
-    padded = np.concatenate((np.full(window, heading[0]), heading, np.full(window, heading[-1])))
-    smooth = np.convolve(padded, kernel, mode="same")[window:-window]
-    return np.column_stack((xy, smooth))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -403,8 +399,8 @@ def drive_path(waypoints: FloatArray, speed: float, rate: float, duration: float
     """Poses ``(x, y, theta)`` at ``rate`` Hz for ``duration`` s along ``waypoints`` at ``speed``.
 
     At the last waypoint the robot turns round and drives back, and so on (a patrol), so any
-    duration fits any path. The heading follows the direction of travel, smoothed over about
-    one second as in :func:`waypoint_path`.
+    duration fits any path. The heading follows the direction of travel and turns smoothly (a
+    moving average over about one second), as a differential-drive robot would.
     """
     wp = np.asarray(waypoints, dtype=np.float64)
     s_wp = _arc_length(wp)

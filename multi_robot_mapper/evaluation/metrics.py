@@ -39,10 +39,12 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.geometry import ranges_index
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 Pose = tuple[float, float, float]
+Robots = tuple[str, ...]
 
 PAIR_TRANSLATION_M = 0.30
 PAIR_ROTATION_RAD = math.radians(5.0)
@@ -192,14 +194,6 @@ def align_se2(estimate: FloatArray, reference: FloatArray) -> FloatArray:
     return T
 
 
-def position_rmse(T_ref_est: FloatArray, estimate: FloatArray, reference: FloatArray) -> float:
-    """RMSE (m) of ``T_ref_est``-mapped estimated positions against reference positions."""
-    if len(estimate) == 0:
-        return math.nan
-    moved = se2.transform_points(T_ref_est, np.asarray(estimate)[:, :2])
-    return float(np.sqrt(np.mean(np.sum((moved - np.asarray(reference)[:, :2]) ** 2, axis=1))))
-
-
 # --------------------------------------------------------------------------------------- pairs
 
 
@@ -261,11 +255,11 @@ def sample_segments(
     seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
     length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
     pieces = np.maximum(1, np.ceil(length / step)).astype(np.int64)
-    count = pieces if midpoints else pieces + 1
-    index = np.repeat(np.arange(len(seg), dtype=np.int64), count)
-    start = np.concatenate(([0], np.cumsum(count)[:-1])).astype(np.int64)
-    k = np.arange(index.size, dtype=np.float64) - np.repeat(start, count)
-    t = ((k + 0.5) if midpoints else k) / pieces[index]
+    if len(seg) == 0:
+        return np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros(0)
+    count = pieces if midpoints else pieces + 1  # never 0: ranges_index needs no empty range
+    k, index, _ = ranges_index(np.zeros(len(seg), dtype=np.int64), count)
+    t = ((k + 0.5) if midpoints else k.astype(np.float64)) / pieces[index]
     a, b = seg[index, :2], seg[index, 2:]
     points = a + t[:, None] * (b - a)
     weight = (length / pieces)[index] if midpoints else np.zeros(index.size)
@@ -273,7 +267,12 @@ def sample_segments(
 
 
 def _distance_to_segments(points: FloatArray, segments: FloatArray) -> FloatArray:
-    """Exact distance from points (..., 2) to segments (..., 4), elementwise (broadcasting)."""
+    """Exact distance from points (..., 2) to segments (..., 4), elementwise (broadcasting).
+
+    Not :func:`multi_robot_mapper.core.geometry.point_segment_distance`: that one ends in
+    ``np.hypot``, which differs from this ``sqrt(x^2 + y^2)`` in the last bit, and the
+    evaluator's published numbers must stay bit-for-bit the same.
+    """
     a = segments[..., :2]
     d = segments[..., 2:] - a
     ap = points - a
@@ -376,33 +375,56 @@ def evaluate(
         moved = se2.transform_points(T, est[robot][:, :2])
         return np.asarray(np.sum((moved - ref[robot][:, :2]) ** 2, axis=1))
 
-    def fit(robots: Sequence[str]) -> FloatArray:
-        return align_se2(np.vstack([est[r] for r in robots]), np.vstack([ref[r] for r in robots]))
+    # A candidate alignment is named by the robots it is fitted to; each is fitted and scored
+    # once: its squared position errors for every posed robot, the robots it places and their
+    # pooled RMSE.
+    fits: dict[Robots, FloatArray] = {}
+    errors: dict[Robots, dict[str, FloatArray]] = {}
+    placements: dict[Robots, tuple[list[str], float]] = {}
 
-    def placement(T: FloatArray) -> tuple[list[str], float]:
-        placed = [
-            r
-            for r in with_poses
-            if r not in reported_unmerged and _pooled_rmse([squares(T, r)]) < MERGE_RMSE_M
-        ]
-        return placed, _pooled_rmse([squares(T, r) for r in placed]) if placed else 0.0
+    def fit(robots: Robots) -> FloatArray:
+        if robots not in fits:
+            fits[robots] = (
+                align_se2(np.vstack([est[r] for r in robots]), np.vstack([ref[r] for r in robots]))
+                if robots
+                else np.eye(3)
+            )
+        return fits[robots]
 
-    own_fit = {r: fit([r]) for r in with_poses}
-    T_all = fit(with_poses) if with_poses else np.eye(3)
-    candidates = [T_all, *own_fit.values()]
+    def squares_under(robots: Robots) -> dict[str, FloatArray]:
+        if robots not in errors:
+            T = fit(robots)
+            errors[robots] = {r: squares(T, r) for r in with_poses}
+        return errors[robots]
 
-    def best_of(candidates: Sequence[FloatArray]) -> tuple[FloatArray, list[str]]:
-        best_T, best_placed, best_key = candidates[0], [], (-1, 0.0)
-        for T in candidates:
-            placed, rmse = placement(T)
+    def placement(robots: Robots) -> tuple[list[str], float]:
+        if robots not in placements:
+            sq = squares_under(robots)
+            placed = [
+                r
+                for r in with_poses
+                if r not in reported_unmerged and _pooled_rmse([sq[r]]) < MERGE_RMSE_M
+            ]
+            placements[robots] = placed, _pooled_rmse([sq[r] for r in placed]) if placed else 0.0
+        return placements[robots]
+
+    def best_of(candidates: Sequence[Robots]) -> tuple[Robots, list[str]]:
+        best, best_placed, best_key = candidates[0], [], (-1, 0.0)
+        for candidate in candidates:
+            placed, rmse = placement(candidate)
             key = (len(placed), -rmse)
             if key > best_key:
-                best_T, best_placed, best_key = T, placed, key
-        return best_T, best_placed
+                best, best_placed, best_key = candidate, placed, key
+        return best, best_placed
 
-    T_ref_map, merged = best_of(candidates)
+    all_key = tuple(with_poses)
+    own_keys = {r: (r,) for r in with_poses}
+    candidates = [all_key, *own_keys.values()]
+    winner, merged = best_of(candidates)
     if merged:
-        T_ref_map, merged = best_of([*candidates, fit(merged)])
+        winner, merged = best_of([*candidates, tuple(merged)])
+    T_ref_map = fit(winner)
+    T_sq = squares_under(winner)
 
     robot_metrics: dict[str, RobotMetrics] = {}
     all_both, all_t, all_r = [], [], []
@@ -412,7 +434,7 @@ def evaluate(
         all_t.append(trans)
         all_r.append(rot)
         success, strict, med_t, med_r = _pair_summary(both, trans, rot)
-        has = r in own_fit
+        has = r in own_keys
         robot_metrics[r] = RobotMetrics(
             scans=len(tracks[r].stamps),
             scans_unposed=int(np.count_nonzero(~posed[r])),
@@ -421,8 +443,8 @@ def evaluate(
             pair_success_strict=strict,
             median_translation_error_m=med_t,
             median_rotation_error_rad=med_r,
-            rmse_m=_pooled_rmse([squares(T_ref_map, r)]) if has else math.nan,
-            ate_own_frame_m=_pooled_rmse([squares(own_fit[r], r)]) if has else math.nan,
+            rmse_m=_pooled_rmse([T_sq[r]]) if has else math.nan,
+            ate_own_frame_m=_pooled_rmse([squares_under(own_keys[r])[r]]) if has else math.nan,
             merged=r in merged,
             reported_unmerged=r in reported_unmerged,
         )
@@ -431,8 +453,10 @@ def evaluate(
         np.concatenate(all_t) if all_t else np.zeros(0),
         np.concatenate(all_r) if all_r else np.zeros(0),
     )
-    ate = _pooled_rmse([squares(fit(merged), r) for r in merged]) if merged else math.nan
-    ate_all = _pooled_rmse([squares(T_all, r) for r in with_poses]) if with_poses else math.nan
+    merged_sq = squares_under(tuple(merged)) if merged else {}
+    ate = _pooled_rmse([merged_sq[r] for r in merged]) if merged else math.nan
+    all_sq = squares_under(all_key)
+    ate_all = _pooled_rmse([all_sq[r] for r in with_poses]) if with_poses else math.nan
 
     segments = np.asarray(map_segments, dtype=np.float64).reshape(-1, 4)
     points = np.asarray(reference_points, dtype=np.float64).reshape(-1, 2)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import contextlib
 import fnmatch
-import math
 import re
 import shutil
 import sqlite3
@@ -33,6 +32,12 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
+from multi_robot_mapper.core.geometry import (
+    quaternion_from_yaw,
+    split_stamp,
+    stamp_seconds,
+    yaw_from_quaternion,
+)
 from multi_robot_mapper.core.scan import LaserScanData
 
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
@@ -130,15 +135,11 @@ def _natural_key(name: str) -> list[tuple[int, int | str]]:
 
 
 def _stamp_seconds(stamp: Any) -> float:
-    return float(stamp.sec) + float(stamp.nanosec) * 1e-9
+    return stamp_seconds(int(stamp.sec), int(stamp.nanosec))
 
 
 def _stamp_msg(seconds: float) -> Any:
-    # Split before scaling so ~1e9 s stamps keep nanosecond resolution in the fraction.
-    sec = math.floor(seconds)
-    nanosec = round((seconds - sec) * 1e9)
-    if nanosec >= 1_000_000_000:
-        sec, nanosec = sec + 1, nanosec - 1_000_000_000
+    sec, nanosec = split_stamp(seconds)
     return _typestore().types["builtin_interfaces/msg/Time"](sec=int(sec), nanosec=int(nanosec))
 
 
@@ -149,11 +150,12 @@ def _stamp_ns(seconds: float) -> int:
 
 def _yaw(q: Any) -> float:
     """Rotation about z of a quaternion (the planar part of any orientation)."""
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    return float(yaw_from_quaternion(q.x, q.y, q.z, q.w))
 
 
 def _scan_from_msg(msg: Any) -> TimedScan:
-    intensities = np.asarray(msg.intensities, dtype=np.float64)
+    # Only the length is checked downstream: keep the stored float32 values, no copy.
+    intensities = np.asarray(msg.intensities)
     ranges = np.asarray(msg.ranges, dtype=np.float64)
     return TimedScan(
         stamp=_stamp_seconds(msg.header.stamp),
@@ -209,7 +211,7 @@ def _pose_msg(item: TimedPose) -> Any:
         pose=types["geometry_msgs/msg/Pose"](
             position=types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0),
             orientation=types["geometry_msgs/msg/Quaternion"](
-                x=0.0, y=0.0, z=math.sin(theta / 2.0), w=math.cos(theta / 2.0)
+                **dict(zip("xyzw", map(float, quaternion_from_yaw(theta)), strict=True))
             ),
         ),
     )
@@ -378,3 +380,34 @@ def write_recordings(
         shutil.rmtree(path, ignore_errors=True)
         raise BagError(f"{path}: cannot write the bag ({_reason(exc)})") from None
     return path
+
+
+# A scan takes the ground-truth pose stamped nearest to it when within this (replay, evaluate).
+GROUND_TRUTH_MATCH_S = 0.02
+
+
+def nearest_stamps(
+    sorted_stamps: np.typing.NDArray[np.float64], query: np.typing.NDArray[np.float64]
+) -> tuple[np.typing.NDArray[np.int64], np.typing.NDArray[np.float64]]:
+    """Index of the nearest of ``sorted_stamps`` for each query stamp, and the absolute gap."""
+    right = np.clip(np.searchsorted(sorted_stamps, query), 0, len(sorted_stamps) - 1)
+    left = np.maximum(right - 1, 0)
+    use_left = np.abs(sorted_stamps[left] - query) <= np.abs(sorted_stamps[right] - query)
+    index = np.where(use_left, left, right).astype(np.int64)
+    return index, np.abs(sorted_stamps[index] - query)
+
+
+def reference_poses(
+    recording: RobotRecording, stamps: np.typing.NDArray[np.float64]
+) -> tuple[np.typing.NDArray[np.float64], np.typing.NDArray[np.bool_]]:
+    """Ground-truth pose of each stamp (nearest, within GROUND_TRUTH_MATCH_S) and which have one."""
+    poses = np.full((len(stamps), 3), np.nan)
+    if not recording.ground_truth or len(stamps) == 0:
+        return poses, np.zeros(len(stamps), dtype=bool)
+    gt_stamps = np.array([g.stamp for g in recording.ground_truth], dtype=np.float64)
+    gt_poses = np.array([g.pose for g in recording.ground_truth], dtype=np.float64).reshape(-1, 3)
+    order = np.argsort(gt_stamps, kind="stable")
+    index, gap = nearest_stamps(gt_stamps[order], stamps)
+    found = gap <= GROUND_TRUTH_MATCH_S
+    poses[found] = gt_poses[order][index[found]]
+    return poses, found

@@ -19,8 +19,8 @@ from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = NDArray[np.float64]
 
-# Readings at or beyond this are "no return" in the Radish CARMEN logs (about 80 m; 50 m on
-# some sets); the scan's range_max is set just below it.
+# Readings at or beyond this are treated as "no return" (the Radish logs mark no return with
+# their sensor's maximum, about 80 m, or 50 m on some sets); it is the scans' range_max.
 NO_RETURN_RANGE_M = 50.0
 FIELD_OF_VIEW_RAD = math.pi
 

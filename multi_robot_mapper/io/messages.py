@@ -11,6 +11,7 @@ from sensor_msgs.msg import LaserScan
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker
 
+from multi_robot_mapper.core.geometry import split_stamp, stamp_seconds
 from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = np.typing.NDArray[np.float64]
@@ -18,7 +19,8 @@ FloatArray = np.typing.NDArray[np.float64]
 
 def scan_from_msg(msg: LaserScan) -> LaserScanData:
     """The geometry of a LaserScan message as plain values (ranges copied to float64)."""
-    intensities = np.asarray(msg.intensities, dtype=np.float64) if len(msg.intensities) else None
+    # Only the length is checked downstream: a zero-copy view of the float32 values.
+    intensities = np.asarray(msg.intensities) if len(msg.intensities) else None
     return LaserScanData(
         ranges=np.asarray(msg.ranges, dtype=np.float64),
         angle_min=float(msg.angle_min),
@@ -52,8 +54,13 @@ def scan_to_msg(
 
 def stamp_from_seconds(seconds: float) -> Time:
     """A builtin_interfaces/Time from seconds."""
-    sec = int(np.floor(seconds))
-    return Time(sec=sec, nanosec=round((seconds - sec) * 1e9) % 1_000_000_000)
+    sec, nanosec = split_stamp(seconds)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def seconds_from_stamp(stamp: Time) -> float:
+    """Seconds of a builtin_interfaces/Time."""
+    return stamp_seconds(stamp.sec, stamp.nanosec)
 
 
 def segments_marker(

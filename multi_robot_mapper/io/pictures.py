@@ -63,13 +63,14 @@ def segments_extent(segment_sets: Sequence[FloatArray]) -> FloatArray:
     return np.concatenate((ends.min(axis=0), ends.max(axis=0)))
 
 
-def save_figure(fig: Figure, path: str | Path) -> Path:
-    """Write a figure (format from the suffix: .png or .svg) and close it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=150, bbox_inches="tight")
+def save_figure(fig: Figure, path: str | Path, *more: str | Path) -> Path:
+    """Write a figure to each path (format from the suffix: .png, .svg) and close it."""
+    paths = [Path(p) for p in (path, *more)]
+    for target in paths:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(target, dpi=150, bbox_inches="tight")
     plt.close(fig)
-    return path
+    return paths[0]
 
 
 def draw_map(

@@ -27,6 +27,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from multi_robot_mapper.core.geometry import quaternion_from_yaw, yaw_from_quaternion
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 Pose = tuple[float, float, float]
@@ -106,10 +108,9 @@ def write_tum(path: Path, stamps: FloatArray, poses: FloatArray) -> None:
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     if len(stamps) != len(poses):
         raise ValueError(f"{len(stamps)} stamps but {len(poses)} poses for {path}")
-    half = 0.5 * poses[:, 2]
-    zeros = np.zeros(len(poses))
+    qx, qy, qz, qw = quaternion_from_yaw(poses[:, 2])
     table = np.column_stack(
-        (stamps, poses[:, 0], poses[:, 1], zeros, zeros, zeros, np.sin(half), np.cos(half))
+        (stamps, poses[:, 0], poses[:, 1], np.zeros(len(poses)), qx, qy, qz, qw)
     )
     # %.9f for stamps (nanoseconds; exact float64 round trip for epoch stamps), %.17g for the
     # rest (exact float64 round trip).
@@ -208,12 +209,7 @@ def read_tum(path: Path) -> tuple[FloatArray, FloatArray]:
     Blank lines and lines starting with ``#`` are skipped. Raises :class:`ResultsError`.
     """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise ResultsError(f"{path}: missing trajectory file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ResultsError(f"{path}: cannot read: {exc}") from None
+    text = _read_text(path, "missing trajectory file")
     rows: list[list[float]] = []
     for number, line in enumerate(text.splitlines(), start=1):
         stripped = line.strip()
@@ -239,18 +235,23 @@ def read_tum(path: Path) -> tuple[FloatArray, FloatArray]:
     norm = np.sqrt(qx**2 + qy**2 + qz**2 + qw**2)
     if np.any(np.abs(norm - 1.0) > 1e-6):
         raise ResultsError(f"{path}: a quaternion is not of unit length")
-    yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy**2 + qz**2))
+    yaw = yaw_from_quaternion(qx, qy, qz, qw)
     poses = np.column_stack((table[:, 1], table[:, 2], yaw))
     return stamps.copy(), poses
 
 
-def _read_json(path: Path) -> Any:
+def _read_text(path: Path, missing: str = "missing") -> str:
+    """The text of ``path``; :class:`ResultsError` (``"<path>: <missing>"``) when it is absent."""
     try:
-        text = path.read_text()
+        return path.read_text()
     except FileNotFoundError:
-        raise ResultsError(f"{path}: missing") from None
+        raise ResultsError(f"{path}: {missing}") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ResultsError(f"{path}: cannot read: {exc}") from None
+
+
+def _read_json(path: Path) -> Any:
+    text = _read_text(path)
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:

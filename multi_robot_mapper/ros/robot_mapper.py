@@ -23,7 +23,7 @@ from multi_robot_mapper.core.config import ConfigError
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import ScanError
-from multi_robot_mapper.io.messages import scan_from_msg, segments_marker
+from multi_robot_mapper.io.messages import scan_from_msg, seconds_from_stamp, segments_marker
 from multi_robot_mapper.ros.parameters import declare_config, on_config_change
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
 
@@ -49,7 +49,7 @@ class RobotMapper(Node):
 
     def _on_scan(self, msg: LaserScan) -> None:
         self.scans_received += 1
-        stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        stamp = seconds_from_stamp(msg.header.stamp)
         try:
             segments, valid = extract_scan(scan_from_msg(msg), self.config.extraction)
         except ScanError as exc:
