@@ -24,6 +24,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from multi_robot_mapper.core import se2  # noqa: E402
+from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
 from multi_robot_mapper.core.matching import HEURISTICS, IntegrateConfig, integrate  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
@@ -31,7 +32,9 @@ from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
 
 
-def run_log(name: str, limit: int, heuristics: tuple[str, ...], views: bool) -> None:
+def run_log(
+    name: str, limit: int, heuristics: tuple[str, ...], views: bool, config: IntegrateConfig
+) -> None:
     path = DATA / f"{name}.log.gz"
     if not path.is_file():
         print(f"{name}: skipped, {path} not found")
@@ -39,7 +42,6 @@ def run_log(name: str, limit: int, heuristics: tuple[str, ...], views: bool) -> 
     scans = list(read_carmen(path))
     data = [carmen_scan_data(s) for s in scans]
     segments = [extract_scan(d, ExtractionConfig())[0].segments for d in data]
-    config = IntegrateConfig()
     pairs = np.arange(len(scans) - 1)
     if limit and limit < len(pairs):
         pairs = pairs[np.linspace(0, len(pairs) - 1, limit).astype(int)]
@@ -77,12 +79,24 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=0, help="at most this many pairs per log")
     parser.add_argument("--heuristics", nargs="+", default=list(HEURISTICS), choices=HEURISTICS)
     parser.add_argument("--no-views", action="store_true", help="no free-space check")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override an IntegrateConfig field, e.g. --set refine_candidates=8",
+    )
     args = parser.parse_args()
+    config = config_from_flat(IntegrateConfig, dict(parse_override(o) for o in args.overrides))
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    print(f"INTEGRATE pair test: heuristics {' '.join(args.heuristics)}, views {not args.no_views}")
+    print(
+        f"INTEGRATE pair test: heuristics {' '.join(args.heuristics)}, "
+        f"views {not args.no_views}, overrides {args.overrides or 'none'}"
+    )
     for name in args.logs:
-        run_log(name, args.limit, tuple(args.heuristics), not args.no_views)
+        run_log(name, args.limit, tuple(args.heuristics), not args.no_views, config)
 
 
 if __name__ == "__main__":
