@@ -35,3 +35,11 @@ def ros_context() -> Iterator[object]:
 
     with isolated_context() as context:
         yield context
+
+
+@pytest.fixture
+def mrm() -> object:
+    """The real ``mrm`` entry point: ``mrm([...args])`` returns the exit code."""
+    from multi_robot_mapper.cli.main import main
+
+    return main

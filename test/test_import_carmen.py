@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import argparse
 import gzip
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -16,25 +15,6 @@ from multi_robot_mapper.io.bags import read_recordings
 from multi_robot_mapper.io.carmen import read_carmen
 
 Mrm = Callable[[list[str]], int]
-
-
-@pytest.fixture
-def mrm(monkeypatch: pytest.MonkeyPatch) -> Iterator[Mrm]:
-    """``mrm``'s real ``main`` with ``import-carmen`` registered (if not yet wired)."""
-    from multi_robot_mapper.cli import import_carmen
-    from multi_robot_mapper.cli import main as cli_main
-
-    build = cli_main.build_parser
-
-    def build_with_import() -> argparse.ArgumentParser:
-        parser = build()
-        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        if "import-carmen" not in sub.choices:
-            import_carmen.register(sub)
-        return parser
-
-    monkeypatch.setattr(cli_main, "build_parser", build_with_import)
-    yield cli_main.main
 
 
 def write_log(path: Path, count: int, beams: int = 180) -> Path:

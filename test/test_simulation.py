@@ -3,8 +3,6 @@ determinism, and ``mrm simulate`` writing a readable multi-robot bag."""
 
 from __future__ import annotations
 
-import argparse
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -241,25 +239,6 @@ def test_runs_start_together_and_have_noise_and_dropouts() -> None:
 
 
 # --- mrm simulate -------------------------------------------------------------------------------
-
-
-@pytest.fixture
-def mrm(monkeypatch: pytest.MonkeyPatch) -> Iterator[object]:
-    """``mrm``'s real ``main`` with the ``simulate`` command registered (if not yet wired)."""
-    from multi_robot_mapper.cli import main as cli_main
-    from multi_robot_mapper.cli import simulate
-
-    build = cli_main.build_parser
-
-    def build_with_simulate() -> argparse.ArgumentParser:
-        parser = build()
-        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        if "simulate" not in sub.choices:
-            simulate.register(sub)
-        return parser
-
-    monkeypatch.setattr(cli_main, "build_parser", build_with_simulate)
-    yield cli_main.main
 
 
 def test_mrm_simulate_writes_a_readable_bag(
