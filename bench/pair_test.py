@@ -45,7 +45,7 @@ def run_log(
     pairs = np.arange(len(scans) - 1)
     if limit and limit < len(pairs):
         pairs = pairs[np.linspace(0, len(pairs) - 1, limit).astype(int)]
-    ok = strict = valid = 0
+    ok = strict = valid = valid_and_ok = 0
     times = []
     for k in pairs:
         T_world_1 = se2.matrix_from_pose(*scans[k].reference_pose)
@@ -62,13 +62,19 @@ def run_log(
         times.append(time.perf_counter() - start)
         dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_1_2) @ result.matrix)
         error, turn = np.hypot(dx, dy), abs(dtheta)
-        ok += bool(error < 0.30 and turn < np.radians(5))
+        correct = bool(error < 0.30 and turn < np.radians(5))
+        ok += correct
         strict += bool(error < 0.10 and turn < np.radians(2))
         valid += result.valid
+        valid_and_ok += result.valid and correct
     n = len(pairs)
+    # How far the validity flag can be trusted: correct among valid, valid among correct.
+    precision = valid_and_ok / valid if valid else float("nan")
+    recall = valid_and_ok / ok if ok else float("nan")
     print(
         f"{name:6s} pairs {n:4d}  success {ok / n:.3f}  strict {strict / n:.3f}  "
-        f"valid {valid / n:.3f}  median {np.median(times) * 1e3:.1f} ms  "
+        f"valid {valid / n:.3f} (correct among valid {precision:.3f}, "
+        f"valid among correct {recall:.3f})  median {np.median(times) * 1e3:.1f} ms  "
         f"p90 {np.percentile(times, 90) * 1e3:.1f} ms"
     )
 
