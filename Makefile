@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: venv test lint typecheck unit demo bench clean
+.PHONY: venv test lint typecheck unit demo bench config clean
 
 venv: $(STAMP)
 
@@ -38,6 +38,13 @@ demo: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python bench/frontend_throughput.py
+	$(BIN)/python bench/pair_test.py --limit 200
+	$(BIN)/python bench/merge_speed.py
+	$(BIN)/python bench/live_rate.py --seconds 20
+
+# Rewrite config/robot_mapper.yaml from the documented dataclass defaults.
+config: $(STAMP)
+	$(BIN)/python -m multi_robot_mapper.io.config_files config/robot_mapper.yaml
 
 clean:
 	rm -rf $(VENV) build install log demo_output bench_output .pytest_cache .mypy_cache .ruff_cache

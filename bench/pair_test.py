@@ -1,11 +1,20 @@
 """Pair test in the manner of Amigoni's Table 2: consecutive scans matched by INTEGRATE alone.
 
 For every consecutive scan pair of the CARMEN logs, INTEGRATE (no initial guess, no
-prediction) estimates the relative pose; a pair succeeds within 0.30 m and 5 deg of the
-reference (strict: 0.10 m and 2 deg). Prints the success rates and the median time per pair.
+prediction, no extra hypotheses) estimates the relative pose; a pair succeeds within 0.30 m
+and 5 deg of the reference (strict: 0.10 m and 2 deg). Prints the success rates, how far the
+validity flag can be trusted, and the median time per pair (INTEGRATE only, one core).
 
     .venv/bin/python bench/pair_test.py [--logs intel aces] [--limit 200]
-        [--heuristics consecutive random histogram all endpoints] [--no-views]
+        [--heuristics consecutive random histogram all endpoints] [--no-views] [--no-refine]
+        [--set NAME=VALUE ...]
+    .venv/bin/python bench/pair_test.py --table [--heuristic-limit 300] [--json out.json]
+
+``--table`` runs Amigoni's Table 2 layout: every heuristic alone and their combination, each
+without refinement (``refine_iterations=0``: no least squares at all; the candidates are still
+ranked by their beams and slid along corridors) and with it, on every log, and prints one
+markdown table. ``all`` engages only for sets of at most ``all_pairs_below`` segments.
+``--json`` writes every row's figures to a file (``-`` for standard output).
 
 Target (issue 4): >= 97 % on every log with one parameter set, median < 20 ms per pair.
 """
@@ -18,8 +27,12 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import dataclasses  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import TextIO  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -27,37 +40,81 @@ from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
 from multi_robot_mapper.core.matching import HEURISTICS, IntegrateConfig, integrate  # noqa: E402
+from multi_robot_mapper.core.scan import LaserScanData  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
+LOGS = ("intel", "aces", "fhw", "csail")
+COMBINATION = "combination"
+
+
+@dataclasses.dataclass(frozen=True)
+class Log:
+    """One CARMEN log, extracted once: views, segment sets and reference poses."""
+
+    name: str
+    views: list[LaserScanData]
+    segments: list[np.ndarray]
+    poses: list[tuple[float, float, float]]
+
+
+@dataclasses.dataclass(frozen=True)
+class Row:
+    """Figures of one configuration on one log."""
+
+    log: str
+    heuristics: str  # one heuristic's name, or "combination"
+    refine: bool
+    views: bool
+    pairs: int
+    success: float
+    strict: float
+    valid: float
+    precision: float  # correct among valid
+    recall: float  # valid among correct
+    median_ms: float
+    p90_ms: float
+
+
+def load_log(name: str) -> Log | None:
+    path = DATA / f"{name}.log.gz"
+    if not path.is_file():
+        print(f"{name}: skipped, {path} not found", file=sys.stderr)
+        return None
+    scans = list(read_carmen(path))
+    views = [carmen_scan_data(s) for s in scans]
+    segments = [extract_scan(v, ExtractionConfig())[0].segments for v in views]
+    return Log(name, views, segments, [s.reference_pose for s in scans])
+
+
+def pair_indices(log: Log, limit: int) -> np.ndarray:
+    """Every consecutive pair, or ``limit`` of them spread evenly over the log."""
+    pairs = np.arange(len(log.segments) - 1)
+    if limit and limit < len(pairs):
+        pairs = pairs[np.linspace(0, len(pairs) - 1, limit).astype(int)]
+    return pairs
 
 
 def run_log(
-    name: str, limit: int, heuristics: tuple[str, ...], views: bool, config: IntegrateConfig
-) -> None:
-    path = DATA / f"{name}.log.gz"
-    if not path.is_file():
-        print(f"{name}: skipped, {path} not found")
-        return
-    scans = list(read_carmen(path))
-    data = [carmen_scan_data(s) for s in scans]
-    segments = [extract_scan(d, ExtractionConfig())[0].segments for d in data]
-    pairs = np.arange(len(scans) - 1)
-    if limit and limit < len(pairs):
-        pairs = pairs[np.linspace(0, len(pairs) - 1, limit).astype(int)]
+    log: Log,
+    pairs: np.ndarray,
+    heuristics: tuple[str, ...],
+    views: bool,
+    config: IntegrateConfig,
+) -> Row:
     ok = strict = valid = valid_and_ok = 0
     times = []
     for k in pairs:
-        T_world_1 = se2.matrix_from_pose(*scans[k].reference_pose)
-        T_world_2 = se2.matrix_from_pose(*scans[k + 1].reference_pose)
+        T_world_1 = se2.matrix_from_pose(*log.poses[k])
+        T_world_2 = se2.matrix_from_pose(*log.poses[k + 1])
         T_1_2 = se2.invert(T_world_1) @ T_world_2
         start = time.perf_counter()
         result = integrate(
-            segments[k],
-            segments[k + 1],
+            log.segments[k],
+            log.segments[k + 1],
             config,
             heuristics=heuristics,
-            views=(data[k], data[k + 1]) if views else (None, None),
+            views=(log.views[k], log.views[k + 1]) if views else (None, None),
         )
         times.append(time.perf_counter() - start)
         dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_1_2) @ result.matrix)
@@ -67,24 +124,94 @@ def run_log(
         strict += bool(error < 0.10 and turn < np.radians(2))
         valid += result.valid
         valid_and_ok += result.valid and correct
-    n = len(pairs)
-    # How far the validity flag can be trusted: correct among valid, valid among correct.
-    precision = valid_and_ok / valid if valid else float("nan")
-    recall = valid_and_ok / ok if ok else float("nan")
-    print(
-        f"{name:6s} pairs {n:4d}  success {ok / n:.3f}  strict {strict / n:.3f}  "
-        f"valid {valid / n:.3f} (correct among valid {precision:.3f}, "
-        f"valid among correct {recall:.3f})  median {np.median(times) * 1e3:.1f} ms  "
-        f"p90 {np.percentile(times, 90) * 1e3:.1f} ms"
+    n = max(len(pairs), 1)
+    return Row(
+        log=log.name,
+        heuristics=COMBINATION if len(heuristics) > 1 else heuristics[0],
+        refine=config.refine_iterations > 0,
+        views=views,
+        pairs=len(pairs),
+        success=ok / n,
+        strict=strict / n,
+        valid=valid / n,
+        precision=valid_and_ok / valid if valid else float("nan"),
+        recall=valid_and_ok / ok if ok else float("nan"),
+        median_ms=float(np.median(times)) * 1e3 if times else float("nan"),
+        p90_ms=float(np.percentile(times, 90)) * 1e3 if times else float("nan"),
     )
 
 
+def print_row(row: Row, out: TextIO) -> None:
+    print(
+        f"{row.log:6s} {row.heuristics:11s} refine {'on ' if row.refine else 'off'} "
+        f"pairs {row.pairs:4d}  success {row.success:.3f}  strict {row.strict:.3f}  "
+        f"valid {row.valid:.3f} (correct among valid {row.precision:.3f}, "
+        f"valid among correct {row.recall:.3f})  median {row.median_ms:.1f} ms  "
+        f"p90 {row.p90_ms:.1f} ms",
+        file=out,
+        flush=True,
+    )
+
+
+def markdown_table(rows: list[Row], logs: list[str]) -> str:
+    """Amigoni Table 2 layout: one line per heuristic and refinement, one column per log."""
+    head = "| heuristic | refinement | " + " | ".join(logs) + " |"
+    rule = "| --- | --- | " + " | ".join("---" for _ in logs) + " |"
+    lines = [
+        "Each cell: success (0.30 m / 5 deg) / strict (0.10 m / 2 deg) / median ms per pair "
+        "[pairs]",
+        "",
+        head,
+        rule,
+    ]
+    keys: list[tuple[str, bool]] = []
+    for row in rows:
+        if (row.heuristics, row.refine) not in keys:
+            keys.append((row.heuristics, row.refine))
+    # Single heuristics first, their combination last, as in Amigoni's Table 2.
+    keys.sort(
+        key=lambda key: (
+            key[0] == COMBINATION,
+            HEURISTICS.index(key[0]) if key[0] in HEURISTICS else 0,
+            key[1],
+        )
+    )
+    for name, refine in keys:
+        cells = []
+        for log in logs:
+            match = [r for r in rows if (r.heuristics, r.refine, r.log) == (name, refine, log)]
+            cells.append(
+                f"{match[0].success:.3f} / {match[0].strict:.3f} / {match[0].median_ms:.1f} "
+                f"[{match[0].pairs}]"
+                if match
+                else "-"
+            )
+        lines.append(f"| {name} | {'on' if refine else 'off'} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--logs", nargs="+", default=["intel", "aces", "fhw", "csail"])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("--logs", nargs="+", default=list(LOGS))
     parser.add_argument("--limit", type=int, default=0, help="at most this many pairs per log")
     parser.add_argument("--heuristics", nargs="+", default=list(HEURISTICS), choices=HEURISTICS)
     parser.add_argument("--no-views", action="store_true", help="no free-space check")
+    parser.add_argument(
+        "--no-refine", action="store_true", help="no least-squares refinement (refine_iterations=0)"
+    )
+    parser.add_argument(
+        "--table",
+        action="store_true",
+        help="every heuristic alone and combined, without and with refinement: a markdown table",
+    )
+    parser.add_argument(
+        "--heuristic-limit",
+        type=int,
+        default=None,
+        help="with --table, at most this many pairs per log for the single-heuristic rows "
+        "(default: --limit)",
+    )
+    parser.add_argument("--json", metavar="PATH", help="write every row's figures ('-': stdout)")
     parser.add_argument(
         "--set",
         dest="overrides",
@@ -94,15 +221,64 @@ def main() -> None:
         help="override an IntegrateConfig field, e.g. --set refine_candidates=8",
     )
     args = parser.parse_args()
-    config = config_from_flat(IntegrateConfig, dict(parse_override(o) for o in args.overrides))
+    flat = dict(parse_override(o) for o in args.overrides)
+    if args.no_refine:
+        flat["refine_iterations"] = 0
+    config = config_from_flat(IntegrateConfig, flat)
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    print(
-        f"INTEGRATE pair test: heuristics {' '.join(args.heuristics)}, "
-        f"views {not args.no_views}, overrides {args.overrides or 'none'}"
-    )
-    for name in args.logs:
-        run_log(name, args.limit, tuple(args.heuristics), not args.no_views, config)
+    out = sys.stderr if args.json == "-" else sys.stdout
+    logs = [log for log in (load_log(name) for name in args.logs) if log is not None]
+    rows: list[Row] = []
+    if args.table:
+        refined = (
+            config
+            if config.refine_iterations > 0
+            else dataclasses.replace(config, refine_iterations=IntegrateConfig().refine_iterations)
+        )
+        unrefined = dataclasses.replace(config, refine_iterations=0)
+        heuristic_limit = args.limit if args.heuristic_limit is None else args.heuristic_limit
+        print(
+            f"INTEGRATE pair test, table: views {not args.no_views}, overrides "
+            f"{args.overrides or 'none'}, pairs per log {args.limit or 'all'} (combination), "
+            f"{heuristic_limit or 'all'} (single heuristics)",
+            file=out,
+            flush=True,
+        )
+        setups: list[tuple[tuple[str, ...], int]] = [(HEURISTICS, args.limit)]
+        setups += [((name,), heuristic_limit) for name in HEURISTICS]
+        for heuristics, limit in setups:
+            for cfg in (unrefined, refined):
+                for log in logs:
+                    row = run_log(log, pair_indices(log, limit), heuristics, not args.no_views, cfg)
+                    rows.append(row)
+                    print_row(row, out)
+        print(file=out)
+        print(markdown_table(rows, [log.name for log in logs]), file=out, flush=True)
+    else:
+        print(
+            f"INTEGRATE pair test: heuristics {' '.join(args.heuristics)}, "
+            f"views {not args.no_views}, refine {config.refine_iterations > 0}, "
+            f"overrides {args.overrides or 'none'}",
+            file=out,
+            flush=True,
+        )
+        for log in logs:
+            row = run_log(
+                log,
+                pair_indices(log, args.limit),
+                tuple(args.heuristics),
+                not args.no_views,
+                config,
+            )
+            rows.append(row)
+            print_row(row, out)
+    if args.json:
+        text = json.dumps([dataclasses.asdict(r) for r in rows], indent=1)
+        if args.json == "-":
+            print(text)
+        else:
+            Path(args.json).write_text(text + "\n")
 
 
 if __name__ == "__main__":

@@ -14,7 +14,11 @@ from multi_robot_mapper.core.config import (
 )
 from multi_robot_mapper.core.extraction import ExtractionConfig
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.io.config_files import load_config, parameters_from_yaml
+from multi_robot_mapper.io.config_files import (
+    default_params_file,
+    load_config,
+    parameters_from_yaml,
+)
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
 
@@ -22,6 +26,9 @@ CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
 def test_shipped_yaml_equals_the_documented_defaults() -> None:
     from_yaml = parameters_from_yaml(CONFIG_DIR / "robot_mapper.yaml", node_name="robot_mapper")
     assert from_yaml == config_to_flat(RobotMapperConfig())
+    # The file is exactly what `make config` writes, comments included.
+    shipped = (CONFIG_DIR / "robot_mapper.yaml").read_text(encoding="utf-8")
+    assert shipped == default_params_file(RobotMapperConfig), "run `make config`"
 
 
 def test_yaml_then_overrides_apply_in_order(tmp_path: Path) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -12,8 +14,11 @@ from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
 from multi_robot_mapper.core.matching import (
     HEURISTICS,
     IntegrateConfig,
+    _distinct_candidates,
     distinct_hypotheses,
     integrate,
+    refine,
+    refine_many,
     seen_through,
 )
 from multi_robot_mapper.core.scan import LaserScanData
@@ -104,3 +109,90 @@ def test_distinct_hypotheses_merge_cells_and_count_votes() -> None:
     raw = np.array([[0.1, 1.0, 2.0], [0.1001, 1.001, 2.0], [1.0, 0.0, 0.0]])
     unique, votes = distinct_hypotheses(raw, np.radians(0.5), 0.02, 10)
     assert len(unique) == 2 and list(votes) == [2, 1]
+
+
+def test_a_step_down_a_corridor_is_matched_with_views() -> None:
+    # The cross corridor between the two blocks: parallel walls, door gaps, a far end.
+    pose1, pose2 = (16.0, 8.0, np.pi / 2), (16.0, 9.1, np.pi / 2 + 0.05)
+    s1, view1 = scan("corridors", pose1, seed=2)
+    s2, view2 = scan("corridors", pose2, seed=3)
+    result = integrate(s1, s2, CONFIG, views=(view1, view2))
+    T_1_2 = se2.invert(se2.matrix_from_pose(*pose1)) @ se2.matrix_from_pose(*pose2)
+    dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_1_2) @ result.matrix)
+    assert np.hypot(dx, dy) < 0.05 and abs(dtheta) < np.radians(1.0)
+
+
+def test_refinement_pulls_several_hypotheses_at_once() -> None:
+    T_1_2 = np.array([0.4, 1.0, -0.5])
+    moved = se2.transform_segments(
+        se2.invert(se2.matrix_from_pose(T_1_2[1], T_1_2[2], T_1_2[0])), ROOM
+    )
+    start = T_1_2 + np.array([[0.02, 0.05, -0.04], [-0.015, -0.06, 0.03], [0.0, 0.0, 0.0]])
+    refined = refine_many(ROOM, moved, start, CONFIG)
+    np.testing.assert_allclose(refined, np.tile(T_1_2, (3, 1)), atol=1e-4)
+    # refine() is the one-hypothesis case.
+    np.testing.assert_allclose(refine(ROOM, moved, start[0], CONFIG), T_1_2, atol=1e-4)
+
+
+def test_no_refinement_leaves_hypotheses_unchanged() -> None:
+    start = np.array([[0.1, 0.2, 0.3], [1.0, -1.0, 2.0]])
+    config = dataclasses.replace(CONFIG, refine_iterations=0)
+    np.testing.assert_array_equal(refine_many(ROOM, ROOM, start, config), start)
+
+
+def test_without_refinement_the_answer_is_a_generated_hypothesis() -> None:
+    # A copy moved by a transform that no hypothesis grid cell holds exactly: with
+    # refinement the answer is exact, without it only within the hypothesis grid.
+    T_1_2 = se2.matrix_from_pose(0.7, -0.3, 0.25)
+    moved = se2.transform_segments(se2.invert(T_1_2), ROOM)
+    config = dataclasses.replace(CONFIG, refine_iterations=0)
+    rough = integrate(ROOM, moved, config)
+    dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_1_2) @ rough.matrix)
+    assert np.hypot(dx, dy) < 0.1 and abs(dtheta) < np.radians(1.0)
+
+
+def test_seen_through_ignores_a_point_beside_a_grazing_return() -> None:
+    ranges = np.full(181, 5.0)
+    ranges[91] = 1.0  # the beam next to the point's bearing stops short
+    view = LaserScanData(ranges, -np.pi / 2, np.pi / 2, np.pi / 180, 0.1, 10.0)
+    point = np.array([[2.0, 0.0]])  # bearing 0: beam 90
+    assert seen_through(view, point, 0.15, spread=0)[0]
+    assert not seen_through(view, point, 0.15, spread=1)[0]
+
+
+def test_distinct_candidates_are_apart() -> None:
+    transforms = np.array(
+        [[0.0, 0.0, 0.0], [0.01, 0.05, 0.0], [0.0, 1.0, 0.0], [np.pi, 0.0, 0.0], [0.0, 1.1, 0.0]]
+    )
+    values = np.array([5.0, 4.0, 3.0, 2.0, 1.0])
+    config = dataclasses.replace(CONFIG, refine_candidates=10)
+    picked = _distinct_candidates(np.zeros((0, 4)), np.zeros((0, 4)), transforms, values, config)
+    assert list(picked) == [0, 2, 3]
+
+
+def test_the_config_fields_are_documented_with_units_and_bounds() -> None:
+    for field in dataclasses.fields(IntegrateConfig):
+        assert field.metadata.get("doc"), field.name
+        assert "unit" in field.metadata, field.name
+
+
+def test_hypotheses_from_other_sets_are_evaluated_on_the_given_sets() -> None:
+    T_1_2 = se2.matrix_from_pose(0.8, 0.4, -0.6)
+    moved = se2.transform_segments(se2.invert(T_1_2), ROOM)
+    half = len(ROOM) // 2  # the hypotheses come from half of each set only
+    result = integrate(ROOM, moved, CONFIG, hypothesis_sets=(ROOM[:half], moved[:half]))
+    dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_1_2) @ result.matrix)
+    assert np.hypot(dx, dy) < 1e-6 and abs(dtheta) < 1e-6
+    assert result.fraction > 0.99
+
+
+def test_an_extra_hypothesis_is_always_evaluated_and_refined() -> None:
+    # No heuristic at all: the prediction alone, a few centimetres and a degree off.
+    T_1_2 = np.array([0.3, 1.2, -0.7])
+    moved = se2.transform_segments(
+        se2.invert(se2.matrix_from_pose(T_1_2[1], T_1_2[2], T_1_2[0])), ROOM
+    )
+    guess = T_1_2 + np.array([0.02, 0.05, -0.03])
+    result = integrate(ROOM, moved, CONFIG, heuristics=(), extra_hypotheses=guess[None, :])
+    np.testing.assert_allclose(result.T_1_2, T_1_2, atol=1e-4)
+    assert result.evaluated == 1

@@ -1,24 +1,41 @@
-"""A real robot_mapper node spun in-process: segments out, bad scans survived, parameters."""
+"""A real robot_mapper node spun in-process: segments, pose and partial map out, bad scans
+survived, parameters."""
 
 from __future__ import annotations
 
 import math
+from functools import cache
 
 import numpy as np
 import pytest
+from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
-from visualization_msgs.msg import Marker
+from visualization_msgs.msg import Marker, MarkerArray
 
+from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError
 from multi_robot_mapper.core.scan import LaserScanData
-from multi_robot_mapper.core.simulation import polygon, raycast
-from multi_robot_mapper.io.messages import scan_to_msg, segments_from_marker, stamp_from_seconds
-from multi_robot_mapper.ros.robot_mapper import RobotMapper
-from multi_robot_mapper.ros.testing import spin_until
+from multi_robot_mapper.core.simulation import (
+    LaserModel,
+    SimulatedRobot,
+    polygon,
+    raycast,
+    simulate_robots,
+)
+from multi_robot_mapper.io.messages import (
+    keyframes_from_markers,
+    pose_from_msg,
+    scan_to_msg,
+    seconds_from_stamp,
+    segments_from_marker,
+    stamp_from_seconds,
+)
+from multi_robot_mapper.ros.robot_mapper import RobotMapper, default_map_frame, main
+from multi_robot_mapper.ros.testing import default_domain_id, spin_until
 
 pytestmark = pytest.mark.ros
 
@@ -46,6 +63,10 @@ class Harness:
         self.driver.create_subscription(
             Marker, "/robot1/scan_segments", self.received.append, QoSProfile(depth=100)
         )
+        self.poses: list[PoseStamped] = []
+        self.driver.create_subscription(
+            PoseStamped, "/robot1/pose", self.poses.append, QoSProfile(depth=100)
+        )
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.mapper)
         self.executor.add_node(self.driver)
@@ -54,6 +75,7 @@ class Harness:
             lambda: (
                 self.scan_pub.get_subscription_count() > 0
                 and self.mapper.count_subscribers("scan_segments") > 0
+                and self.mapper.count_subscribers("pose") > 0
             ),
             timeout=10.0,
         )
@@ -105,7 +127,7 @@ def test_segments_come_back_stamped_and_framed_like_the_scan(harness: Harness) -
 
 def test_topics_are_relative_to_the_namespace(harness: Harness) -> None:
     names = {name for name, _ in harness.mapper.get_topic_names_and_types()}
-    assert {"/robot1/scan", "/robot1/scan_segments"} <= names
+    assert {"/robot1/scan", "/robot1/scan_segments", "/robot1/pose", "/robot1/partial_map"} <= names
 
 
 def bad(base: LaserScanData | None = None, **changes) -> LaserScan:
@@ -191,3 +213,224 @@ def test_parameter_override_reaches_the_config_and_bad_runtime_changes_are_refus
         assert node.config.extraction.simplifier == "dce"
     finally:
         node.destroy_node()
+
+
+# --- local mapping: pose and partial_map -----------------------------------------------------
+
+DRIVE_EVERY = 4  # every 4th scan of a 40 Hz drive: 10 Hz, about 8 cm apart, fast enough here
+
+
+@cache
+def drive() -> SimulatedRobot:
+    """Three seconds of one robot in the office world (seeded, the same every time)."""
+    return simulate_robots("office", 1, LaserModel(), seed=0, duration=3.0)[0]
+
+
+def truth_in_robot_map(run: SimulatedRobot, stamp: float) -> np.ndarray:
+    """The true laser pose at ``stamp`` relative to the first scan's (the robot's map frame)."""
+    i = int(np.argmin(np.abs(run.stamps - stamp)))
+    T_first_world = se2.invert(se2.matrix_from_pose(*run.T_world_laser[0]))
+    return np.array(
+        se2.pose_from_matrix(T_first_world @ se2.matrix_from_pose(*run.T_world_laser[i]))
+    )
+
+
+def assert_pose_close(got: np.ndarray, want: np.ndarray, metres: float, radians: float) -> None:
+    assert math.hypot(got[0] - want[0], got[1] - want[1]) < metres, (got, want)
+    assert abs(math.remainder(got[2] - want[2], math.tau)) < radians, (got, want)
+
+
+def send_drive(harness: Harness) -> list[LaserScan]:
+    run = drive()
+    msgs = [
+        scan_to_msg(run.scans[i], "robot1/laser", stamp_from_seconds(run.stamps[i]), 0.025)
+        for i in range(0, len(run.scans), DRIVE_EVERY)
+    ]
+    for msg in msgs:
+        harness.send(msg)
+    return msgs
+
+
+@pytest.fixture
+def fast_map_harness(ros_context):
+    h = Harness(ros_context, parameter_overrides=[Parameter("partial_map_period", value=0.1)])
+    yield h
+    h.close()
+
+
+def test_every_accepted_scan_gives_its_pose_stamped_and_in_the_robot_map_frame(
+    fast_map_harness: Harness,
+) -> None:
+    h = fast_map_harness
+    msgs = send_drive(h)
+    assert h.mapper.scans_received == len(msgs)
+    accepted = h.mapper.mapper.scans_accepted
+    assert accepted >= len(msgs) - 2  # a clean simulated drive: (nearly) every scan placed
+    assert spin_until(h.executor, lambda: len(h.poses) == accepted, timeout=5.0)
+    sent = {(m.header.stamp.sec, m.header.stamp.nanosec) for m in msgs}
+    for pose in h.poses:
+        assert pose.header.frame_id == "robot1/map"
+        assert (pose.header.stamp.sec, pose.header.stamp.nanosec) in sent
+    np.testing.assert_array_equal(pose_from_msg(h.poses[0].pose), [0.0, 0.0, 0.0])
+    for pose in h.poses:
+        want = truth_in_robot_map(drive(), seconds_from_stamp(pose.header.stamp))
+        assert_pose_close(pose_from_msg(pose.pose), want, metres=0.05, radians=0.02)
+    # The newest pose is the mapper's, and the scan_segments output goes on as before.
+    np.testing.assert_allclose(pose_from_msg(h.poses[-1].pose), h.mapper.mapper.pose, atol=1e-12)
+    assert len(h.received) == len(msgs)
+
+
+def test_late_subscriber_receives_the_whole_partial_map(fast_map_harness: Harness) -> None:
+    h = fast_map_harness
+    msgs = send_drive(h)
+    mapper = h.mapper.mapper
+    assert spin_until(h.executor, lambda: h.mapper.published_version == mapper.version, timeout=5.0)
+    published = h.mapper.partial_maps_published
+    # Created after the map went out: transient local delivers the last (whole) map to it.
+    maps: list[MarkerArray] = []
+    late = Node("late_viewer", context=h.driver.context)
+    qos = QoSProfile(
+        depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+    )
+    late.create_subscription(MarkerArray, "/robot1/partial_map", maps.append, qos)
+    h.executor.add_node(late)
+    try:
+        assert spin_until(h.executor, lambda: bool(maps), timeout=5.0)
+        # Several map periods go by: nothing changed, so nothing is republished.
+        spin_until(h.executor, lambda: False, timeout=0.5)
+        assert len(maps) == 1 and h.mapper.partial_maps_published == published
+    finally:
+        h.executor.remove_node(late)
+        late.destroy_node()
+    array = maps[0]
+    keyframes = mapper.keyframes()
+    assert len(keyframes) >= 3
+    assert len(array.markers) == len(keyframes)
+    assert [m.id for m in array.markers] == list(range(len(keyframes)))
+    # Stamped with the newest scan in the map (the last keyframe's), exactly as that scan was.
+    newest = next(m for m in msgs if seconds_from_stamp(m.header.stamp) == keyframes[-1].stamp)
+    last_stamp = (newest.header.stamp.sec, newest.header.stamp.nanosec)
+    for marker in array.markers:
+        assert marker.ns == "partial_map" and marker.type == Marker.LINE_LIST
+        assert marker.header.frame_id == "robot1/map"
+        assert (marker.header.stamp.sec, marker.header.stamp.nanosec) == last_stamp
+    received = keyframes_from_markers(array)
+    for got, want in zip(received, keyframes, strict=True):
+        np.testing.assert_array_equal(got.segments, want.segments)
+        assert got.stamp == want.stamp
+        # Keyframe poses: close to the true motion since the first scan.
+        assert_pose_close(
+            got.T_robotmap_keyframe, truth_in_robot_map(drive(), got.stamp), 0.05, 0.02
+        )
+    assert received[0].T_robotmap_keyframe.tolist() == [0.0, 0.0, 0.0]
+    segments = sum(len(kf.segments) for kf in received)
+    assert segments >= 10
+
+
+def test_an_error_inside_the_local_mapper_is_logged_and_the_map_kept(
+    fast_map_harness: Harness,
+) -> None:
+    h = fast_map_harness
+    send_drive(h)
+    local = h.mapper.mapper
+    before = local.keyframes()
+    state = (local.version, local.pose, local.stamp, local.scans_accepted)
+    original = local.add_scan
+
+    def broken(*args: object) -> None:
+        original(*args)  # the scan changes the map, and then something goes wrong
+        raise RuntimeError("simulated bug")
+
+    local.add_scan = broken  # type: ignore[method-assign]
+    run = drive()
+    far = len(run.scans) - 1  # the drive's last scan, not sent before
+    scan = scan_to_msg(run.scans[far], "robot1/laser", stamp_from_seconds(run.stamps[-1] + 1.0))
+    h.answer_to(scan)  # scan_segments still comes back
+    h.send(scan)
+    logged = [line for line in h.logged if "simulated bug" in line]
+    assert len(logged) == 1 and "partial map is kept" in logged[0]  # throttled
+    assert h.mapper.mapping_errors == 2
+    # Whatever the failed scans changed was undone: the map is the one built before.
+    assert (local.version, local.pose, local.stamp, local.scans_accepted) == state
+    after = local.keyframes()
+    assert len(after) == len(before)
+    for a, b in zip(after, before, strict=True):
+        np.testing.assert_array_equal(a.segments, b.segments)
+        np.testing.assert_array_equal(a.T_robotmap_keyframe, b.T_robotmap_keyframe)
+    del local.add_scan  # the bug is gone: mapping resumes on the same map
+    h.send(scan_to_msg(run.scans[far], "robot1/laser", stamp_from_seconds(run.stamps[-1] + 2.0)))
+    assert local.scans_accepted == state[3] + 1
+    assert spin_until(h.executor, lambda: len(h.poses) == local.scans_accepted, timeout=5.0)
+
+
+def test_bad_scans_leave_the_partial_map_alone(harness: Harness) -> None:
+    harness.send(bad(ranges=[]))  # refused by the front end: never reaches the mapper
+    harness.send(bad(ranges=[float("nan")] * 361))  # processed, but nothing to place
+    assert harness.mapper.scans_rejected == 1
+    local = harness.mapper.mapper
+    assert local.scans_accepted == 0 and local.scans_set_aside == 1 and local.pose is None
+    assert harness.poses == [] and local.version == 0
+    harness.send_good(5.0)
+    assert local.scans_accepted == 1
+    assert spin_until(harness.executor, lambda: len(harness.poses) == 1, timeout=5.0)
+
+
+def test_map_frame_default_follows_the_namespace_and_can_be_set(ros_context) -> None:
+    assert default_map_frame("/robot1") == "robot1/map"
+    assert default_map_frame("/fleet/robot2") == "fleet/robot2/map"
+    assert default_map_frame("/") == "map"
+    nodes = [
+        RobotMapper(context=ros_context),
+        RobotMapper(context=ros_context, namespace="robot3"),
+        RobotMapper(
+            context=ros_context,
+            namespace="robot4",
+            parameter_overrides=[Parameter("map_frame", value="site/r4_map")],
+        ),
+    ]
+    try:
+        assert [n.map_frame for n in nodes] == ["map", "robot3/map", "site/r4_map"]
+    finally:
+        for node in nodes:
+            node.destroy_node()
+
+
+def test_local_mapping_parameters_two_levels_deep_reach_the_mapper(ros_context) -> None:
+    node = RobotMapper(
+        context=ros_context,
+        parameter_overrides=[
+            Parameter("local_mapping.integrate.point_distance_tolerance", value=0.08),
+            Parameter("local_mapping.keyframe_distance", value=0.7),
+        ],
+    )
+    try:
+        assert node.mapper.config.integrate.point_distance_tolerance == 0.08
+        assert node.mapper.config.keyframe_distance == 0.7
+        results = node.set_parameters([Parameter("local_mapping.keyframe_angle", value=-1.0)])
+        assert not results[0].successful and "keyframe_angle" in results[0].reason
+        results = node.set_parameters([Parameter("local_mapping.keyframe_angle", value=0.2)])
+        assert results[0].successful and node.mapper.config.keyframe_angle == 0.2
+        results = node.set_parameters([Parameter("partial_map_period", value=0.0)])
+        assert not results[0].successful and "partial_map_period" in results[0].reason
+        results = node.set_parameters([Parameter("partial_map_period", value=0.5)])
+        assert results[0].successful
+        assert node._map_timer.timer_period_ns == 500_000_000
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize("value", [0.0, -1.0])
+def test_bad_partial_map_period_is_refused(ros_context, value: float) -> None:
+    with pytest.raises(ConfigError, match="partial_map_period"):
+        RobotMapper(
+            context=ros_context, parameter_overrides=[Parameter("partial_map_period", value=value)]
+        )
+
+
+def test_main_exits_2_on_a_bad_partial_map_period(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(default_domain_id()))
+    code = main(["robot_mapper", "--ros-args", "-p", "partial_map_period:=0.0"])
+    assert code == 2
+    assert "partial_map_period" in capsys.readouterr().err

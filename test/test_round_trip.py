@@ -70,6 +70,28 @@ def test_simulate_replay_reference_evaluate(capsys, tmp_path: Path, storage: str
     assert_reference_round_trip(capsys, bag, tmp_path / "ref", robots=2)
 
 
+def test_simulate_replay_local_evaluate_scores_each_robot_in_its_own_frame(
+    capsys, tmp_path: Path
+) -> None:
+    bag = tmp_path / "sim"
+    args = ("--robots", 2, "--out", bag, "--duration", 4, "--rate", 10, "--seed", 3)
+    assert mrm(capsys, "simulate", *args)[0] == 0
+    out = tmp_path / "local"
+    code, _, err = mrm(capsys, "replay", bag, "--out", out)  # the default method is local
+    assert code == 0, err
+    robots = json.loads((out / "robots.json").read_text())
+    assert robots == {"robot1": "unmerged", "robot2": "unmerged"}
+    stats = json.loads((out / "stats.json").read_text())
+    assert stats["method"] == "local" and set(stats["robots"]) == {"robot1", "robot2"}
+    assert mrm(capsys, "evaluate", out, "--bag", bag, "--json")[0] == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["robots_merged"] == 0  # never claimed: no merging in 'local'
+    assert metrics["pair_success"] >= 0.95
+    for robot in metrics["robots"].values():
+        assert robot["ate_own_frame_m"] < 0.05
+        assert robot["reported_unmerged"]
+
+
 def test_methods_not_built_yet_exit_2_and_say_so(capsys, tmp_path: Path) -> None:
     bag = tmp_path / "sim"
     assert mrm(capsys, "simulate", "--robots", 1, "--out", bag, "--duration", 1)[0] == 0

@@ -1,4 +1,4 @@
-"""``mrm replay BAG --out DIR [--method pivot|ffs|reference] [--config YAML]``.
+"""``mrm replay BAG --out DIR [--method local|pivot|ffs|reference] [--config YAML]``.
 
 Runs the pipeline offline, as fast as the CPU allows, through the same core the nodes use, and
 writes DIR/map.json, map.svg, map.png, trajectories/<robot>.tum, robots.json and stats.json.
@@ -21,7 +21,7 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser("replay", help="run the pipeline offline on a rosbag2 file")
     parser.add_argument("bag", type=Path, help="rosbag2 folder or .mcap file with */scan topics")
     parser.add_argument("--out", type=Path, required=True, help="output folder")
-    parser.add_argument("--method", choices=METHODS, default="pivot")
+    parser.add_argument("--method", choices=METHODS, default="local")
     parser.add_argument("--scan-topics", default="/*/scan", help="topic pattern (fnmatch)")
     add_config_options(parser)
     parser.set_defaults(func=run)
@@ -58,7 +58,13 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"{args.bag} has no <robot>/ground_truth poses: 'reference' needs them")
     bar = ProgressBar(f"replay {args.method}")
     try:
-        offline = run_offline(inputs, args.method, config.extraction, progress=bar)
+        offline = run_offline(
+            inputs,
+            args.method,
+            config.extraction,
+            progress=bar,
+            local_mapping=config.local_mapping,
+        )
     finally:
         bar.close()
     out = Path(args.out)

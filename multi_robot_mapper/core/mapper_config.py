@@ -6,13 +6,16 @@ import dataclasses
 
 from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.extraction import ExtractionConfig
+from multi_robot_mapper.core.local_mapping import LocalMapperConfig
 
 
 @dataclasses.dataclass(frozen=True)
 class RobotMapperConfig:
-    """Per-robot mapper. ROS parameter names are the dotted field names (``extraction.*``)."""
+    """Per-robot mapper. ROS parameter names are the dotted field names (``extraction.*``,
+    ``local_mapping.*``, ``local_mapping.integrate.*``)."""
 
     extraction: ExtractionConfig = dataclasses.field(default_factory=ExtractionConfig)
+    local_mapping: LocalMapperConfig = dataclasses.field(default_factory=LocalMapperConfig)
     warning_period: float = param(
         10.0,
         unit="s",
@@ -25,6 +28,19 @@ class RobotMapperConfig:
         doc="line width of the segment markers (visualisation only)",
         minimum=0.0,
         exclusive_minimum=True,
+    )
+    partial_map_period: float = param(
+        1.0,
+        unit="s",
+        doc="the whole partial map is republished at most once per this period, when it changed",
+        minimum=0.0,
+        maximum=3600.0,
+        exclusive_minimum=True,
+    )
+    map_frame: str = param(
+        "",
+        unit="",
+        doc="frame of partial_map and pose; empty means '<namespace>/map' ('map' at the root)",
     )
 
     def __post_init__(self) -> None:

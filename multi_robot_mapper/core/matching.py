@@ -3,12 +3,17 @@
 Amigoni, Gasparini & Gini 2006, Sec. III: angles between pairs of segments are geometric
 landmarks; every rototranslation that superimposes an angle of S2 on an equal angle of S1 is a
 hypothesis (Algorithm 2, with the heuristics of III-A that choose which angles); each
-hypothesis is scored by the overlap length of matching segments (Algorithm 4); the best one is
-refined by point-to-line least squares (Cox, as in Wolter 5.1).
+hypothesis is scored by the overlap length of matching segments (Algorithm 4). Then, beyond
+the paper: the best few distinct hypotheses are refined by point-to-line least squares (Cox,
+as in Wolter 5.1), corridor-like ones are also slid along their free direction, and the
+winner is the one the two scans' beams agree with best (overlap, minus what one scan saw
+through, plus what its beams confirm). Overlap alone cannot tell a corridor's true motion from
+standing still, nor a scan from its mirror image behind the robot.
 
 All of it is array code: landmarks x landmarks for hypotheses, and hypotheses x segments x
-segments for the evaluation, restricted early to the nearly parallel triples that can score.
-Transforms are ``(theta, tx, ty)`` rows: ``T_1_2`` maps S2 coordinates into S1's frame.
+segments for the evaluation, restricted early to the nearly parallel triples that can score
+and, with many hypotheses, to the few that a cheap prescreen on the longest segments ranks
+best. Transforms are ``(theta, tx, ty)`` rows: ``T_1_2`` maps S2 coordinates into S1's frame.
 """
 
 from __future__ import annotations
@@ -20,11 +25,18 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import param, validate
-from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.scan import LaserScanData, scan_points
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
+
+# A refined slid hypothesis replaces the slid one unless its net score is this much lower (m):
+# the slide grid is coarse, the refinement is the precise answer.
+_POLISH_TOLERANCE = 0.25
+
+# The prescreen's rough cut (half the segments) keeps this many times candidate_pool.
+_ROUGH_CUT = 10
 
 HEURISTICS = ("consecutive", "random", "histogram", "all", "endpoints")
 
@@ -115,12 +127,29 @@ class IntegrateConfig:
         maximum=1.5,
     )
     max_hypotheses: int = param(
-        4000, unit="", doc="at most this many distinct hypotheses are evaluated", minimum=1
+        20000,
+        unit="",
+        doc="at most this many distinct hypotheses (most voted first) are prescreened",
+        minimum=1,
+    )
+    hypothesis_angle_cell: float = param(
+        0.0087,
+        unit="rad",
+        doc="hypotheses in the same (angle, x, y) cell are one (the most voted cells first)",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    hypothesis_distance_cell: float = param(
+        0.02,
+        unit="m",
+        doc="translation size of the cells that merge hypotheses",
+        minimum=0.0,
+        exclusive_minimum=True,
     )
     refine_iterations: int = param(
-        15,
+        6,
         unit="",
-        doc="point-to-line least-squares iterations after the best hypothesis",
+        doc="Gauss-Newton iterations of the least-squares refinement of each candidate (0: none)",
         minimum=0,
     )
     seed: int = param(0, unit="", doc="seed of the random-pair heuristic (deterministic runs)")
@@ -157,10 +186,97 @@ class IntegrateConfig:
         minimum=0.0,
     )
     refine_candidates: int = param(
+        12,
+        unit="",
+        doc="the best this many distinct hypotheses are refined; the best net score wins",
+        minimum=1,
+    )
+
+    free_space_spread: int = param(
+        1,
+        unit="beams",
+        doc="a point is seen through only if the beams this many either side passed it too",
+        minimum=0,
+    )
+    free_space_min_length: float = param(
+        0.3,
+        unit="m",
+        doc="with one view only, segments shorter than this (people) are not tested",
+        minimum=0.0,
+    )
+    view_point_length: float = param(
+        0.3,
+        unit="m",
+        doc="with both views, one return stands for at most this much surface",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    confirmed_weight: float = param(
+        3.0,
+        unit="",
+        doc="metres of score one metre of a scan that the other scan's beams end on adds when "
+        "candidates are ranked (a wrong transform puts one scan where the other never looked)",
+        minimum=0.0,
+    )
+    cross_support_weight: float = param(
+        5.0,
+        unit="",
+        doc="metres of score one metre of cross support adds when candidates are ranked",
+        minimum=0.0,
+    )
+    slide_candidates: int = param(
         3,
         unit="",
-        doc="the best this many hypotheses are refined; the best refined one wins",
+        doc="this many best candidates are slid along the direction their walls leave free",
+        minimum=0,
+    )
+    slide_below_support: float = param(
+        1.0,
+        unit="m",
+        doc="only candidates with less cross support than this are slid",
+        minimum=0.0,
+    )
+    slide_range: float = param(1.5, unit="m", doc="slides go this far either way", minimum=0.0)
+    slide_step: float = param(
+        0.1,
+        unit="m",
+        doc="slides are tried every this far",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    candidate_pool: int = param(
+        100,
+        unit="",
+        doc="this many prescreened hypotheses are evaluated in full (Alg. 4) and searched for "
+        "distinct candidates",
         minimum=1,
+    )
+    prescreen_segments: int = param(
+        16,
+        unit="segments",
+        doc="with more than candidate_pool hypotheses, all are first valued on this many "
+        "longest segments of each set; the candidate_pool best are evaluated in full",
+        minimum=1,
+    )
+    prescreen_match_angle: float = param(
+        0.1,
+        unit="rad",
+        doc="in the prescreen, segments whose directions differ more than this never match",
+        minimum=0.0,
+        exclusive_minimum=True,
+        maximum=1.5,
+    )
+    candidate_separation: float = param(
+        0.4,
+        unit="m",
+        doc="candidates closer than this (and candidate_angle_separation) are one answer",
+        minimum=0.0,
+    )
+    candidate_angle_separation: float = param(
+        0.05,
+        unit="rad",
+        doc="candidates turned less than this (and candidate_separation) are one answer",
+        minimum=0.0,
     )
 
     def __post_init__(self) -> None:
@@ -413,7 +529,10 @@ def distinct_hypotheses(
         )
     ).astype(np.int64)
     keys[:, 0] %= round(2 * np.pi / angle_step)
-    _, first, votes = np.unique(keys, axis=0, return_index=True, return_counts=True)
+    # One int64 per cell (1-D unique is several times faster than unique rows).
+    span = 1 << 24
+    code = (keys[:, 0] * span + (keys[:, 1] % span)) * span + (keys[:, 2] % span)
+    _, first, votes = np.unique(code, return_index=True, return_counts=True)
     order = np.argsort(-votes, kind="stable")[:limit]
     return transforms[first[order]], votes[order]
 
@@ -480,26 +599,29 @@ def score_pairs(
     h, a, b = _candidate_triples(lines1, lines2, transforms[:, 0], subset, config.max_match_angle)
     if h.size == 0:
         return empty
-    c, s = np.cos(transforms[h, 0]), np.sin(transforms[h, 0])
+    cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
+    c, s = cos_h[h], sin_h[h]
     tx, ty = transforms[h, 1], transforms[h, 2]
-    # S2 end points and direction under the hypothesis.
+    # S2 end points under the hypothesis, and their distances to s1's line (Alg. 4 l. 9).
     q1x = c * segments2[b, 0] - s * segments2[b, 1] + tx
     q1y = s * segments2[b, 0] + c * segments2[b, 1] + ty
     q2x = c * segments2[b, 2] - s * segments2[b, 3] + tx
     q2y = s * segments2[b, 2] + c * segments2[b, 3] + ty
+    ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
+    ca = lines1.normal_offset[a]
+    dq = np.maximum(np.abs(-uy * q1x + ux * q1y - ca), np.abs(-uy * q2x + ux * q2y - ca))
     vx = c * lines2.direction[b, 0] - s * lines2.direction[b, 1]
     vy = s * lines2.direction[b, 0] + c * lines2.direction[b, 1]
-    ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
     e1x, e1y, e2x, e2y = segments1[a, 0], segments1[a, 1], segments1[a, 2], segments1[a, 3]
-    # Distances of each segment's end points to the other's supporting line.
-    ca = lines1.normal_offset[a]
-    dq1 = np.abs(-uy * q1x + ux * q1y - ca)
-    dq2 = np.abs(-uy * q2x + ux * q2y - ca)
     cb = -vy * q1x + vx * q1y
-    de1 = np.abs(-vy * e1x + vx * e1y - cb)
-    de2 = np.abs(-vy * e2x + vx * e2y - cb)
-    d = np.minimum(np.maximum(dq1, dq2), np.maximum(de1, de2))
-    near = d <= config.match_distance
+    de = np.maximum(np.abs(-vy * e1x + vx * e1y - cb), np.abs(-vy * e2x + vx * e2y - cb))
+    d = np.minimum(dq, de)
+    # Most candidate triples are far apart: drop them before the overlap arithmetic.
+    near = np.flatnonzero(d <= config.match_distance)
+    h, a, b, d = h[near], a[near], b[near], d[near]
+    q1x, q1y, q2x, q2y = q1x[near], q1y[near], q2x[near], q2y[near]
+    ux, uy, vx, vy = ux[near], uy[near], vx[near], vy[near]
+    e1x, e1y, e2x, e2y = e1x[near], e1y[near], e2x[near], e2y[near]
     # Overlaps along each line (s1 runs from e1 to e2 along u; s2 from q1 to q2 along v).
     sa1 = ux * e1x + uy * e1y
     sq1 = ux * q1x + uy * q1y
@@ -522,7 +644,7 @@ def score_pairs(
     crossing = _segments_cross(e1x, e1y, e2x, e2y, q1x, q1y, q2x, q2y)
     penalty = np.where(crossing, 1.0, 0.95 ** (d / config.point_distance_tolerance))
     value = 0.5 * (l1 + l2) * penalty
-    keep = near & (value > 0.0)
+    keep = value > 0.0
     return PairScores(h[keep], a[keep], b[keep], value[keep], crossing[keep])
 
 
@@ -631,64 +753,97 @@ def integrate(
     ordered: tuple[bool, bool] = (True, True),
     extra_hypotheses: FloatArray | None = None,
     views: tuple[LaserScanData | None, LaserScanData | None] = (None, None),
+    hypothesis_sets: tuple[FloatArray, FloatArray] | None = None,
 ) -> MatchResult:
     """Find how S2 lies in S1's frame with no initial guess (INTEGRATE steps 1-2).
 
+    ``hypothesis_sets`` (same frames as S1 and S2) are the sets whose landmarks generate the
+    hypotheses when they differ from the sets evaluated: a local mapper draws hypotheses from
+    the last keyframe's scan (few segments, few landmarks) and evaluates them on the partial
+    map around it (every wall seen nearby).
+
     ``views`` are the scans each set was seen in, in its own frame, when known. Overlap length
     cannot tell a corridor's true motion from standing still (the visible stretch of wall moves
-    with the robot); free space can: under a wrong hypothesis one scan's walls lie where the
-    other scan's beams passed. With views, the best candidates are refined and ranked by
-    overlap minus ``free_space_weight`` times the length seen through.
+    with the robot); the beams can: under a wrong hypothesis one scan's walls lie where the
+    other scan's beams passed (seen through), and few of its returns lie where the other's
+    beams ended (confirmed). The ``refine_candidates`` best distinct hypotheses are refined
+    and ranked by overlap - ``free_space_weight`` x seen through + ``confirmed_weight`` x
+    confirmed + ``cross_support_weight`` x cross support (without views: overlap and cross
+    support). Validity uses overlap minus seen through only.
+
+    Steps: hypotheses (Alg. 2 and the heuristics of III-A); values (Alg. 4 l. 5-19, after a
+    prescreen when there are many); the best distinct ones, refused ones dropped (Alg. 4
+    l. 6-7, 20-23); refinement; slides along corridors; the best net score wins.
     """
     rng = np.random.default_rng(config.seed)
     total1 = float(lines_of(segments1).length.sum()) if len(segments1) else 0.0
     total2 = float(lines_of(segments2).length.sum()) if len(segments2) else 0.0
     shorter = max(min(total1, total2), 1e-9)
-    marks1 = (
-        landmarks(segments1, heuristics, config, ordered[0], rng) if len(segments1) > 1 else None
-    )
-    marks2 = (
-        landmarks(segments2, heuristics, config, ordered[1], rng) if len(segments2) > 1 else None
-    )
+    source1, source2 = (segments1, segments2) if hypothesis_sets is None else hypothesis_sets
+    marks1 = landmarks(source1, heuristics, config, ordered[0], rng) if len(source1) > 1 else None
+    marks2 = landmarks(source2, heuristics, config, ordered[1], rng) if len(source2) > 1 else None
     raw = (
-        hypotheses(segments1, marks1, segments2, marks2, config)
+        hypotheses(source1, marks1, source2, marks2, config)
         if marks1 is not None and marks2 is not None
         else np.zeros((0, 3))
     )
-    if "endpoints" in heuristics and len(segments1) and len(segments2):
-        raw = np.vstack((raw, endpoint_hypotheses(segments1, segments2, config)))
-    if extra_hypotheses is not None and len(extra_hypotheses):
-        raw = np.vstack((np.asarray(extra_hypotheses, dtype=np.float64).reshape(-1, 3), raw))
-    transforms, _ = distinct_hypotheses(raw, np.radians(0.5), 0.02, config.max_hypotheses)
+    if "endpoints" in heuristics and len(source1) and len(source2):
+        raw = np.vstack((raw, endpoint_hypotheses(source1, source2, config)))
+    transforms, _ = distinct_hypotheses(
+        raw, config.hypothesis_angle_cell, config.hypothesis_distance_cell, config.max_hypotheses
+    )
+    # Extra hypotheses (predictions) come first and are always evaluated in full.
+    extra = (
+        np.zeros((0, 3))
+        if extra_hypotheses is None
+        else np.asarray(extra_hypotheses, dtype=np.float64).reshape(-1, 3)
+    )
+    transforms = np.vstack((extra, transforms))
     if len(transforms) == 0:
         return MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0)
-    values, evaluated = _pruned_values(segments1, segments2, transforms, config, total2)
-    # Best hypotheses first; a refused one (long walls crossing) is skipped (Alg. 4 l. 6-7).
-    order = np.argsort(-values, kind="stable")
-    candidates: list[int] = []
-    for start in range(0, len(order), 32):
-        batch = order[start : start + 32]
-        batch = batch[values[batch] > 0.0]
-        if batch.size == 0:
-            break
-        ok = ~refused(segments1, segments2, transforms[batch], config)
-        candidates.extend(int(i) for i in batch[ok])
-        if len(candidates) >= config.refine_candidates:
-            break
-    if not candidates:
+    values, evaluated = _pruned_values(segments1, segments2, transforms, config, len(extra))
+    # Alg. 4 l. 20-23 (keep the best), widened: the best few DISTINCT hypotheses are refused
+    # (l. 6-7) or refined, then ranked by their net score (overlap and the scans' beams).
+    candidates = _distinct_candidates(segments1, segments2, transforms, values, config)
+    if candidates.size == 0:
         return MatchResult(np.zeros(3), 0.0, 0.0, False, len(transforms), evaluated)
-    best_T, best_value = transforms[candidates[0]], float(values[candidates[0]])
-    best_score = best_value - _seen_through(segments1, segments2, best_T, views, config)
-    for index in candidates[: config.refine_candidates]:
-        refined_T = refine(segments1, segments2, transforms[index], config)
-        refined_value = float(
-            transform_values(score_pairs(segments1, segments2, refined_T[None, :], config), 1)[0]
+    refined = refine_many(segments1, segments2, transforms[candidates], config)
+    refined_values, scores, support, slide = _net_scores(
+        segments1, segments2, refined, views, config
+    )
+    if config.refine_iterations > 0:
+        # A refinement that slid into a crossing (or lost its overlap) falls back to the
+        # unrefined hypothesis, which passed the refusal test.
+        bad = refused(segments1, segments2, refined, config) | (refined_values <= 0.0)
+        if bad.any():
+            refined[bad] = transforms[candidates[bad]]
+            refined_values[bad], scores[bad], support[bad], slide[bad] = _net_scores(
+                segments1, segments2, refined[bad], views, config
+            )
+    slid, slid_values, slid_scores = _slide(
+        segments1, segments2, refined, scores, support, slide, views, config
+    )
+    refined = np.vstack((refined, slid))
+    refined_values = np.concatenate((refined_values, slid_values))
+    scores = np.concatenate((scores, slid_scores))
+    pick = int(np.argmax(scores))
+    if pick >= len(candidates) and config.refine_iterations > 0:
+        # A slid hypothesis sits on a grid along the corridor: refine it too (the damped
+        # steps leave it where it is along a bare corridor).
+        polished = refine_many(segments1, segments2, refined[pick : pick + 1], config)
+        polished_value, polished_score, _, _ = _net_scores(
+            segments1, segments2, polished, views, config
         )
-        score = refined_value - _seen_through(segments1, segments2, refined_T, views, config)
-        if score > best_score and not refused(segments1, segments2, refined_T[None, :], config)[0]:
-            best_T, best_value, best_score = refined_T, refined_value, score
+        if (
+            polished_score[0] >= scores[pick] - _POLISH_TOLERANCE
+            and not refused(segments1, segments2, polished, config)[0]
+        ):
+            refined[pick], refined_values[pick] = polished[0], polished_value[0]
+    best_T, best_value = refined[pick], float(refined_values[pick])
     # Validity on the net value: overlap that the other scan's free space contradicts counts
     # against it (two unrelated rectilinear places easily overlap by a third).
+    through, _ = _seen_through_many(segments1, segments2, best_T[None, :], views, config)
+    best_score = best_value - config.free_space_weight * float(through[0])
     fraction = best_score / shorter
     valid = (
         best_score >= config.min_match_value
@@ -698,21 +853,198 @@ def integrate(
     return MatchResult(best_T.copy(), best_value, fraction, bool(valid), len(transforms), evaluated)
 
 
+def _slide(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    scores: FloatArray,
+    support: FloatArray,
+    direction: FloatArray,
+    views: tuple[LaserScanData | None, LaserScanData | None],
+    config: IntegrateConfig,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Hypotheses slid along the direction their matched walls leave free, with their values
+    and net scores.
+
+    In a corridor every wall is parallel: no angle fixes the offset along it and end points
+    rarely do, so the true offset may be missing from the hypotheses. The best
+    ``slide_candidates`` candidates whose cross support is below ``slide_below_support`` are
+    tried at every ``slide_step`` within ``slide_range`` along that direction; free space
+    (what each scan saw down the corridor) tells the offsets apart. Refused ones are dropped.
+    """
+    top = np.argsort(-scores, kind="stable")[: config.slide_candidates]
+    top = top[support[top] < config.slide_below_support]
+    if top.size == 0 or config.slide_range <= 0.0:
+        return np.zeros((0, 3)), np.zeros(0), np.zeros(0)
+    offsets = np.arange(-config.slide_range, config.slide_range + 1e-9, config.slide_step)
+    offsets = offsets[np.abs(offsets) > 1e-9]
+    shifted = np.repeat(transforms[top], offsets.size, axis=0)
+    step = np.tile(offsets, top.size)
+    shifted[:, 1] += step * np.repeat(direction[top, 0], offsets.size)
+    shifted[:, 2] += step * np.repeat(direction[top, 1], offsets.size)
+    keep = ~refused(segments1, segments2, shifted, config)
+    shifted = shifted[keep]
+    values, net, _, _ = _net_scores(segments1, segments2, shifted, views, config)
+    return shifted, values, net
+
+
+def _net_scores(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    views: tuple[LaserScanData | None, LaserScanData | None],
+    config: IntegrateConfig,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Value, net score, cross support and least constrained direction of each transform.
+
+    The net score is the overlap (Alg. 4 l. 18) minus the length seen through in the other
+    scan's free space plus ``cross_support_weight`` x the cross support: in a corridor the
+    overlap of the long walls barely changes with the offset along them (standing still even
+    wins, the visible stretch of wall moving with the robot), and what tells the offsets
+    apart is the little that crosses the corridor (door jambs, its end).
+    """
+    scores = score_pairs(segments1, segments2, transforms, config)
+    count = len(transforms)
+    values = transform_values(scores, count)
+    support, direction = _information(segments1, scores, count)
+    through, confirmed = _seen_through_many(segments1, segments2, transforms, views, config)
+    net = (
+        values
+        - config.free_space_weight * through
+        + config.confirmed_weight * confirmed
+        + config.cross_support_weight * support
+    )
+    return values, net, support, direction
+
+
+def _information(
+    segments1: FloatArray, scores: PairScores, count: int
+) -> tuple[FloatArray, FloatArray]:
+    """Per hypothesis: smallest eigenvalue of sum(value n n^T) and its eigenvector (the
+    direction matched walls constrain least, along a corridor)."""
+    if scores.first.size == 0:
+        return np.zeros(count), np.tile([1.0, 0.0], (count, 1))
+    u = lines_of(segments1).direction[scores.first]
+    nx, ny, w, h = -u[:, 1], u[:, 0], scores.value, scores.hypothesis
+    sxx = np.bincount(h, weights=w * nx * nx, minlength=count)
+    sxy = np.bincount(h, weights=w * nx * ny, minlength=count)
+    syy = np.bincount(h, weights=w * ny * ny, minlength=count)
+    half_trace = 0.5 * (sxx + syy)
+    radius = np.hypot(0.5 * (sxx - syy), sxy)
+    major = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)  # the dominant normal
+    direction = np.column_stack((-np.sin(major), np.cos(major)))
+    return np.asarray(np.maximum(half_trace - radius, 0.0), dtype=np.float64), direction
+
+
+def _distinct_candidates(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    values: FloatArray,
+    config: IntegrateConfig,
+    limit: int | None = None,
+) -> IntArray:
+    """Indices of the best ``limit`` (``refine_candidates``) hypotheses, near-duplicates
+    suppressed.
+
+    Hypotheses are taken best first (Alg. 4 l. 20-23); one within ``candidate_separation``
+    (and ``candidate_angle_separation``) of a hypothesis already taken is the same answer
+    and is skipped; a refused one (long walls crossing, Alg. 4 l. 6-7) is skipped too.
+    """
+    order = np.argsort(-values, kind="stable")
+    order = order[values[order] > 0.0][: config.candidate_pool]
+    if order.size == 0:
+        return order
+    order = order[~refused(segments1, segments2, transforms[order], config)]
+    pool = transforms[order]
+    free = np.ones(len(order), dtype=bool)
+    taken: list[int] = []
+    limit = config.refine_candidates if limit is None else limit
+    while len(taken) < limit and free.any():
+        k = int(np.argmax(free))  # best remaining, the pool being sorted
+        taken.append(int(order[k]))
+        turn = np.abs(se2.wrap_angle(pool[:, 0] - pool[k, 0]))
+        shift = np.hypot(pool[:, 1] - pool[k, 1], pool[:, 2] - pool[k, 2])
+        free &= (turn > config.candidate_angle_separation) | (shift > config.candidate_separation)
+    return np.asarray(taken, dtype=np.int64)
+
+
 def cross_support(
     segments1: FloatArray, segments2: FloatArray, T_1_2: FloatArray, config: IntegrateConfig
 ) -> float:
     """Matched length in the least constrained direction: the smallest eigenvalue of the sum
     of matching value x n n^T over matched pairs (n the S1 line's normal). Zero when every
     matched wall is parallel, so the offset along them rests on where walls happen to end."""
-    scores = score_pairs(segments1, segments2, T_1_2[None, :], config)
+    T = np.asarray(T_1_2, dtype=np.float64).reshape(1, 3)
+    return float(_cross_support_many(segments1, segments2, T, config)[0])
+
+
+def _cross_support_many(
+    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+) -> FloatArray:
+    """:func:`cross_support` of each transform (closed-form 2x2 eigenvalue, no loop)."""
+    scores = score_pairs(segments1, segments2, transforms, config)
+    count = len(transforms)
     if scores.first.size == 0:
-        return 0.0
+        return np.zeros(count)
     u = lines_of(segments1).direction[scores.first]
-    nx, ny, w = -u[:, 1], u[:, 0], scores.value
-    info = np.array(
-        [[np.sum(w * nx * nx), np.sum(w * nx * ny)], [np.sum(w * nx * ny), np.sum(w * ny * ny)]]
+    nx, ny, w, h = -u[:, 1], u[:, 0], scores.value, scores.hypothesis
+    sxx = np.bincount(h, weights=w * nx * nx, minlength=count)
+    sxy = np.bincount(h, weights=w * nx * ny, minlength=count)
+    syy = np.bincount(h, weights=w * ny * ny, minlength=count)
+    half_trace = 0.5 * (sxx + syy)
+    radius = np.hypot(0.5 * (sxx - syy), sxy)
+    return np.asarray(np.maximum(half_trace - radius, 0.0), dtype=np.float64)
+
+
+def _longest(segments: FloatArray, count: int) -> IntArray:
+    """Indices of the ``count`` longest segments."""
+    length = lines_of(segments).length
+    return np.argsort(-length, kind="stable")[:count].astype(np.int64)
+
+
+def _prescreen_values(
+    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+) -> FloatArray:
+    """A cheap lower-fidelity value of every hypothesis, for ranking only.
+
+    Alg. 4's matching value with half the arithmetic: the S2 segment's end points' distance
+    to the S1 line (not the symmetric distance), the overlap along the S1 line only, and no
+    crossing test; directions must agree within ``prescreen_match_angle``.
+    """
+    count = len(transforms)
+    if count == 0 or len(segments1) == 0 or len(segments2) == 0:
+        return np.zeros(count)
+    lines1, lines2 = lines_of(segments1), lines_of(segments2)
+    h, a, b = _candidate_triples(
+        lines1, lines2, transforms[:, 0], np.arange(len(segments2)), config.prescreen_match_angle
     )
-    return float(np.linalg.eigvalsh(info)[0])
+    if h.size == 0:
+        return np.zeros(count)
+    cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
+    c, s = cos_h[h], sin_h[h]
+    tx, ty = transforms[h, 1], transforms[h, 2]
+    q1x = c * segments2[b, 0] - s * segments2[b, 1] + tx
+    q1y = s * segments2[b, 0] + c * segments2[b, 1] + ty
+    q2x = c * segments2[b, 2] - s * segments2[b, 3] + tx
+    q2y = s * segments2[b, 2] + c * segments2[b, 3] + ty
+    ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
+    ca = lines1.normal_offset[a]
+    d = np.maximum(np.abs(-uy * q1x + ux * q1y - ca), np.abs(-uy * q2x + ux * q2y - ca))
+    near = np.flatnonzero(d <= config.match_distance)
+    h, a, d = h[near], a[near], d[near]
+    ux, uy = ux[near], uy[near]
+    sa1 = ux * segments1[a, 0] + uy * segments1[a, 1]
+    sq1 = ux * q1x[near] + uy * q1y[near]
+    sq2 = ux * q2x[near] + uy * q2y[near]
+    overlap = np.clip(
+        np.minimum(sa1 + lines1.length[a], np.maximum(sq1, sq2))
+        - np.maximum(sa1, np.minimum(sq1, sq2)),
+        0.0,
+        None,
+    )
+    value = overlap * 0.95 ** (d / config.point_distance_tolerance)
+    return np.bincount(h, weights=value, minlength=count).astype(np.float64)
 
 
 def _pruned_values(
@@ -720,94 +1052,120 @@ def _pruned_values(
     segments2: FloatArray,
     transforms: FloatArray,
     config: IntegrateConfig,
-    total2: float,
+    forced: int = 0,
 ) -> tuple[FloatArray, int]:
-    """Values of all hypotheses, skipping the ones that cannot beat the best (Amigoni III-B).
+    """Values of the hypotheses worth a full evaluation, 0 for the others (Amigoni III-B).
 
-    The long S2 segments are scored first for every hypothesis; a hypothesis whose partial
-    value plus the length of the S2 segments not yet scored stays below the best partial
-    value cannot become the best, so only the others are scored on the short segments.
+    Long segments carry most of a good transformation's value, and the work of Alg. 4 grows
+    with hypotheses x segments x segments. When there are more than ``candidate_pool``
+    hypotheses, each is first valued roughly (:func:`_prescreen_values`) on the longest
+    segments of both sets: half of ``prescreen_segments`` for a rough cut to
+    10 x ``candidate_pool``, then ``prescreen_segments``; the ``candidate_pool`` best are
+    evaluated in full (Alg. 4 l. 5-19), and so are the first ``forced`` hypotheses.
     """
-    length2 = lines_of(segments2).length
-    by_length = np.argsort(-length2, kind="stable")
-    covered = np.cumsum(length2[by_length])
-    head = max(1, int(np.searchsorted(covered, 0.6 * total2)) + 1)
-    first, rest = by_length[:head], by_length[head:]
-    values = transform_values(
-        score_pairs(segments1, segments2, transforms, config, first), len(transforms)
+    count = len(transforms)
+    pool = np.arange(forced, count)
+    for segments_used, keep in (
+        (max(1, config.prescreen_segments // 2), _ROUGH_CUT * config.candidate_pool),
+        (config.prescreen_segments, config.candidate_pool),
+    ):
+        if pool.size <= keep:
+            continue
+        long1 = _longest(segments1, segments_used)
+        long2 = _longest(segments2, segments_used)
+        partial = _prescreen_values(segments1[long1], segments2[long2], transforms[pool], config)
+        pool = pool[np.argpartition(-partial, keep - 1)[:keep]]
+    pool = np.concatenate((np.arange(forced), pool))
+    values = np.zeros(count)
+    values[pool] = transform_values(
+        score_pairs(segments1, segments2, transforms[pool], config), pool.size
     )
-    if rest.size == 0:
-        return values, len(transforms)
-    bound = values + float(length2[rest].sum())
-    alive = np.flatnonzero(bound >= values.max())
-    tail = score_pairs(segments1, segments2, transforms[alive], config, rest)
-    values[alive] += transform_values(tail, len(alive))
-    values[np.setdiff1d(np.arange(len(transforms)), alive)] = 0.0
-    return values, len(alive)
+    return values, int(pool.size)
 
 
 def refine(
     segments1: FloatArray, segments2: FloatArray, T_1_2: FloatArray, config: IntegrateConfig
 ) -> FloatArray:
-    """Point-to-line least squares (Cox; Wolter 5.1) from ``T_1_2``, iterated to convergence.
+    """Point-to-line least squares (Cox; Wolter 5.1) from ``T_1_2``; see :func:`refine_many`."""
+    T = np.asarray(T_1_2, dtype=np.float64).reshape(1, 3)
+    return np.asarray(refine_many(segments1, segments2, T, config)[0], dtype=np.float64)
 
-    Points sampled along S2 (every 5 cm) are pulled onto the lines of the S1 segments they
-    match under the current estimate (matching pairs of Alg. 4, nearest line per point, points
-    projecting onto that segment only); a Gauss-Newton step solves the 3x3 normal equations.
+
+def refine_many(
+    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+) -> FloatArray:
+    """Point-to-line least squares (Cox; Wolter 5.1) of several hypotheses at once.
+
+    Each iteration pairs the segments that match under the current estimate (the matching
+    pairs of Alg. 4 l. 5-19) and pulls the part of each S2 segment that projects onto its S1
+    segment onto that segment's line. The squared point-to-line residual and its Jacobian are
+    linear along a segment, so two Gauss points per pair integrate the normal equations
+    exactly (before weighting); a Cauchy weight (scale ``point_distance_tolerance``) lets the
+    nearer of two parallel candidate lines win. A damped Gauss-Newton step solves each 3x3
+    system, so the offset along a bare corridor (not observable) stays where it was.
+    ``refine_iterations`` 0 returns the hypotheses unchanged.
     """
-    points, owner = sample_segments(segments2, 0.05)
-    lines1 = lines_of(segments1)
-    T = np.asarray(T_1_2, dtype=np.float64).copy()
+    T = np.array(transforms, dtype=np.float64).reshape(-1, 3)
+    count = len(T)
+    if count == 0 or len(segments1) == 0 or len(segments2) == 0 or config.refine_iterations == 0:
+        return T
+    lines1, lines2 = lines_of(segments1), lines_of(segments2)
+    gauss = np.array([0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0)])
+    active = np.ones(count, dtype=bool)
     for _ in range(config.refine_iterations):
-        scores = score_pairs(segments1, segments2, T[None, :], config)
+        live = np.flatnonzero(active)
+        if live.size == 0:
+            break
+        scores = score_pairs(segments1, segments2, T[live], config)
         if scores.first.size == 0:
             break
-        # Every sampled point of each matched S2 segment, paired with each S1 segment it matched.
-        pair_a, pair_b = scores.first, scores.second
-        take = np.isin(owner, pair_b)
-        idx = np.flatnonzero(take)
-        # Expand (point, pair) for pairs sharing the point's segment.
-        order = np.argsort(pair_b, kind="stable")
-        pb_sorted = pair_b[order]
-        lo = np.searchsorted(pb_sorted, owner[idx], side="left")
-        hi = np.searchsorted(pb_sorted, owner[idx], side="right")
-        count = hi - lo
-        point = np.repeat(idx, count)
-        pos = (
-            np.repeat(lo, count)
-            + np.arange(point.size)
-            - np.repeat(np.cumsum(count) - count, count)
-        )
-        a = pair_a[order[pos]]
-        c, s = np.cos(T[0]), np.sin(T[0])
-        px, py = points[point, 0], points[point, 1]
-        qx, qy = c * px - s * py + T[1], s * px + c * py + T[2]
+        h, a, b = scores.hypothesis, scores.first, scores.second
+        c, s = np.cos(T[live[h], 0]), np.sin(T[live[h], 0])
+        tx, ty = T[live[h], 1], T[live[h], 2]
         ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
-        residual = -uy * qx + ux * qy - lines1.normal_offset[a]
-        along = ux * (qx - segments1[a, 0]) + uy * (qy - segments1[a, 1])
-        inside = (along >= -0.1) & (along <= lines1.length[a] + 0.1)
-        near = inside & (np.abs(residual) <= config.match_distance)
-        if not near.any():
-            break
-        point, a, residual, px, py = point[near], a[near], residual[near], px[near], py[near]
-        ux, uy = ux[near], uy[near]
-        # Nearest matched line per point.
-        pick = np.lexsort((np.abs(residual), point))
-        first_of = np.concatenate(([True], point[pick][1:] != point[pick][:-1]))
-        sel = pick[first_of]
-        r, nx, ny = residual[sel], -uy[sel], ux[sel]
+        # Where S2's end points fall along S1's line: the part of s2 over s1.
+        p1, p2 = segments2[b, :2], segments2[b, 2:]
+        t1 = ux * (c * p1[:, 0] - s * p1[:, 1] + tx - segments1[a, 0]) + uy * (
+            s * p1[:, 0] + c * p1[:, 1] + ty - segments1[a, 1]
+        )
+        t2 = ux * (c * p2[:, 0] - s * p2[:, 1] + tx - segments1[a, 0]) + uy * (
+            s * p2[:, 0] + c * p2[:, 1] + ty - segments1[a, 1]
+        )
+        span = np.where(np.abs(t2 - t1) > 1e-9, t2 - t1, 1e-9)
+        lo = np.clip(np.minimum(-t1 / span, (lines1.length[a] - t1) / span), 0.0, 1.0)
+        hi = np.clip(np.maximum(-t1 / span, (lines1.length[a] - t1) / span), 0.0, 1.0)
+        weight = 0.5 * (hi - lo) * lines2.length[b]
+        # Two Gauss points per pair on the overlapping part of s2 (in S2's frame).
+        lam = lo[:, None] + (hi - lo)[:, None] * gauss[None, :]
+        px = (p1[:, 0, None] + lam * (p2[:, 0] - p1[:, 0])[:, None]).ravel()
+        py = (p1[:, 1, None] + lam * (p2[:, 1] - p1[:, 1])[:, None]).ravel()
+        hh = np.repeat(h, 2)
+        aa = np.repeat(a, 2)
+        cc, ss = np.repeat(c, 2), np.repeat(s, 2)
+        qx = cc * px - ss * py + np.repeat(tx, 2)
+        qy = ss * px + cc * py + np.repeat(ty, 2)
+        nx, ny = -lines1.direction[aa, 1], lines1.direction[aa, 0]
+        r = nx * qx + ny * qy - lines1.normal_offset[aa]
+        w = np.repeat(weight, 2) / (1.0 + (r / config.point_distance_tolerance) ** 2)
         # d q / d theta = (-(s px + c py), c px - s py)
-        dqx = -(s * px[sel] + c * py[sel])
-        dqy = c * px[sel] - s * py[sel]
-        J = np.column_stack((nx * dqx + ny * dqy, nx, ny))
-        H = J.T @ J
-        if np.linalg.cond(H) > 1e8:
-            break  # all matched lines parallel: the step along them is not observable
-        step = -np.linalg.solve(H, J.T @ r)
-        T += step
-        if abs(step[0]) < 1e-5 and np.hypot(step[1], step[2]) < 1e-4:
-            break
-    T[0] = float(se2.wrap_angle(T[0]))
+        j0 = nx * -(ss * px + cc * py) + ny * (cc * px - ss * py)
+        J = (j0, nx, ny)
+        H = np.empty((live.size, 3, 3))
+        g = np.empty((live.size, 3))
+        for i in range(3):
+            g[:, i] = np.bincount(hh, weights=w * J[i] * r, minlength=live.size)
+            for j in range(i, 3):
+                H[:, i, j] = H[:, j, i] = np.bincount(
+                    hh, weights=w * J[i] * J[j], minlength=live.size
+                )
+        # Levenberg damping: a direction no matched line constrains gets no step.
+        damping = 1e-6 + 1e-4 * np.trace(H, axis1=1, axis2=2)
+        H += damping[:, None, None] * np.eye(3)[None, :, :]
+        step = -np.linalg.solve(H, g[:, :, None])[:, :, 0]
+        T[live] += step
+        small = (np.abs(step[:, 0]) < 1e-5) & (np.hypot(step[:, 1], step[:, 2]) < 1e-4)
+        active[live[small]] = False
+    T[:, 0] = se2.wrap_angle(T[:, 0])
     return T
 
 
@@ -825,44 +1183,111 @@ def sample_segments(segments: FloatArray, spacing: float) -> tuple[FloatArray, I
 # --- Free-space consistency --------------------------------------------------------------------
 
 
-def seen_through(view: LaserScanData, points: FloatArray, margin: float) -> BoolArray:
+def seen_through(
+    view: LaserScanData, points: FloatArray, margin: float, spread: int = 0
+) -> BoolArray:
     """Points (in the view's laser frame) lying in free space that the view's beams crossed.
 
-    A point is seen through when the beam nearest its bearing returned from more than
-    ``margin`` beyond it; beams without a valid return say nothing.
+    A point is seen through when every beam within ``spread`` beams of its bearing returned
+    from more than ``margin`` beyond it: a wall seen at a grazing angle returns very different
+    ranges on neighbouring beams. Beams without a valid return say nothing.
     """
+    return _beam_evidence(view, points, margin, spread)[0]
+
+
+def _beam_evidence(
+    view: LaserScanData, points: FloatArray, margin: float, spread: int
+) -> tuple[BoolArray, BoolArray]:
+    """For points in the view's laser frame: seen through (:func:`seen_through`), and
+    confirmed, lying within ``margin`` of the return of the beam nearest their bearing."""
     ranges = np.asarray(view.ranges, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(ranges) & (ranges >= view.range_min) & (ranges < view.range_max)
+    # Invalid beams never contradict nor confirm; the shortest return around each beam is the
+    # free-space test.
+    returned = np.where(valid, ranges, np.inf)
+    nearest = np.where(valid, ranges, -np.inf)
+    if spread > 0:
+        padded = np.concatenate((np.full(spread, -np.inf), nearest, np.full(spread, -np.inf)))
+        window = np.lib.stride_tricks.sliding_window_view(padded, 2 * spread + 1).min(axis=1)
+        nearest = np.where(valid, window, -np.inf)
     bearing = np.arctan2(points[:, 1], points[:, 0])
     distance = np.hypot(points[:, 0], points[:, 1])
     beam = np.rint((bearing - view.angle_min) / view.angle_increment).astype(np.int64)
-    inside = (beam >= 0) & (beam < ranges.size)
-    measured = np.full(len(points), np.nan)
-    measured[inside] = ranges[beam[inside]]
-    with np.errstate(invalid="ignore"):
-        valid = np.isfinite(measured) & (measured >= view.range_min) & (measured < view.range_max)
-        return np.asarray(valid & (distance < measured - margin))
+    outside = (beam < 0) | (beam >= ranges.size)
+    beam[outside] = 0
+    free = np.where(outside, -np.inf, nearest[beam])
+    hit = np.where(outside, np.inf, returned[beam])
+    return np.asarray(distance < free - margin), np.asarray(np.abs(distance - hit) <= margin)
 
 
-def _seen_through(
+def _view_points(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArray]:
+    """A view's returns in its laser frame, each weighted by the surface it stands for (the
+    smaller gap to a neighbouring return, at most ``cap``); one return per degree at most."""
+    points = scan_points(view).points
+    points = points[:: max(1, round(np.radians(1.0) / abs(view.angle_increment)))]
+    if len(points) < 2:
+        return points, np.full(len(points), cap)
+    gap = np.hypot(*np.diff(points, axis=0).T)
+    gap = np.minimum(np.concatenate((gap, gap[-1:])), np.concatenate((gap[:1], gap)))
+    return points, np.minimum(gap, cap)
+
+
+def _segment_points(segments: FloatArray, config: IntegrateConfig) -> tuple[FloatArray, FloatArray]:
+    """Points every 5 cm along the segments of at least ``free_space_min_length``."""
+    spacing = 0.05
+    if len(segments) == 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    long = segments[lines_of(segments).length >= config.free_space_min_length]
+    if len(long) == 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    points, _ = sample_segments(long, spacing)
+    return points, np.full(len(points), spacing)
+
+
+def _seen_through_many(
     segments1: FloatArray,
     segments2: FloatArray,
-    T_1_2: FloatArray,
+    transforms: FloatArray,
     views: tuple[LaserScanData | None, LaserScanData | None],
     config: IntegrateConfig,
-) -> float:
-    """Weighted length of each set lying in the other's observed free space under ``T_1_2``."""
+) -> tuple[FloatArray, FloatArray]:
+    """Per transform: the length of each scan lying in the other's observed free space, and
+    the length the other's beams confirm (ending within ``free_space_margin`` of it).
+
+    With both views the tested points are the views' own returns (a corridor's far end is a
+    few sparse returns, too few for a segment, and it is what fixes the offset along the
+    corridor); with one view, points along the other set's long segments (short ones are
+    mostly people, who move between scans).
+    """
     view1, view2 = views
-    if view1 is None and view2 is None:
-        return 0.0
-    spacing = 0.05
-    T = se2.matrix_from_pose(float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0]))
-    count = 0
-    if view1 is not None and len(segments2):
-        points2, _ = sample_segments(segments2, spacing)
-        moved = se2.transform_points(T, points2)
-        count += int(np.count_nonzero(seen_through(view1, moved, config.free_space_margin)))
-    if view2 is not None and len(segments1):
-        points1, _ = sample_segments(segments1, spacing)
-        moved = se2.transform_points(se2.invert(T), points1)
-        count += int(np.count_nonzero(seen_through(view2, moved, config.free_space_margin)))
-    return config.free_space_weight * spacing * count
+    through = np.zeros(len(transforms))
+    confirmed = np.zeros(len(transforms))
+    if (view1 is None and view2 is None) or len(transforms) == 0:
+        return through, confirmed
+    cap = config.view_point_length
+    if view1 is not None and view2 is not None:
+        points2, weight2 = _view_points(view2, cap)
+        points1, weight1 = _view_points(view1, cap)
+    else:
+        points2, weight2 = _segment_points(segments2, config)
+        points1, weight1 = _segment_points(segments1, config)
+    c, s = np.cos(transforms[:, 0])[:, None], np.sin(transforms[:, 0])[:, None]
+    tx, ty = transforms[:, 1, None], transforms[:, 2, None]
+    margin, spread = config.free_space_margin, config.free_space_spread
+    shape = (len(transforms), -1)
+    if view1 is not None and len(points2):
+        # S2 points in S1's frame: q = R p + t, for every transform.
+        qx = c * points2[None, :, 0] - s * points2[None, :, 1] + tx
+        qy = s * points2[None, :, 0] + c * points2[None, :, 1] + ty
+        hit, seen = _beam_evidence(view1, np.column_stack((qx.ravel(), qy.ravel())), margin, spread)
+        through += hit.reshape(shape) @ weight2
+        confirmed += seen.reshape(shape) @ weight2
+    if view2 is not None and len(points1):
+        # S1 points in S2's frame: p = R^T (q - t).
+        dx, dy = points1[None, :, 0] - tx, points1[None, :, 1] - ty
+        px, py = c * dx + s * dy, -s * dx + c * dy
+        hit, seen = _beam_evidence(view2, np.column_stack((px.ravel(), py.ravel())), margin, spread)
+        through += hit.reshape(shape) @ weight1
+        confirmed += seen.reshape(shape) @ weight1
+    return through, confirmed

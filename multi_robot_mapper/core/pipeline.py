@@ -5,8 +5,11 @@ front end (scan -> segments), then a placement method. Methods:
 
 - ``reference``: each scan placed at its reference (ground-truth) pose. A labelled tool for
   checking the evaluator and the pictures, never a mapping result.
-- ``pivot`` and ``ffs``: odometry-free local mapping and merging (their own issues); until they
-  exist they raise :class:`MethodNotImplementedError` rather than return anything.
+- ``local``: odometry-free local mapping only (:class:`LocalMapper`, one per robot). Every
+  robot's trajectory and partial map are in its own map frame and every robot frame is
+  reported ``"unmerged"``: no placement between robots is claimed.
+- ``pivot`` and ``ffs``: local mapping and merging (their own issues); until they exist they
+  raise :class:`MethodNotImplementedError` rather than return anything.
 """
 
 from __future__ import annotations
@@ -20,14 +23,15 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.local_mapping import LocalMapper, LocalMapperConfig
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 Pose = tuple[float, float, float]
 
-METHODS = ("reference", "pivot", "ffs")
-IMPLEMENTED_METHODS = ("reference",)
+METHODS = ("reference", "local", "pivot", "ffs")
+IMPLEMENTED_METHODS = ("reference", "local")
 
 
 class MethodNotImplementedError(NotImplementedError):
@@ -74,9 +78,12 @@ def run_offline(
     method: str,
     extraction: ExtractionConfig,
     progress: Progress | None = None,
+    local_mapping: LocalMapperConfig | None = None,
 ) -> OfflineMap:
     """Run the front end on every scan of every robot, then place them with ``method``."""
     require_method(method)
+    if method == "local":
+        return _run_local(recordings, extraction, local_mapping or LocalMapperConfig(), progress)
     robots = sorted(recordings)
     total = sum(len(recordings[r]) for r in robots)
     done = 0
@@ -127,3 +134,88 @@ def run_offline(
     # With reference poses every robot frame is the reference world frame.
     frames: dict[str, Pose | None] = {r: (0.0, 0.0, 0.0) for r in robots}
     return OfflineMap(robots, map_segments, segment_robot, trajectories, frames, stats)
+
+
+def _run_local(
+    recordings: Mapping[str, Sequence[TimedLaserScan]],
+    extraction: ExtractionConfig,
+    config: LocalMapperConfig,
+    progress: Progress | None,
+) -> OfflineMap:
+    """One :class:`LocalMapper` per robot, exactly as ``robot_mapper`` runs it."""
+    robots = sorted(recordings)
+    total = sum(len(recordings[r]) for r in robots)
+    done = 0
+    started = time.perf_counter()
+    front_end_s = mapping_s = 0.0
+    rejected: dict[str, int] = {}
+    segment_sets: list[FloatArray] = []
+    owners: list[IntArray] = []
+    trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
+    per_robot: dict[str, dict[str, object]] = {}
+    scan_times: list[float] = []
+    for index, robot in enumerate(robots):
+        mapper = LocalMapper(config)
+        stamps: list[float] = []
+        poses: list[Pose] = []
+        for item in recordings[robot]:
+            done += 1
+            if progress is not None:
+                progress(robot, done, total)
+            t0 = time.perf_counter()
+            try:
+                segments, _ = extract_scan(item.scan, extraction)
+            except ScanError as exc:
+                rejected[exc.kind] = rejected.get(exc.kind, 0) + 1
+                continue
+            finally:
+                front_end_s += time.perf_counter() - t0
+            t1 = time.perf_counter()
+            update = mapper.add_scan(item.stamp, segments, item.scan)
+            elapsed = time.perf_counter() - t1
+            mapping_s += elapsed
+            scan_times.append(elapsed)
+            if update.restarted:  # the scans placed before are no longer in this map
+                stamps.clear()
+                poses.clear()
+            if update.pose is not None:
+                stamps.append(item.stamp)
+                poses.append(update.pose)
+        map_segments = mapper.map_segments
+        segment_sets.append(map_segments)
+        owners.append(np.full(len(map_segments), index, dtype=np.int64))
+        trajectories[robot] = (
+            np.asarray(stamps, dtype=np.float64),
+            np.asarray(poses, dtype=np.float64).reshape(-1, 3),
+        )
+        per_robot[robot] = {
+            "scans_accepted": mapper.scans_accepted,
+            "scans_set_aside": mapper.scans_set_aside,
+            "scans_tracked": mapper.scans_tracked,
+            "set_aside_reasons": dict(mapper.set_aside_reasons),
+            "keyframes": len(mapper.keyframes()),
+            "map_segments": len(map_segments),
+        }
+    times = np.asarray(scan_times) if scan_times else np.zeros(1)
+    stats: dict[str, object] = {
+        "method": "local",
+        "scans_total": total,
+        "scans_posed": sum(len(t[0]) for t in trajectories.values()),
+        "scans_rejected": rejected,
+        "segments": int(sum(len(s) for s in segment_sets)),
+        "front_end_s": round(front_end_s, 4),
+        "local_mapping_s": round(mapping_s, 4),
+        "local_mapping_median_ms": round(float(np.median(times)) * 1e3, 3),
+        "local_mapping_p95_ms": round(float(np.percentile(times, 95)) * 1e3, 3),
+        "robots": per_robot,
+        "total_s": round(time.perf_counter() - started, 4),
+    }
+    frames: dict[str, Pose | None] = {r: None for r in robots}  # never claimed: "unmerged"
+    return OfflineMap(
+        robots,
+        np.vstack(segment_sets) if segment_sets else np.zeros((0, 4)),
+        np.concatenate(owners) if owners else np.zeros(0, dtype=np.int64),
+        trajectories,
+        frames,
+        stats,
+    )

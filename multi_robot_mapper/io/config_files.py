@@ -66,3 +66,48 @@ def load_config(
         name, value = parse_override(text)
         flat[name] = value
     return config_from_flat(cls, flat)
+
+
+PARAMS_FILE_HEADER = (
+    "# robot_mapper parameters (ROS 2 params-file layout; also read by `mrm --config`).\n"
+    "# Units are SI. Generated from the dataclass defaults in multi_robot_mapper/core by\n"
+    "# `make config` (a test keeps them equal). Use: ros2 run multi_robot_mapper robot_mapper\n"
+    "#   --ros-args -r __ns:=/robot1 --params-file config/robot_mapper.yaml\n"
+)
+
+
+def default_params_file(config_class: type) -> str:
+    """A ROS 2 params file holding every parameter of ``config_class`` at its default, each
+    with its unit and meaning as a comment (``config/robot_mapper.yaml`` is this text)."""
+    from multi_robot_mapper.core.config import field_specs
+
+    def scalar(value: Any) -> str:
+        if isinstance(value, bool):
+            return "true" if value else "false"
+        if isinstance(value, str):
+            return yaml.safe_dump(value, default_style='"').strip()
+        return repr(value)
+
+    rows: list[tuple[str, str | None]] = []
+    opened: set[str] = set()
+    for spec in field_specs(config_class):
+        parts = spec.name.split(".")
+        for depth in range(len(parts) - 1):
+            section = ".".join(parts[: depth + 1])
+            if section not in opened:
+                opened.add(section)
+                rows.append((f"{'    ' + '  ' * depth}{parts[depth]}:", None))
+        unit = f"{spec.unit}, " if spec.unit else ""
+        indent = "    " + "  " * (len(parts) - 1)
+        rows.append((f"{indent}{parts[-1]}: {scalar(spec.default)}", f"# {unit}{spec.doc}"))
+    width = max(len(text) for text, comment in rows if comment is not None) + 1
+    body = [text if comment is None else f"{text.ljust(width)}{comment}" for text, comment in rows]
+    return PARAMS_FILE_HEADER + "/**:\n  ros__parameters:\n" + "\n".join(body) + "\n"
+
+
+if __name__ == "__main__":  # `make config`: rewrite config/robot_mapper.yaml from the defaults
+    import sys
+
+    from multi_robot_mapper.core.mapper_config import RobotMapperConfig
+
+    Path(sys.argv[1]).write_text(default_params_file(RobotMapperConfig), encoding="utf-8")

@@ -6,12 +6,18 @@ from collections.abc import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import ColorRGBA, Header
-from visualization_msgs.msg import Marker
+from visualization_msgs.msg import Marker, MarkerArray
 
-from multi_robot_mapper.core.geometry import split_stamp, stamp_seconds
+from multi_robot_mapper.core.geometry import (
+    quaternion_from_yaw,
+    split_stamp,
+    stamp_seconds,
+    yaw_from_quaternion,
+)
+from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = np.typing.NDArray[np.float64]
@@ -90,3 +96,92 @@ def segments_from_marker(marker: Marker) -> FloatArray:
     """The ``(N, 4)`` segments of a LINE_LIST marker (inverse of :func:`segments_marker`)."""
     ends = np.array([(p.x, p.y) for p in marker.points], dtype=np.float64).reshape(-1, 4)
     return ends
+
+
+PARTIAL_MAP_NAMESPACE = "partial_map"
+PARTIAL_MAP_COLOR = (0.95, 0.45, 0.1, 1.0)
+
+
+def pose_msg(pose: Sequence[float]) -> Pose:
+    """A geometry_msgs/Pose from a planar pose ``(x, y, theta)`` (z = 0, rotation about z)."""
+    x, y, theta = (float(v) for v in pose)
+    qx, qy, qz, qw = (float(q) for q in quaternion_from_yaw(theta))
+    msg = Pose()
+    msg.position = Point(x=x, y=y, z=0.0)
+    msg.orientation = Quaternion(x=qx, y=qy, z=qz, w=qw)
+    return msg
+
+
+def pose_from_msg(msg: Pose) -> FloatArray:
+    """The planar pose ``(x, y, theta)`` of a geometry_msgs/Pose (inverse of :func:`pose_msg`)."""
+    q = msg.orientation
+    theta = float(yaw_from_quaternion(q.x, q.y, q.z, q.w))
+    return np.array([msg.position.x, msg.position.y, theta], dtype=np.float64)
+
+
+def pose_stamped(pose: Sequence[float], stamp: Time, frame_id: str) -> PoseStamped:
+    """A PoseStamped of the planar pose ``(x, y, theta)`` in ``frame_id``."""
+    msg = PoseStamped()
+    msg.header = Header(frame_id=frame_id, stamp=stamp)
+    msg.pose = pose_msg(pose)
+    return msg
+
+
+def keyframe_marker(keyframe: Keyframe, header: Header, width: float) -> Marker:
+    """One keyframe as a LINE_LIST marker: ``id`` = keyframe index, ``pose`` = the keyframe's
+    pose in the map frame, points = its segments in its own frame (two per segment).
+
+    The keyframe's own stamp rides in ``text`` (``repr`` of the seconds, exact; RViz and
+    Foxglove ignore ``text`` on line lists) because ``header.stamp`` is the map's stamp.
+    """
+    marker = segments_marker(
+        keyframe.segments,
+        header,
+        namespace=PARTIAL_MAP_NAMESPACE,
+        width=width,
+        color=PARTIAL_MAP_COLOR,
+        marker_id=int(keyframe.index),
+    )
+    marker.pose = pose_msg(keyframe.T_robotmap_keyframe)
+    marker.text = repr(float(keyframe.stamp))
+    return marker
+
+
+def partial_map_markers(
+    keyframes: Sequence[Keyframe], header_stamp: Time, frame_id: str, width: float
+) -> MarkerArray:
+    """The whole partial map as a MarkerArray: one :func:`keyframe_marker` per keyframe, each
+    stamped ``header_stamp`` (the newest scan integrated) in the map frame ``frame_id``."""
+    array = MarkerArray()
+    array.markers = [
+        keyframe_marker(kf, Header(frame_id=frame_id, stamp=header_stamp), width)
+        for kf in keyframes
+    ]
+    return array
+
+
+def keyframe_from_marker(marker: Marker) -> Keyframe:
+    """The keyframe a :func:`keyframe_marker` carries (the stamp from ``text``, else the header)."""
+    try:
+        stamp = float(marker.text)
+    except ValueError:
+        stamp = seconds_from_stamp(marker.header.stamp)
+    return Keyframe(
+        index=int(marker.id),
+        stamp=stamp,
+        T_robotmap_keyframe=pose_from_msg(marker.pose),
+        segments=segments_from_marker(marker),
+    )
+
+
+def keyframes_from_markers(array: MarkerArray) -> list[Keyframe]:
+    """The keyframes of a ``partial_map`` MarkerArray (inverse of :func:`partial_map_markers`).
+
+    Only ``ADD`` line lists of the ``partial_map`` namespace count; sorted by keyframe index.
+    """
+    keyframes = [
+        keyframe_from_marker(m)
+        for m in array.markers
+        if m.ns == PARTIAL_MAP_NAMESPACE and m.type == Marker.LINE_LIST and m.action == Marker.ADD
+    ]
+    return sorted(keyframes, key=lambda kf: kf.index)

@@ -1,9 +1,16 @@
-"""``robot_mapper``: one robot's laser scans in, line segments out.
+"""``robot_mapper``: one robot's laser scans in; line segments, its pose and its partial map out.
 
-Topics (relative, so ``-r __ns:=/robot1`` gives ``/robot1/scan`` -> ``/robot1/scan_segments``):
+Topics (relative, so ``-r __ns:=/robot1`` gives ``/robot1/scan`` -> ``/robot1/partial_map``):
   sub ``scan``           sensor_msgs/LaserScan, sensor-data QoS (best effort)
   pub ``scan_segments``  visualization_msgs/Marker LINE_LIST in the scan's frame, stamped with
                          the scan's stamp
+  pub ``pose``           geometry_msgs/PoseStamped, T_robotmap_laser of every accepted scan in
+                         the map frame, stamped with the scan's stamp (reliable, depth 10)
+  pub ``partial_map``    visualization_msgs/MarkerArray, one LINE_LIST per keyframe (id = index,
+                         pose = the keyframe in the map frame, points in the keyframe's frame),
+                         stamped with the newest keyframe's scan; the whole map every
+                         ``partial_map_period`` when it changed (reliable, transient local,
+                         depth 1: a late subscriber gets the map)
 Parameters: the fields of :class:`RobotMapperConfig` (``config/robot_mapper.yaml``).
 """
 
@@ -12,46 +19,105 @@ from __future__ import annotations
 import sys
 import traceback
 
+import numpy as np
 import rclpy
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import (
+    DurabilityPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
 from sensor_msgs.msg import LaserScan
-from visualization_msgs.msg import Marker
+from std_msgs.msg import Header
+from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core.config import ConfigError
 from multi_robot_mapper.core.extraction import extract_scan
+from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalUpdate
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import ScanError
-from multi_robot_mapper.io.messages import scan_from_msg, seconds_from_stamp, segments_marker
+from multi_robot_mapper.io.messages import (
+    keyframe_marker,
+    pose_stamped,
+    scan_from_msg,
+    seconds_from_stamp,
+    segments_marker,
+    stamp_from_seconds,
+)
 from multi_robot_mapper.ros.parameters import declare_config, on_config_change
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
 
+POSE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+PARTIAL_MAP_QOS = QoSProfile(
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+
+
+def default_map_frame(namespace: str) -> str:
+    """``/robot1`` -> ``robot1/map``; the root namespace -> ``map``."""
+    prefix = namespace.strip("/")
+    return f"{prefix}/map" if prefix else "map"
+
 
 class RobotMapper(Node):
-    """Per-robot mapper node (front end for now: scans to segments)."""
+    """Per-robot mapper node: front end (scans to segments) and local mapper (partial map)."""
 
     def __init__(self, node_name: str = "robot_mapper", **kwargs: object) -> None:
         super().__init__(node_name, **kwargs)  # type: ignore[arg-type]
         self.config = declare_config(self, RobotMapperConfig)
         self.warnings = ThrottledWarnings(self.get_logger().warning, self.config.warning_period)
-        on_config_change(self, RobotMapperConfig, self._apply_config)
         self.scans_received = 0
-        self.scans_rejected = 0
+        self.scans_rejected = 0  # dropped before mapping: bad scan or front-end error
+        self.mapping_errors = 0  # scans the local mapper failed on (map kept as it was)
+        self.partial_maps_published = 0
+        self.mapper = LocalMapper(self.config.local_mapping)
+        self.last_update: LocalUpdate | None = None
+        # Header stamps of the keyframes' scans, exact (a float second near 1e9 is not).
+        self._keyframe_stamps: dict[float, Time] = {}
+        self.published_version = 0  # mapper version last published (the empty map never is)
+        # Markers of unchanged keyframes are reused: building Points is the costly part.
+        self._marker_cache: dict[int, tuple[bytes, Marker]] = {}
         self._segments_pub = self.create_publisher(Marker, "scan_segments", 10)
+        self._pose_pub = self.create_publisher(PoseStamped, "pose", POSE_QOS)
+        self._map_pub = self.create_publisher(MarkerArray, "partial_map", PARTIAL_MAP_QOS)
         self._scan_sub = self.create_subscription(
             LaserScan, "scan", self._on_scan, qos_profile_sensor_data
         )
+        self._map_timer = self.create_timer(self.config.partial_map_period, self.publish_map)
+        on_config_change(self, RobotMapperConfig, self._apply_config)
+
+    @property
+    def map_frame(self) -> str:
+        """The frame of ``pose`` and ``partial_map``."""
+        return self.config.map_frame or default_map_frame(self.get_namespace())
 
     def _apply_config(self, config: RobotMapperConfig) -> None:
+        old = self.config
         self.config = config
         self.warnings.period = config.warning_period
+        self.mapper.config = config.local_mapping  # read at every scan; the map is kept
+        if config.partial_map_period != old.partial_map_period:
+            self.destroy_timer(self._map_timer)
+            self._map_timer = self.create_timer(config.partial_map_period, self.publish_map)
+        if (config.map_frame, config.segment_marker_width) != (
+            old.map_frame,
+            old.segment_marker_width,
+        ):
+            self._marker_cache.clear()
+            self.published_version = -1  # republish in the new frame / width
 
     def _on_scan(self, msg: LaserScan) -> None:
         self.scans_received += 1
         stamp = seconds_from_stamp(msg.header.stamp)
         try:
-            segments, valid = extract_scan(scan_from_msg(msg), self.config.extraction)
+            view = scan_from_msg(msg)
+            segments, valid = extract_scan(view, self.config.extraction)
         except ScanError as exc:
             self.scans_rejected += 1
             self.warnings.warn(
@@ -76,6 +142,80 @@ class RobotMapper(Node):
                 width=self.config.segment_marker_width,
             )
         )
+        saved = _snapshot(self.mapper)
+        try:
+            update = self.mapper.add_scan(stamp, segments, view)
+        except Exception:  # the map built so far stays; the next scan is tried as usual
+            _restore(self.mapper, saved)  # undo whatever the failed scan half-changed
+            self.mapping_errors += 1
+            self.last_update = None
+            self.warnings.warn(
+                "mapping_error",
+                f"scan (stamp {stamp:.3f}) not mapped after an internal error in the local "
+                f"mapper (the partial map is kept):\n{traceback.format_exc()}",
+            )
+            return
+        self.last_update = update
+        if update.keyframe_added:
+            self._keyframe_stamps[stamp] = msg.header.stamp
+        if update.accepted and update.pose is not None:
+            self._pose_pub.publish(pose_stamped(update.pose, msg.header.stamp, self.map_frame))
+
+    def publish_map(self) -> bool:
+        """Publish the whole partial map if it changed since the last publication."""
+        version = self.mapper.version
+        if version == self.published_version or version == 0:
+            return False
+        try:
+            keyframes = self.mapper.keyframes()
+            newest = max(kf.stamp for kf in keyframes)  # the newest scan in the map
+            stamp = self._keyframe_stamps.get(newest)
+            if stamp is None:
+                stamp = stamp_from_seconds(newest)
+            array = MarkerArray()
+            header = Header(frame_id=self.map_frame, stamp=stamp)
+            array.markers = [self._marker(kf, header) for kf in keyframes]
+        except Exception:
+            self.warnings.warn(
+                "partial_map_error",
+                f"partial map not published after an internal error:\n{traceback.format_exc()}",
+            )
+            return False
+        self._map_pub.publish(array)
+        self.published_version = version
+        self.partial_maps_published += 1
+        return True
+
+    def _marker(self, keyframe: Keyframe, header: Header) -> Marker:
+        """The keyframe's marker, reused (with the new header) when the keyframe is unchanged."""
+        key = (
+            np.float64(keyframe.stamp).tobytes()
+            + np.ascontiguousarray(keyframe.T_robotmap_keyframe, dtype=np.float64).tobytes()
+            + np.ascontiguousarray(keyframe.segments, dtype=np.float64).tobytes()
+        )
+        cached = self._marker_cache.get(keyframe.index)
+        if cached is not None and cached[0] == key:
+            marker = cached[1]
+            marker.header = header
+            return marker
+        marker = keyframe_marker(keyframe, header, self.config.segment_marker_width)
+        self._marker_cache[keyframe.index] = (key, marker)
+        return marker
+
+
+def _snapshot(obj: object) -> dict[str, object]:
+    """The attributes of ``obj``, containers and arrays copied one level deep (cheap: the
+    mapper holds a few arrays and lists; the fused map is a few thousand rows)."""
+    return {
+        name: value.copy() if isinstance(value, (list, dict, set, np.ndarray)) else value
+        for name, value in vars(obj).items()
+    }
+
+
+def _restore(obj: object, saved: dict[str, object]) -> None:
+    """Put back the attributes taken by :func:`_snapshot`."""
+    vars(obj).clear()
+    vars(obj).update(saved)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,0 +1,172 @@
+"""Two partial maps of about 100 segments each merged with no initial guess (issue 5).
+
+From a CARMEN log (intel by default): the first ``--scans`` scans, placed at their reference
+poses and fused (Amigoni Alg. 5) into two overlapping halves (scans ``[0, n/2 + o/2)`` and
+``[n/2 - o/2, n)``), each kept to its ``--segments`` longest segments and expressed in its
+own first scan's frame. ``merge`` recovers how the second robot's frame lies in the first's;
+the known answer is the reference poses' relative transform.
+
+    .venv/bin/python bench/merge_speed.py [--log intel] [--scans 160] [--overlap 40]
+        [--segments 100] [--repeats 7]
+
+Prints the median time per merge over the repeats (every repeat recomputes: no reuse), the
+split of that time (pairs/INTEGRATE, tree, fusion) and the error against the reference.
+Target: under 100 ms (the paper: 12.8 s for 108 x 103 segments on a 1 GHz Pentium III).
+
+    .venv/bin/python bench/merge_speed.py --split 2 4 8 [--logs intel aces fhw csail]
+
+instead cuts each whole log into K contiguous runs (each starting ``--overlap`` scans before
+its predecessor ends; every second scan), builds each run's partial map from its
+reference-placed scans (fused, untrimmed) in its own first scan's frame, merges the K maps in
+no particular order and prints robots merged, the worst placement error, the number of valid
+links that are wrong (> 0.3 m from the reference) and the merge time. The maps are reference
+maps, not local-mapping output: this measures merging alone.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from multi_robot_mapper.core import se2  # noqa: E402
+from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
+from multi_robot_mapper.core.fusion import fuse  # noqa: E402
+from multi_robot_mapper.core.matching import IntegrateConfig  # noqa: E402
+from multi_robot_mapper.core.merging import MergeConfig, longest, merge  # noqa: E402
+from multi_robot_mapper.io.carmen import CarmenScan, carmen_scan_data, read_carmen  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
+
+
+def partial_map(scans: list[CarmenScan], segments: int) -> tuple[np.ndarray, np.ndarray]:
+    """Reference-placed, fused, trimmed; returns (T_world_robot, map in the robot's frame)."""
+    world = np.zeros((0, 4))
+    owner = np.zeros(0, dtype=np.int64)
+    config = IntegrateConfig()
+    for scan in scans:
+        found = extract_scan(carmen_scan_data(scan), ExtractionConfig())[0].segments
+        placed = se2.transform_segments(se2.matrix_from_pose(*scan.reference_pose), found)
+        world, owner = fuse(world, owner, placed, np.zeros(len(placed), np.int64), config, 0.02)
+    T_world_robot = se2.matrix_from_pose(*scans[0].reference_pose)
+    own = se2.transform_segments(se2.invert(T_world_robot), longest(world, segments))
+    return T_world_robot, own
+
+
+def split_runs(name: str, robots: int, overlap: int) -> None:
+    """Merge a whole log cut into ``robots`` reference-placed partial maps; print one line."""
+    path = DATA / f"{name}.log.gz"
+    if not path.is_file():
+        print(f"{name}: skipped, {path} not found")
+        return
+    scans = list(read_carmen(path))
+    size = len(scans) // robots
+    frames, maps = {}, {}
+    for k in range(robots):
+        run = scans[max(0, k * size - overlap) : (k + 1) * size : 2]
+        frames[f"robot{k}"], maps[f"robot{k}"] = partial_map(run, 10**9)
+    started = time.perf_counter()
+    result = merge(maps, MergeConfig())
+    elapsed = time.perf_counter() - started
+    worst = 0.0
+    reference = result.reference
+    assert reference is not None
+    for robot, pose in result.placements.items():
+        if pose is None:
+            continue
+        truth = se2.invert(frames[reference]) @ frames[robot]
+        dx, dy, _ = se2.pose_from_matrix(se2.invert(truth) @ se2.matrix_from_pose(*pose))
+        worst = max(worst, float(np.hypot(dx, dy)))
+    wrong = 0
+    for (a, b), record in result.pairs.items():
+        if record.link.valid:
+            truth = se2.invert(frames[a]) @ frames[b]
+            dx, dy, _ = se2.pose_from_matrix(se2.invert(truth) @ record.link.matrix)
+            wrong += bool(np.hypot(dx, dy) > 0.3)
+    merged = sum(pose is not None for pose in result.placements.values())
+    sizes = [len(m) for m in maps.values()]
+    print(
+        f"{name:6s} {robots} robots: merged {merged}/{robots}, worst error {worst * 100:.1f} cm, "
+        f"valid links {result.stats['links_valid']}/{len(result.pairs)} (wrong {wrong}), "
+        f"merge {elapsed:.1f} s, map sizes {min(sizes)}-{max(sizes)} segments"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--log", default="intel")
+    parser.add_argument("--scans", type=int, default=160)
+    parser.add_argument("--overlap", type=int, default=40)
+    parser.add_argument("--segments", type=int, default=100)
+    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--split", type=int, nargs="*", default=[])
+    parser.add_argument("--logs", nargs="*", default=["intel", "aces", "fhw", "csail"])
+    args = parser.parse_args()
+    if args.split:
+        for name in args.logs:
+            for robots in args.split:
+                split_runs(name, robots, args.overlap)
+        return
+    path = DATA / f"{args.log}.log.gz"
+    if not path.is_file():
+        print(f"skipped: {path} not found")
+        return
+    scans = []
+    for scan in read_carmen(path):
+        scans.append(scan)
+        if len(scans) >= args.scans:
+            break
+    half, extra = len(scans) // 2, args.overlap // 2
+    T_world_a, map_a = partial_map(scans[: half + extra], args.segments)
+    T_world_b, map_b = partial_map(scans[half - extra :], args.segments)
+    T_a_b = se2.invert(T_world_a) @ T_world_b
+    maps = {"robot_a": map_a, "robot_b": map_b}
+    config = MergeConfig(reference="robot_a")
+    times, cpu, parts = [], [], []
+    result = merge(maps, config)
+    for _ in range(args.repeats):
+        started, started_cpu = time.perf_counter(), time.process_time()
+        result = merge(maps, config)
+        times.append(time.perf_counter() - started)
+        cpu.append(time.process_time() - started_cpu)
+        parts.append(result.timings)
+    pose = result.placements["robot_b"]
+    print(
+        f"{args.log}: scans [0, {half + extra}) and [{half - extra}, {len(scans)}), "
+        f"{len(map_a)} x {len(map_b)} segments"
+    )
+    if pose is None:
+        print("robot_b unmerged: no valid link")
+    else:
+        dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_a_b) @ se2.matrix_from_pose(*pose))
+        link = result.links[0]
+        print(
+            f"error vs reference: {np.hypot(dx, dy) * 100:.2f} cm, "
+            f"{np.degrees(abs(dtheta)):.3f} deg (link value {link.value:.1f} m, "
+            f"fraction {link.fraction:.2f})"
+        )
+    median = {k: float(np.median([p[k] for p in parts])) * 1e3 for k in parts[0]}
+    print(
+        f"merge: median {np.median(times) * 1e3:.1f} ms over {args.repeats} repeats "
+        f"(min {min(times) * 1e3:.1f}, max {max(times) * 1e3:.1f}); pairs "
+        f"{median['pairs_s']:.1f} ms, tree {median['tree_s']:.2f} ms, fusion "
+        f"{median['fusion_s']:.1f} ms; global map {len(result.segments)} segments"
+    )
+    load = os.getloadavg()[0]
+    print(f"CPU time per merge: median {np.median(cpu) * 1e3:.1f} ms (load average {load:.1f})")
+    reuse = merge(maps, config, previous=result)
+    print(
+        f"re-run with previous (maps unchanged, pair reused): "
+        f"{reuse.timings['total_s'] * 1e3:.1f} ms"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,413 @@
+"""Odometry-free local mapping: one robot's scans in, its segment partial map out.
+
+Frames: ``robotmap`` is the robot's own map frame (the laser frame of its first accepted
+scan); ``T_robotmap_laser`` places a scan in it. Each new scan is matched by INTEGRATE against
+the partial map near the robot's last pose, with the constant-velocity prediction as one more
+hypothesis (never a requirement). A scan whose best transformation fails the validity
+threshold is set aside and counted: a wrong integration is worse than a missing one. Scans
+that moved more than ``keyframe_distance`` or turned more than ``keyframe_angle`` since the
+last keyframe become keyframes and are fused into the partial map (Amigoni Alg. 5).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.config import param, validate
+from multi_robot_mapper.core.extraction import SegmentScan
+from multi_robot_mapper.core.fusion import fuse
+from multi_robot_mapper.core.geometry import point_segment_distance
+from multi_robot_mapper.core.matching import (
+    IntegrateConfig,
+    MatchResult,
+    cross_support,
+    integrate,
+    lines_of,
+    refine,
+)
+from multi_robot_mapper.core.scan import LaserScanData
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+Pose = tuple[float, float, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class LocalMapperConfig:
+    """Local mapping. Lengths in metres, angles in radians."""
+
+    keyframe_distance: float = param(
+        0.5,
+        unit="m",
+        doc="a scan this far from the last keyframe becomes a keyframe",
+        minimum=0.0,
+    )
+    keyframe_angle: float = param(
+        0.35,
+        unit="rad",
+        doc="a scan turned this much from the last keyframe becomes a keyframe",
+        minimum=0.0,
+    )
+    submap_radius: float = param(
+        12.0,
+        unit="m",
+        doc="partial-map segments within this distance of the last pose are matched",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    fusion_tolerance: float = param(
+        0.02,
+        unit="m",
+        doc="FUSIONTOLERANCE: a fused polyline stays this close to every segment it replaces",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    min_match_fraction: float = param(
+        0.15,
+        unit="",
+        doc="a scan is integrated when its match with the last scan overlaps at least "
+        "integrate.min_match_value and its net value (overlap minus length seen through the "
+        "other scan's free space) is at least this fraction of the shorter scan's length. "
+        "Lower than integrate.min_match_fraction, which judges unrelated maps: on a sparse "
+        "log consecutive scans share a fifth of their walls; unrelated rooms reach 0.10",
+        minimum=-1.0,
+        maximum=1.0,
+    )
+    min_cross_support: float = param(
+        0.0,
+        unit="m",
+        doc="matched length across the weakest direction a scan needs; 0 because INTEGRATE "
+        "places a scan along a bare corridor by free space (where the other scan's beams "
+        "ended), which overlap length cannot see",
+        minimum=0.0,
+    )
+    map_refine_limit: float = param(
+        0.1,
+        unit="m or rad",
+        doc="refinement on the partial map may move a scan at most this far (metres, and "
+        "radians) from where its match with the last scan put it",
+        minimum=0.0,
+    )
+    tracking_fraction: float = param(
+        0.7,
+        unit="",
+        doc="a refined prediction explaining this fraction of the scan is accepted without a "
+        "global search",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclasses.dataclass(frozen=True)
+class Keyframe:
+    """One keyframe of the partial map: its pose and the map segments it owns (own frame)."""
+
+    index: int
+    stamp: float
+    T_robotmap_keyframe: FloatArray  # (3,) x, y, theta
+    segments: FloatArray  # (N, 4) in the keyframe's frame
+
+
+@dataclasses.dataclass(frozen=True)
+class LocalUpdate:
+    """What one scan did to the partial map."""
+
+    accepted: bool
+    pose: Pose | None  # T_robotmap_laser of this scan when accepted
+    keyframe_added: bool
+    value: float  # overlap length of the accepted match (m); 0 for the first scan
+    fraction: float  # net value / shorter set's length
+    reason: str  # why a scan was set aside ("" when accepted)
+    restarted: bool = False  # the map started again at this scan: earlier poses are void
+
+
+class LocalMapper:
+    """One robot's partial map, built scan by scan with no odometry.
+
+    ``add_scan`` is the whole method (the node, ``mrm replay`` and the benches call it):
+    predict, track, search when tracking fails, accept or set aside, fuse keyframes.
+    """
+
+    def __init__(self, config: LocalMapperConfig | None = None) -> None:
+        self.config = config if config is not None else LocalMapperConfig()
+        self.pose: Pose | None = None  # T_robotmap_laser of the newest accepted scan
+        self.stamp: float | None = None
+        self.version = 0  # bumped whenever the partial map changes
+        self.scans_accepted = 0
+        self.scans_set_aside = 0
+        self.scans_tracked = 0  # accepted from the prediction alone, without a global search
+        self.set_aside_reasons: dict[str, int] = {}
+        self._map_segments = np.zeros((0, 4))  # fused partial map, robotmap frame
+        self._map_owner = np.zeros(0, dtype=np.int64)  # keyframe index owning each segment
+        self._keyframe_poses: list[FloatArray] = []
+        self._keyframe_stamps: list[float] = []
+        self._last_segments = np.zeros((0, 4))  # newest accepted scan, its own frame
+        self._last_view: LaserScanData | None = None
+        self._velocity: FloatArray | None = None  # T_prev_last per second (x, y, theta)
+        # The newest set-aside scan and its best (invalid) T_last_pending, while no scan since
+        # was accepted: the next scan's motion through it is one more hypothesis.
+        self._pending: tuple[FloatArray, LaserScanData, FloatArray] | None = None
+
+    # --- the method -------------------------------------------------------------------------
+
+    def add_scan(self, stamp: float, segments: SegmentScan, view: LaserScanData) -> LocalUpdate:
+        """Place one scan (its segments and the scan they came from) and extend the map."""
+        new = np.asarray(segments.segments, dtype=np.float64).reshape(-1, 4)
+        integrate_config = self.config.integrate
+        if float(lines_of(new).length.sum()) < integrate_config.min_match_value:
+            return self._set_aside("too little structure in the scan")
+        if self.pose is None:  # the first scan defines the robot's map frame
+            return self._start(stamp, new, view)
+        assert self.stamp is not None
+        T_robotmap_last = np.asarray(self.pose, dtype=np.float64)
+        dt = max(stamp - self.stamp, 0.0)
+        predictions = [np.zeros(3)]  # "did not move" is always worth a look
+        if self._velocity is not None:
+            predictions.insert(0, _scaled_motion(self._velocity, dt))
+        last = self._last_segments
+        views = (self._last_view, view)
+        # Tracking: the predictions alone, refined and judged against the last scan; accepted
+        # without a search when they explain most of the scan (every scan of a fast laser).
+        result = integrate(
+            last,
+            new,
+            integrate_config,
+            heuristics=(),
+            extra_hypotheses=_as_hypotheses(predictions),
+            views=views,
+        )
+        if self._passes(last, new, result) and result.fraction >= self.config.tracking_fraction:
+            self.scans_tracked += 1
+        else:
+            # INTEGRATE with no guess between the last scan and the new one (both scans' free
+            # space known); the predictions stay candidates.
+            searched = integrate(
+                last,
+                new,
+                integrate_config,
+                extra_hypotheses=_as_hypotheses(predictions),
+                views=views,
+            )
+            if searched.fraction > result.fraction or not self._passes(last, new, result):
+                result = searched
+            if not self._passes(last, new, result) and self._pending is not None:
+                result = self._through_pending(last, new, view, result)
+        if self._passes(last, new, result):
+            # Hold drift down: pull the scan onto the partial map around it (Cox least
+            # squares), unless that moves it far from what the scans agreed on.
+            result = self._refined_on_map(T_robotmap_last, new, result)
+        if not self._passes(last, new, result):
+            if self.scans_accepted == 1:
+                # A start that no second scan confirms is not a map (a poor first scan would
+                # otherwise hold the robot forever): start again from this scan.
+                self.scans_accepted = 0
+                self.set_aside_reasons["start not confirmed"] = (
+                    self.set_aside_reasons.get("start not confirmed", 0) + 1
+                )
+                self.scans_set_aside += 1
+                return self._start(stamp, new, view)
+            self._pending = (new, view, _pose_triple(result.T_1_2))
+            return self._set_aside("no valid match", result.value, result.fraction)
+        T_last_new = _pose_triple(result.T_1_2)
+        T_robotmap_new = se2.pose_from_matrix(
+            se2.matrix_from_pose(*T_robotmap_last) @ se2.matrix_from_pose(*T_last_new)
+        )
+        motion = T_last_new / dt if dt > 0.0 else None
+        keyframe = self._accept(stamp, new, view, np.asarray(T_robotmap_new), motion)
+        return LocalUpdate(
+            True,
+            (float(T_robotmap_new[0]), float(T_robotmap_new[1]), float(T_robotmap_new[2])),
+            keyframe,
+            result.value,
+            result.fraction,
+            "",
+        )
+
+    def _start(self, stamp: float, new: FloatArray, view: LaserScanData) -> LocalUpdate:
+        """(Re)start the map at this scan: it becomes keyframe 0 and the map frame."""
+        restart = self.pose is not None
+        self._map_segments = np.zeros((0, 4))
+        self._map_owner = np.zeros(0, dtype=np.int64)
+        self._keyframe_poses, self._keyframe_stamps = [], []
+        self._velocity = None
+        self.pose = None
+        self._accept(stamp, new, view, np.zeros(3), None)
+        return LocalUpdate(True, (0.0, 0.0, 0.0), True, 0.0, 1.0, "", restarted=restart)
+
+    def _through_pending(
+        self, last: FloatArray, new: FloatArray, view: LaserScanData, result: MatchResult
+    ) -> MatchResult:
+        """After a set-aside scan: the motion through it (last -> pending -> new), when the new
+        scan validly matches the pending one, judged against the last scan like any other."""
+        assert self._pending is not None
+        segments_p, view_p, T_last_pending = self._pending
+        via = integrate(segments_p, new, self.config.integrate, views=(view_p, view))
+        if not self._passes(segments_p, new, via):
+            return result
+        composed = _compose(T_last_pending, _pose_triple(via.T_1_2))
+        judged = integrate(
+            last,
+            new,
+            self.config.integrate,
+            heuristics=(),
+            extra_hypotheses=_as_hypotheses([composed]),
+            views=(self._last_view, view),
+        )
+        return judged if judged.fraction > result.fraction else result
+
+    def _refined_on_map(
+        self, T_robotmap_last: FloatArray, new: FloatArray, result: MatchResult
+    ) -> MatchResult:
+        """``result`` refined on the submap around the last pose (no free space: the map holds
+        walls the last scan never saw), kept only within ``map_refine_limit``."""
+        reference = self._submap(T_robotmap_last)
+        if len(reference) < 2:
+            return result
+        refined = refine(reference, new, result.T_1_2, self.config.integrate)
+        shift = refined - result.T_1_2
+        if (
+            float(np.hypot(shift[1], shift[2])) > self.config.map_refine_limit
+            or abs(float(se2.wrap_angle(shift[0]))) > self.config.map_refine_limit
+        ):
+            return result
+        return dataclasses.replace(result, T_1_2=refined)
+
+    # --- the partial map --------------------------------------------------------------------
+
+    @property
+    def map_segments(self) -> FloatArray:
+        """The fused partial map, (M, 4) in the robot's map frame."""
+        return self._map_segments.copy()
+
+    def keyframes(self) -> list[Keyframe]:
+        """Every keyframe with the map segments it owns, in its own frame."""
+        frames = []
+        order = np.argsort(self._map_owner, kind="stable")
+        bounds = np.searchsorted(
+            self._map_owner[order], np.arange(len(self._keyframe_poses) + 1), side="left"
+        )
+        for index, T_robotmap_keyframe in enumerate(self._keyframe_poses):
+            owned = self._map_segments[order[bounds[index] : bounds[index + 1]]]
+            T_keyframe_robotmap = se2.invert(se2.matrix_from_pose(*T_robotmap_keyframe))
+            frames.append(
+                Keyframe(
+                    index,
+                    self._keyframe_stamps[index],
+                    T_robotmap_keyframe.copy(),
+                    se2.transform_segments(T_keyframe_robotmap, owned),
+                )
+            )
+        return frames
+
+    # --- steps ------------------------------------------------------------------------------
+
+    def _near(self, T_robotmap_laser: FloatArray) -> BoolArray:
+        """Which map segments pass within ``submap_radius`` of the laser's position."""
+        segments = self._map_segments
+        x, y = float(T_robotmap_laser[0]), float(T_robotmap_laser[1])
+        distance = point_segment_distance(
+            np.full(len(segments), x),
+            np.full(len(segments), y),
+            segments[:, 0],
+            segments[:, 1],
+            segments[:, 2],
+            segments[:, 3],
+        )
+        return np.asarray(distance <= self.config.submap_radius)
+
+    def _submap(self, T_robotmap_last: FloatArray) -> FloatArray:
+        """Map segments within ``submap_radius`` of the last pose, in the last scan's frame."""
+        near = self._map_segments[self._near(T_robotmap_last)]
+        T_last_robotmap = se2.invert(se2.matrix_from_pose(*T_robotmap_last))
+        return se2.transform_segments(T_last_robotmap, near)
+
+    def _accept(
+        self,
+        stamp: float,
+        segments: FloatArray,
+        view: LaserScanData,
+        T_robotmap_new: FloatArray,
+        motion: FloatArray | None,
+    ) -> bool:
+        """Record an accepted scan; fuse it into the map when it is a keyframe."""
+        self.scans_accepted += 1
+        self.pose = (float(T_robotmap_new[0]), float(T_robotmap_new[1]), float(T_robotmap_new[2]))
+        self.stamp = stamp
+        self._last_segments, self._last_view = segments, view
+        self._pending = None
+        if motion is not None:
+            self._velocity = motion
+        if self._keyframe_poses:
+            last = self._keyframe_poses[-1]
+            moved = float(np.hypot(*(T_robotmap_new[:2] - last[:2])))
+            turned = abs(float(se2.wrap_angle(T_robotmap_new[2] - last[2])))
+            if moved <= self.config.keyframe_distance and turned <= self.config.keyframe_angle:
+                return False
+        index = len(self._keyframe_poses)
+        self._keyframe_poses.append(T_robotmap_new.copy())
+        self._keyframe_stamps.append(stamp)
+        placed = se2.transform_segments(se2.matrix_from_pose(*T_robotmap_new), segments)
+        self._fuse(placed, index, T_robotmap_new)
+        self.version += 1
+        return True
+
+    def _fuse(self, placed: FloatArray, index: int, T_robotmap_new: FloatArray) -> None:
+        """Alg. 5 between the map near the new keyframe and the keyframe's segments."""
+        segments, owner = self._map_segments, self._map_owner
+        near = self._near(T_robotmap_new)
+        fused, fused_owner = fuse(
+            segments[near],
+            owner[near],
+            placed,
+            np.full(len(placed), index, dtype=np.int64),
+            self.config.integrate,
+            self.config.fusion_tolerance,
+        )
+        self._map_segments = np.vstack((segments[~near], fused))
+        self._map_owner = np.concatenate((owner[~near], fused_owner))
+
+    def _passes(self, reference: FloatArray, new: FloatArray, result: MatchResult) -> bool:
+        """The validity threshold of a scan against a reference (see ``min_match_fraction``)."""
+        integrate_config = self.config.integrate
+        return (
+            result.value >= integrate_config.min_match_value
+            and result.fraction >= self.config.min_match_fraction
+            and cross_support(reference, new, result.T_1_2, integrate_config)
+            >= self.config.min_cross_support
+        )
+
+    def _set_aside(self, reason: str, value: float = 0.0, fraction: float = 0.0) -> LocalUpdate:
+        self.scans_set_aside += 1
+        self.set_aside_reasons[reason] = self.set_aside_reasons.get(reason, 0) + 1
+        return LocalUpdate(False, None, False, value, fraction, reason)
+
+
+def _scaled_motion(velocity: FloatArray, dt: float) -> FloatArray:
+    """The constant-velocity prediction of the motion since the last scan."""
+    return np.asarray(velocity * dt, dtype=np.float64)
+
+
+def _compose(T_a_b: FloatArray, T_b_c: FloatArray) -> FloatArray:
+    """T_a_c of two (x, y, theta) motions."""
+    composed = se2.pose_from_matrix(se2.matrix_from_pose(*T_a_b) @ se2.matrix_from_pose(*T_b_c))
+    return np.asarray(composed, dtype=np.float64)
+
+
+def _as_hypotheses(motions: list[FloatArray]) -> FloatArray:
+    """(x, y, theta) motions as INTEGRATE hypotheses (theta, tx, ty)."""
+    stacked = np.asarray(motions, dtype=np.float64).reshape(-1, 3)
+    return np.column_stack((stacked[:, 2], stacked[:, 0], stacked[:, 1]))
+
+
+def _pose_triple(T_1_2: FloatArray) -> FloatArray:
+    """INTEGRATE's (theta, tx, ty) as an (x, y, theta) pose."""
+    return np.array([T_1_2[1], T_1_2[2], T_1_2[0]], dtype=np.float64)

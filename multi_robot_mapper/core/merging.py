@@ -1,0 +1,933 @@
+"""Map merging: partial maps of robots that never met, in one global ``map`` frame.
+
+Amigoni, Gasparini & Gini 2006, Sec. IV merge an *ordered* sequence of partial maps by
+repeated INTEGRATE: sequentially (IV-A), as a tree (IV-B) or with the pivot method (IV-C,
+Algorithm 6). :func:`merge_sequential`, :func:`merge_tree` and :func:`merge_pivot` implement
+the three over an ordered list, for comparison on a known order; the pivot method uses the
+cleaner variant the paper recommends (fuse ``S_1..i-1`` with ``S_i`` moved by the composed
+``t_1,i``, not with ``S_i-1,i``).
+
+Robots do not come in an order, and the order is what the paper leaves as future work.
+:func:`merge` is the pivot idea without it: INTEGRATE every pair of partial maps, keep the
+pairs whose best transformation passes the validity threshold (*links*), take the
+maximum-value spanning tree of the links and place every robot frame by composing the links'
+transforms along the tree from a reference robot (the pivots are the tree's edges). A robot
+with no valid link to the reference stays unmerged (``None``): a wrong placement is worse than
+none. ``merge(..., previous=result)`` re-runs cheaply as the maps grow: a pair whose two maps
+barely changed keeps its earlier result, and the previous tree is kept unless a clearly
+better link appears.
+
+Known limit: segment overlap cannot tell two look-alike places apart (a grid of equal rooms,
+a ring of equal corridors, two rectilinear buildings drawn on the same grid): a wrong link
+can then score as high as the true one. The validity thresholds are set on real data (intel,
+aces: no wrong link accepted, see bench/merge_speed.py and test_merging); free space (the
+robots' scans or paths) would be the evidence that separates them, and maps carry none.
+
+Frames: each robot's partial map is in its own map frame ``robot``; ``T_map_robot`` places it
+in the global ``map`` frame, which is the reference robot's map frame. Poses are ``(x, y,
+theta)`` triples (metres, radians), matrices ``T_a_b`` map frame-b coordinates into frame a.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import itertools
+import time
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.config import param, validate
+from multi_robot_mapper.core.fusion import fuse
+from multi_robot_mapper.core.matching import (
+    IntegrateConfig,
+    MatchResult,
+    hypotheses,
+    integrate,
+    landmarks_from_pairs,
+    lines_of,
+    score_pairs,
+)
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+Pose = tuple[float, float, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class MergeConfig:
+    """Map merging. Lengths in metres, angles in radians.
+
+    ``integrate`` holds INTEGRATE's matching tolerances; for links between maps its validity
+    thresholds (``min_match_value``, ``min_match_fraction``, ``min_cross_support``) and its
+    hypothesis budget (``max_hypotheses``, ``all_pairs_below``, ``refine_candidates``) are
+    replaced by the ``link_*`` and hypothesis parameters below: partial maps are larger than
+    scans and overlap by a smaller fraction.
+    """
+
+    reference: str = param(
+        "",
+        unit="",
+        doc="robot whose map frame is 'map'; empty: the robot with the largest map (total "
+        "segment length) among the largest group of linked robots",
+    )
+    link_min_value: float = param(
+        5.0,
+        unit="m",
+        doc="validity threshold: a link's best transformation must overlap at least this "
+        "length of matching segments",
+        minimum=0.0,
+    )
+    link_min_fraction: float = param(
+        0.3,
+        unit="",
+        doc="validity threshold: overlap at least this fraction of the shorter map's total "
+        "segment length",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    link_min_cross_support: float = param(
+        1.5,
+        unit="m",
+        doc="validity threshold: matched length across the least constrained direction "
+        "(parallel walls alone cannot fix the offset along them)",
+        minimum=0.0,
+    )
+    link_min_tight_fraction: float = param(
+        0.15,
+        unit="",
+        doc="validity threshold: segments matched within tight_distance must overlap at least "
+        "this fraction of the shorter map (the same walls coincide to centimetres, look-alike "
+        "walls of other places only roughly)",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    tight_distance: float = param(
+        0.05,
+        unit="m",
+        doc="matching distance of the tight overlap (link_min_tight_fraction)",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    hypothesis_segments: int = param(
+        12,
+        unit="segments",
+        doc="the angles between every pair of this many longest segments of each map "
+        "propose the transformations",
+        minimum=2,
+    )
+    coarse_segments: int = param(
+        40,
+        unit="segments",
+        doc="hypotheses are ranked on this many longest segments of each map; the best are "
+        "then refined and judged on the whole maps",
+        minimum=2,
+    )
+    wide_hypothesis_segments: int = param(
+        16,
+        unit="segments",
+        doc="second try, when the first finds no clear link: angles between this many "
+        "longest segments",
+        minimum=2,
+    )
+    wide_coarse_segments: int = param(
+        60,
+        unit="segments",
+        doc="second try: hypotheses ranked on this many longest segments",
+        minimum=2,
+    )
+    corner_min_length: float = param(
+        0.3,
+        unit="m",
+        doc="corner landmarks join two segments at least this long",
+        minimum=0.0,
+    )
+    corner_gap: float = param(
+        0.3,
+        unit="m",
+        doc="two segments with end points this close form a corner landmark",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    corner_vote_cell: float = param(
+        0.2,
+        unit="m",
+        doc="corner hypotheses vote in cells of this size (and 2 degrees)",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    corner_candidates: int = param(
+        40,
+        unit="",
+        doc="the most voted corner hypotheses ranked on the judged sets",
+        minimum=1,
+    )
+    judge_segments: int = param(
+        250,
+        unit="segments",
+        doc="the best hypotheses are refined and judged on this many longest segments of each "
+        "map (short pieces add cost, not evidence)",
+        minimum=2,
+    )
+    max_hypotheses: int = param(
+        150,
+        unit="",
+        doc="at most this many most-voted hypotheses are ranked per pair and order",
+        minimum=1,
+    )
+    both_orders: bool = param(
+        True,
+        unit="",
+        doc="a link not clearly valid is searched in the other order too (ranking map a on "
+        "map b), the better kept: finds links one order misses, for twice the work",
+    )
+    confident_fraction: float = param(
+        0.5,
+        unit="",
+        doc="a valid link overlapping at least this fraction of the shorter map is clear: "
+        "the other order is not searched",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    reuse_length_change: float = param(
+        5.0,
+        unit="%",
+        doc="a pair's result is reused while each map's total segment length stays within "
+        "this of the length it was computed on (and its segment count within "
+        "reuse_count_change)",
+        minimum=0.0,
+    )
+    reuse_count_change: float = param(
+        10.0,
+        unit="%",
+        doc="a pair's result is reused while each map's segment count stays within this (or "
+        "2 segments) of the count it was computed on",
+        minimum=0.0,
+    )
+    stability_margin: float = param(
+        0.25,
+        unit="",
+        doc="a link of the previous tree stays in the tree unless another link's value "
+        "exceeds it by this fraction (placements do not flip between similar links)",
+        minimum=0.0,
+    )
+    fusion_tolerance: float = param(
+        0.05,
+        unit="m",
+        doc="FUSIONTOLERANCE of the global map: a fused polyline stays this close to every "
+        "segment it replaces",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    def link_config(self, hypotheses: int | None = None) -> IntegrateConfig:
+        """``integrate`` with this config's validity thresholds and hypothesis budget."""
+        return dataclasses.replace(
+            self.integrate,
+            min_match_value=self.link_min_value,
+            min_match_fraction=self.link_min_fraction,
+            min_cross_support=self.link_min_cross_support,
+            max_hypotheses=self.max_hypotheses if hypotheses is None else hypotheses,
+            all_pairs_below=self.hypothesis_segments,
+            refine_candidates=min(self.integrate.refine_candidates, 3),
+        )
+
+
+# --- One pair of maps ------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class Link:
+    """How map b lies in map a: ``T_a_b`` and how much to trust it."""
+
+    robot_a: str
+    robot_b: str
+    T_a_b: Pose  # x, y, theta: robot b's map frame in robot a's
+    value: float  # overlap length of matching segments under T_a_b (m)
+    fraction: float  # value / shorter map's total segment length
+    valid: bool  # passes the link_* thresholds
+    tight_fraction: float = 0.0  # overlap within tight_distance / shorter map's length
+
+    @property
+    def matrix(self) -> FloatArray:
+        return se2.matrix_from_pose(*self.T_a_b)
+
+
+@dataclasses.dataclass(frozen=True)
+class MapSignature:
+    """What a pair result was computed on: enough to tell whether a map changed much."""
+
+    count: int
+    length: float  # total segment length (m)
+    digest: str  # content hash: equal digests are equal maps
+
+    @staticmethod
+    def of(segments: FloatArray) -> MapSignature:
+        array = np.ascontiguousarray(segments, dtype=np.float64)
+        length = float(lines_of(array).length.sum()) if len(array) else 0.0
+        return MapSignature(len(array), length, hashlib.sha1(array.tobytes()).hexdigest())
+
+    def close_to(self, earlier: MapSignature, config: MergeConfig) -> bool:
+        """Did the map change little since ``earlier``? (Then a pair result is reused.)
+
+        Identical content, or: segment count within ``reuse_count_change`` % (at least 2
+        segments) and total length within ``reuse_length_change`` % of the earlier map's. A
+        growing map is re-matched once it grew by that much since the result was computed.
+        """
+        if self.digest == earlier.digest:
+            return True
+        count_slack = max(2.0, config.reuse_count_change / 100.0 * earlier.count)
+        length_slack = config.reuse_length_change / 100.0 * earlier.length
+        return (
+            abs(self.count - earlier.count) <= count_slack
+            and abs(self.length - earlier.length) <= length_slack
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class PairRecord:
+    """The INTEGRATE result of one pair of maps and the maps it was computed on."""
+
+    link: Link
+    signature_a: MapSignature
+    signature_b: MapSignature
+    reused: bool  # taken from the previous run instead of computed
+
+
+def longest(segments: FloatArray, count: int) -> FloatArray:
+    """The ``count`` longest segments, longest first."""
+    if len(segments) == 0:
+        return segments.reshape(0, 4)
+    order = np.argsort(-lines_of(segments).length, kind="stable")
+    return np.asarray(segments[order[:count]])
+
+
+def _inverse_row(T_1_2: FloatArray) -> FloatArray:
+    """``(theta, tx, ty)`` of T_2_1 from that of T_1_2 (INTEGRATE's row convention)."""
+    T = se2.invert(se2.matrix_from_pose(float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0])))
+    x, y, theta = se2.pose_from_matrix(T)
+    return np.array([theta, x, y])
+
+
+@dataclasses.dataclass(frozen=True)
+class MapMatch:
+    """The result of matching two maps: INTEGRATE's best transformation and the verdict."""
+
+    result: MatchResult  # T_1_2 (theta, tx, ty): map b in map a; value, fraction
+    tight_fraction: float  # overlap within tight_distance / shorter judged set's length
+    valid: bool  # INTEGRATE's validity with the link_* thresholds, and the tight overlap
+    integrate_calls: int
+
+    @property
+    def matrix(self) -> FloatArray:
+        return self.result.matrix
+
+
+def match_maps(map_a: FloatArray, map_b: FloatArray, config: MergeConfig) -> MapMatch:
+    """INTEGRATE for two partial maps: how map b lies in map a, and whether to trust it.
+
+    Partial maps hold hundreds or thousands of segments, too many for INTEGRATE's heuristics
+    over all of them; the transformations that matter superimpose long walls. So, as the
+    paper's random heuristic does, hypotheses come from angles between the longest segments
+    (every pair of the ``hypothesis_segments`` longest of each map), the most voted are ranked
+    on the ``coarse_segments`` longest, and the best is refined and judged on the
+    ``judge_segments`` longest (no views: a map has no single scan). The search stops at the
+    first clear answer (valid, fraction at least ``confident_fraction``); until then it tries
+    the other order (``both_orders``: map a's segments ranked on map b's), then more segments
+    (``wide_*``), then corners anywhere in the maps (:func:`corner_hypotheses`); the best
+    judged candidate wins. Finally the overlap within ``tight_distance`` must reach
+    ``link_min_tight_fraction``: two unrelated places overlap roughly, one place to
+    centimetres.
+    """
+    result, calls = _match_maps(map_a, map_b, config)
+    if result.value <= 0.0:
+        return MapMatch(result, 0.0, False, calls)
+    judge_a = longest(map_a, config.judge_segments)
+    judge_b = longest(map_b, config.judge_segments)
+    tight = tight_fraction(judge_a, judge_b, result.T_1_2, config)
+    return MapMatch(result, tight, result.valid and tight >= config.link_min_tight_fraction, calls)
+
+
+def tight_fraction(
+    segments1: FloatArray, segments2: FloatArray, T_1_2: FloatArray, config: MergeConfig
+) -> float:
+    """Overlap of matching segments within ``tight_distance`` under ``T_1_2`` (INTEGRATE's
+    row), as a fraction of the shorter set's total length."""
+    tight = dataclasses.replace(
+        config.integrate,
+        segment_distance_threshold=config.tight_distance
+        / config.integrate.point_distance_tolerance,
+    )
+    scores = score_pairs(segments1, segments2, np.asarray(T_1_2)[None, :], tight)
+    shorter = min(float(lines_of(segments1).length.sum()), float(lines_of(segments2).length.sum()))
+    return float(scores.value.sum()) / max(shorter, 1e-9)
+
+
+def _match_maps(
+    map_a: FloatArray, map_b: FloatArray, config: MergeConfig
+) -> tuple[MatchResult, int]:
+    """:func:`match_maps` and the number of INTEGRATE calls it took."""
+    if len(map_a) == 0 or len(map_b) == 0:
+        return MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0), 0
+    coarse_config = config.link_config()
+    k, c, j = config.hypothesis_segments, config.coarse_segments, config.judge_segments
+    judge_a, judge_b = longest(map_a, j), longest(map_b, j)
+    candidates: list[FloatArray] = []
+    calls = 0
+    result = MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0)
+
+    def add(row: FloatArray) -> bool:
+        """Judge the candidates with ``row`` added; True when the answer is clear."""
+        nonlocal result, calls
+        for old in candidates:
+            turn = abs(float(se2.wrap_angle(row[0] - old[0])))
+            if turn < 1e-3 and float(np.hypot(row[1] - old[1], row[2] - old[2])) < 0.01:
+                return False  # the same answer again
+        candidates.append(row)
+        result = integrate(
+            judge_a,
+            judge_b,
+            config.link_config(hypotheses=len(candidates)),
+            heuristics=(),
+            ordered=(False, False),
+            extra_hypotheses=np.vstack(candidates),
+        )
+        calls += 1
+        return result.valid and result.fraction >= config.confident_fraction
+
+    # 1. Angles between the longest segments, ranked on the coarse sets, S_b on S_a (then,
+    # with both_orders, S_a on S_b); 2. the same with more segments (large maps need it).
+    tries = [(k, c)]
+    wide_k, wide_c = config.wide_hypothesis_segments, config.wide_coarse_segments
+    if (wide_k, wide_c) != (k, c):
+        tries.append((wide_k, wide_c))
+    for hyp_count, coarse_count in tries:
+        hyp_a, hyp_b = longest(map_a, hyp_count), longest(map_b, hyp_count)
+        coarse_a, coarse_b = longest(map_a, coarse_count), longest(map_b, coarse_count)
+        ranking = dataclasses.replace(coarse_config, all_pairs_below=hyp_count)
+        forward = integrate(
+            coarse_a,
+            coarse_b,
+            ranking,
+            heuristics=("all",),
+            ordered=(False, False),
+            hypothesis_sets=(hyp_a, hyp_b),
+        )
+        calls += 1
+        if forward.value > 0.0 and add(forward.T_1_2):
+            return result, calls
+        if not config.both_orders:
+            continue
+        backward = integrate(
+            coarse_b,
+            coarse_a,
+            ranking,
+            heuristics=("all",),
+            ordered=(False, False),
+            hypothesis_sets=(hyp_b, hyp_a),
+        )
+        calls += 1
+        if backward.value > 0.0 and add(_inverse_row(backward.T_1_2)):
+            return result, calls
+    # 3. Corners anywhere in the maps, most voted first, ranked on the judged sets.
+    corner_rows = corner_hypotheses(judge_a, judge_b, config)
+    if len(corner_rows):
+        corners = integrate(
+            judge_a,
+            judge_b,
+            config.link_config(hypotheses=len(corner_rows)),
+            heuristics=(),
+            ordered=(False, False),
+            extra_hypotheses=corner_rows,
+        )
+        calls += 1
+        if corners.value > 0.0:
+            add(corners.T_1_2)
+    return result, calls
+
+
+def corner_pairs(segments: FloatArray, config: MergeConfig) -> tuple[IntArray, IntArray]:
+    """Pairs of segments (both at least ``corner_min_length``) with end points within
+    ``corner_gap``: the corners of the map, wherever they are (their number grows with the
+    map, unlike the pairs of a fixed number of longest segments)."""
+    lengths = lines_of(segments).length
+    usable = np.flatnonzero(lengths >= config.corner_min_length)
+    if usable.size < 2:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    ends = segments[usable].reshape(-1, 2)
+    owner = np.repeat(np.arange(usable.size), 2)
+    gap = ends[:, None, :] - ends[None, :, :]
+    close = np.einsum("ijk,ijk->ij", gap, gap) <= config.corner_gap**2
+    p, q = np.nonzero(close)
+    a, b = owner[p], owner[q]
+    keep = a < b
+    pairs = np.unique(np.column_stack((a[keep], b[keep])), axis=0)
+    return usable[pairs[:, 0]].astype(np.int64), usable[pairs[:, 1]].astype(np.int64)
+
+
+def corner_hypotheses(map_a: FloatArray, map_b: FloatArray, config: MergeConfig) -> FloatArray:
+    """Transformations superimposing a corner of map b on an equal corner of map a (Alg. 2
+    with corner landmarks), voted in cells of ``corner_vote_cell`` and 2 degrees: one
+    hypothesis from each of the ``corner_candidates`` most voted cells, as INTEGRATE rows
+    (theta, tx, ty). The same place seen by two robots shares many corners, which all vote
+    for the one transformation that superimposes it."""
+    ic = config.link_config()
+    first_a, second_a = corner_pairs(map_a, config)
+    first_b, second_b = corner_pairs(map_b, config)
+    if first_a.size == 0 or first_b.size == 0:
+        return np.zeros((0, 3))
+    marks_a = landmarks_from_pairs(map_a, first_a, second_a, ic)
+    marks_b = landmarks_from_pairs(map_b, first_b, second_b, ic)
+    raw = hypotheses(map_a, marks_a, map_b, marks_b, ic)
+    if len(raw) == 0:
+        return raw
+    cell, turn = config.corner_vote_cell, np.radians(2.0)
+    keys = np.column_stack(
+        (
+            np.round(raw[:, 0] / turn) % round(2 * np.pi / turn),
+            np.round(raw[:, 1] / cell),
+            np.round(raw[:, 2] / cell),
+        )
+    ).astype(np.int64)
+    _, first, votes = np.unique(keys, axis=0, return_index=True, return_counts=True)
+    order = np.argsort(-votes, kind="stable")[: config.corner_candidates]
+    return np.asarray(raw[first[order]])
+
+
+def _link(robot_a: str, robot_b: str, match: MapMatch) -> Link:
+    x, y, theta = se2.pose_from_matrix(match.matrix)
+    result = match.result
+    return Link(
+        robot_a,
+        robot_b,
+        (x, y, theta),
+        result.value,
+        result.fraction,
+        match.valid,
+        match.tight_fraction,
+    )
+
+
+def _fuse(
+    segments1: FloatArray,
+    owner1: IntArray,
+    segments2: FloatArray,
+    owner2: IntArray,
+    config: MergeConfig,
+) -> tuple[FloatArray, IntArray]:
+    """S1 fused with S2 (already in S1's frame), Amigoni Alg. 5 (core.fusion)."""
+    if len(segments1) == 0 or len(segments2) == 0:
+        return (
+            np.vstack((segments1.reshape(-1, 4), segments2.reshape(-1, 4))),
+            np.concatenate((owner1, owner2)).astype(np.int64),
+        )
+    return fuse(segments1, owner1, segments2, owner2, config.integrate, config.fusion_tolerance)
+
+
+def _as_map(segments: FloatArray) -> FloatArray:
+    array = np.asarray(segments, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 4:
+        if array.size == 0:
+            return np.zeros((0, 4))
+        raise ValueError(f"a partial map must be an (N, 4) segment array, got {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError("a partial map holds NaN or infinite coordinates")
+    return array
+
+
+# --- Unknown order: pairwise links, maximum-value spanning tree ------------------------------
+
+
+@dataclasses.dataclass
+class MergeResult:
+    """Every robot frame in ``map`` (or unmerged), the links used and the global map."""
+
+    robots: list[str]  # sorted; segment_robot indexes this list
+    placements: dict[str, Pose | None]  # T_map_robot as (x, y, theta); None = unmerged
+    reference: str | None  # the robot whose map frame is `map` (None: no robots)
+    links: list[Link]  # the spanning tree's edges, the transforms composed
+    pairs: dict[tuple[str, str], PairRecord]  # every pair's result (a < b), reusable
+    segments: FloatArray  # (M, 4) fused global map in `map`
+    segment_robot: IntArray  # (M,) index into robots of each segment's owner
+    timings: dict[str, float]  # seconds: pairs_s, tree_s, fusion_s, total_s
+    # pairs_computed, pairs_reused, integrate_calls, links_valid, cycle_conflicts
+    stats: dict[str, int]
+
+    @property
+    def unmerged(self) -> list[str]:
+        """Robots with no valid chain of links to the reference."""
+        return [r for r in self.robots if self.placements[r] is None]
+
+    def matrix(self, robot: str) -> FloatArray | None:
+        """T_map_robot as a 3x3 matrix, or None when the robot is unmerged."""
+        pose = self.placements.get(robot)
+        return None if pose is None else se2.matrix_from_pose(*pose)
+
+
+def pair_links(
+    maps: Mapping[str, FloatArray],
+    config: MergeConfig,
+    previous: Mapping[tuple[str, str], PairRecord] | None = None,
+) -> tuple[dict[tuple[str, str], PairRecord], int]:
+    """INTEGRATE every pair (a, b) with a < b, reusing earlier results where maps barely
+    changed (:meth:`MapSignature.close_to`). Returns the records and the INTEGRATE calls."""
+    robots = sorted(maps)
+    signatures = {r: MapSignature.of(maps[r]) for r in robots}
+    records: dict[tuple[str, str], PairRecord] = {}
+    calls = 0
+    for i, a in enumerate(robots):
+        for b in robots[i + 1 :]:
+            old = None if previous is None else previous.get((a, b))
+            if (
+                old is not None
+                and signatures[a].close_to(old.signature_a, config)
+                and signatures[b].close_to(old.signature_b, config)
+            ):
+                records[(a, b)] = dataclasses.replace(old, reused=True)
+                continue
+            match = match_maps(maps[a], maps[b], config)
+            calls += match.integrate_calls
+            records[(a, b)] = PairRecord(_link(a, b, match), signatures[a], signatures[b], False)
+    return records, calls
+
+
+def spanning_tree(
+    robots: Sequence[str],
+    links: Sequence[Link],
+    previous_edges: set[tuple[str, str]] | None = None,
+    margin: float = 0.0,
+) -> list[Link]:
+    """Maximum-value spanning forest of the valid links (Kruskal).
+
+    Edges of the previous tree count as ``(1 + margin)`` times their value, so a new link
+    replaces one only when clearly better. Ties break on the robot names: the result does not
+    depend on the order the robots or links come in.
+    """
+    kept = previous_edges or set()
+
+    def weight(link: Link) -> float:
+        key = (link.robot_a, link.robot_b)
+        return link.value * (1.0 + margin) if key in kept else link.value
+
+    order = sorted(
+        (lk for lk in links if lk.valid), key=lambda lk: (-weight(lk), lk.robot_a, lk.robot_b)
+    )
+    parent = {r: r for r in robots}
+
+    def root(r: str) -> str:
+        while parent[r] != r:
+            parent[r] = parent[parent[r]]
+            r = parent[r]
+        return r
+
+    tree: list[Link] = []
+    for link in order:
+        ra, rb = root(link.robot_a), root(link.robot_b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+            tree.append(link)
+    return tree
+
+
+def _components(robots: Sequence[str], tree: Sequence[Link]) -> list[list[str]]:
+    adjacency: dict[str, list[str]] = {r: [] for r in robots}
+    for link in tree:
+        adjacency[link.robot_a].append(link.robot_b)
+        adjacency[link.robot_b].append(link.robot_a)
+    seen: set[str] = set()
+    groups: list[list[str]] = []
+    for start in robots:
+        if start in seen:
+            continue
+        group, stack = [], [start]
+        seen.add(start)
+        while stack:
+            r = stack.pop()
+            group.append(r)
+            for n in adjacency[r]:
+                if n not in seen:
+                    seen.add(n)
+                    stack.append(n)
+        groups.append(sorted(group))
+    return groups
+
+
+def choose_reference(
+    robots: Sequence[str],
+    tree: Sequence[Link],
+    lengths: Mapping[str, float],
+    previous: str | None = None,
+) -> str:
+    """The largest map (total segment length) in the largest linked group of robots.
+
+    ``previous`` (the last run's reference) is kept while it is in a group as large as any,
+    so the ``map`` frame does not jump between runs.
+    """
+    groups = _components(robots, tree)
+    size = max(len(g) for g in groups)
+    if (
+        previous is not None
+        and previous in robots
+        and len(next(g for g in groups if previous in g)) == size
+    ):
+        return previous
+    best = min(
+        (g for g in groups if len(g) == size), key=lambda g: (-sum(lengths[r] for r in g), g[0])
+    )
+    return min(best, key=lambda r: (-lengths[r], r))
+
+
+def place(reference: str, robots: Sequence[str], tree: Sequence[Link]) -> dict[str, FloatArray]:
+    """T_map_robot of every robot linked to ``reference`` (the frame `map`), composed along
+    the tree (breadth first, so the order of placing is also the order of fusing)."""
+    adjacency: dict[str, list[tuple[str, FloatArray]]] = {r: [] for r in robots}
+    for link in tree:
+        T_a_b = link.matrix
+        adjacency[link.robot_a].append((link.robot_b, T_a_b))
+        adjacency[link.robot_b].append((link.robot_a, se2.invert(T_a_b)))
+    placed: dict[str, FloatArray] = {reference: np.eye(3)}
+    queue = [reference]
+    while queue:
+        a = queue.pop(0)
+        for b, T_a_b in sorted(adjacency[a], key=lambda item: item[0]):
+            if b not in placed:
+                placed[b] = placed[a] @ T_a_b
+                queue.append(b)
+    return placed
+
+
+def cycle_conflicts(
+    placed: Mapping[str, FloatArray],
+    links: Sequence[Link],
+    distance: float = 0.3,
+    angle: float = np.radians(3.0),
+) -> list[Link]:
+    """Valid links between placed robots that disagree with the placements (by more than
+    ``distance`` or ``angle``): a cycle of links that does not close. Some link on that cycle
+    is wrong (self-similar buildings match at wrong offsets); reported, not resolved."""
+    out = []
+    for link in links:
+        if not (link.valid and link.robot_a in placed and link.robot_b in placed):
+            continue
+        T_a_b = se2.invert(placed[link.robot_a]) @ placed[link.robot_b]
+        dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_a_b) @ link.matrix)
+        if np.hypot(dx, dy) > distance or abs(dtheta) > angle:
+            out.append(link)
+    return out
+
+
+def merge(
+    maps: Mapping[str, FloatArray],
+    config: MergeConfig | None = None,
+    previous: MergeResult | None = None,
+    reference: str | None = None,
+) -> MergeResult:
+    """Merge partial maps whose relative poses are unknown, in no particular order.
+
+    ``maps``: robot name -> (N, 4) segments in that robot's own map frame. ``reference`` (or
+    ``config.reference``) names the robot whose frame becomes ``map``; by default the previous
+    run's reference is kept, else the largest map of the largest linked group is taken.
+    ``previous`` (the last result) supplies pair results to reuse and the tree to keep.
+    """
+    config = config if config is not None else MergeConfig()
+    started = time.perf_counter()
+    clean = {str(r): _as_map(s) for r, s in maps.items()}
+    robots = sorted(clean)
+    chosen = reference if reference is not None else (config.reference or None)
+    if chosen is not None and chosen not in clean:
+        raise ValueError(f"reference robot {chosen!r} has no map; robots: {', '.join(robots)}")
+    if not robots:
+        empty = np.zeros((0, 4))
+        return MergeResult([], {}, None, [], {}, empty, np.zeros(0, dtype=np.int64), {}, {})
+    records, calls = pair_links(clean, config, None if previous is None else previous.pairs)
+    pairs_done = time.perf_counter()
+    lengths = {r: MapSignature.of(clean[r]).length for r in robots}
+    kept = set() if previous is None else {(lk.robot_a, lk.robot_b) for lk in previous.links}
+    all_links = [record.link for record in records.values()]
+    tree = spanning_tree(robots, all_links, kept, config.stability_margin)
+    if chosen is None:
+        chosen = choose_reference(
+            robots, tree, lengths, None if previous is None else previous.reference
+        )
+    placed = place(chosen, robots, tree)
+    used = [lk for lk in tree if lk.robot_a in placed and lk.robot_b in placed]
+    tree_done = time.perf_counter()
+    # Global map: fuse each placed map, in the order robots were placed (reference first).
+    segments = np.zeros((0, 4))
+    owner = np.zeros(0, dtype=np.int64)
+    for robot, T_map_robot in placed.items():
+        moved = se2.transform_segments(T_map_robot, clean[robot])
+        index = np.full(len(moved), robots.index(robot), dtype=np.int64)
+        segments, owner = _fuse(segments, owner, moved, index, config)
+    finished = time.perf_counter()
+    placements: dict[str, Pose | None] = {
+        r: (se2.pose_from_matrix(placed[r]) if r in placed else None) for r in robots
+    }
+    return MergeResult(
+        robots=robots,
+        placements=placements,
+        reference=chosen,
+        links=used,
+        pairs=records,
+        segments=segments,
+        segment_robot=owner,
+        timings={
+            "pairs_s": pairs_done - started,
+            "tree_s": tree_done - pairs_done,
+            "fusion_s": finished - tree_done,
+            "total_s": finished - started,
+        },
+        stats={
+            "pairs_computed": sum(not r.reused for r in records.values()),
+            "pairs_reused": sum(r.reused for r in records.values()),
+            "integrate_calls": calls,
+            "links_valid": sum(lk.valid for lk in all_links),
+            "cycle_conflicts": len(cycle_conflicts(placed, all_links)),
+        },
+    )
+
+
+# --- Known order: the paper's three methods (Sec. IV) ----------------------------------------
+
+
+@dataclasses.dataclass
+class OrderedMerge:
+    """The result of merging an ordered list of maps; ``map`` is the first map's frame."""
+
+    method: str
+    placements: list[Pose | None]  # T_map_i (x, y, theta) per map; None = never integrated
+    links: list[Link]  # every INTEGRATE call (robots named by their index)
+    segments: FloatArray  # (M, 4) final map S_1..n
+    segment_robot: IntArray  # (M,) index of the map each segment came from
+    integrations: int  # pairs of maps INTEGRATE was run on (the paper's count)
+    elapsed_s: float
+
+
+def _ordered_result(
+    method: str,
+    count: int,
+    placed: Mapping[int, FloatArray],
+    links: list[Link],
+    segments: FloatArray,
+    owner: IntArray,
+    started: float,
+) -> OrderedMerge:
+    placements: list[Pose | None] = [
+        se2.pose_from_matrix(placed[i]) if i in placed else None for i in range(count)
+    ]
+    return OrderedMerge(
+        method, placements, links, segments, owner, len(links), time.perf_counter() - started
+    )
+
+
+def merge_sequential(maps: Sequence[FloatArray], config: MergeConfig | None = None) -> OrderedMerge:
+    """Sequential method (IV-A): S_1,2 = INTEGRATE(S_1, S_2), S_1,2,3 = INTEGRATE(S_1,2, S_3)...
+
+    A map whose integration is not valid is left out (``None``) and the next one tried.
+    """
+    config = config if config is not None else MergeConfig()
+    started = time.perf_counter()
+    clean = [_as_map(m) for m in maps]
+    if not clean:
+        return OrderedMerge("sequential", [], [], np.zeros((0, 4)), np.zeros(0, np.int64), 0, 0.0)
+    segments = clean[0]
+    owner = np.zeros(len(segments), dtype=np.int64)
+    placed: dict[int, FloatArray] = {0: np.eye(3)}
+    links: list[Link] = []
+    for i in range(1, len(clean)):
+        result = match_maps(segments, clean[i], config)
+        links.append(_link("0", str(i), result))
+        if not result.valid:
+            continue
+        placed[i] = result.matrix
+        moved = se2.transform_segments(placed[i], clean[i])
+        segments, owner = _fuse(
+            segments, owner, moved, np.full(len(moved), i, dtype=np.int64), config
+        )
+    return _ordered_result("sequential", len(clean), placed, links, segments, owner, started)
+
+
+@dataclasses.dataclass
+class _Node:
+    """A partial map of the tree method: segments in its first member's frame."""
+
+    segments: FloatArray
+    owner: IntArray
+    members: dict[int, FloatArray]  # map index -> T_node_map
+    first: int
+
+
+def merge_tree(maps: Sequence[FloatArray], config: MergeConfig | None = None) -> OrderedMerge:
+    """Tree method (IV-B): each map integrated with the next, level after level, until one.
+
+    Level 0 is the maps; level l+1 integrates every node of level l with the next one
+    (n(n-1)/2 INTEGRATE calls). A failed integration keeps the left node as it is, so a map
+    missing from one node can still arrive through the next.
+    """
+    config = config if config is not None else MergeConfig()
+    started = time.perf_counter()
+    clean = [_as_map(m) for m in maps]
+    if not clean:
+        return OrderedMerge("tree", [], [], np.zeros((0, 4)), np.zeros(0, np.int64), 0, 0.0)
+    nodes = [
+        _Node(m, np.full(len(m), i, dtype=np.int64), {i: np.eye(3)}, i) for i, m in enumerate(clean)
+    ]
+    links: list[Link] = []
+    while len(nodes) > 1:
+        level: list[_Node] = []
+        for left, right in itertools.pairwise(nodes):
+            result = match_maps(left.segments, right.segments, config)
+            links.append(_link(str(left.first), str(right.first), result))
+            if not result.valid:
+                level.append(left)
+                continue
+            T_left_right = result.matrix
+            members = dict(left.members)
+            for index, T_right_map in right.members.items():
+                members.setdefault(index, T_left_right @ T_right_map)
+            moved = se2.transform_segments(T_left_right, right.segments)
+            segments, owner = _fuse(left.segments, left.owner, moved, right.owner, config)
+            level.append(_Node(segments, owner, members, left.first))
+        nodes = level
+    root = nodes[0]
+    return _ordered_result(
+        "tree", len(clean), root.members, links, root.segments, root.owner, started
+    )
+
+
+def merge_pivot(maps: Sequence[FloatArray], config: MergeConfig | None = None) -> OrderedMerge:
+    """Pivot method (IV-C, Algorithm 6), the cleaner variant.
+
+    t_i-1,i = INTEGRATE(S_i-1, S_i) (two partial maps of similar size), t_1,i = t_1,i-1 t_i-1,i,
+    and S_1..i = fusion of S_1..i-1 with S_i moved by t_1,i (S_i, not S_i-1,i: each map's
+    segments are fused once). When S_i-1 was left out, the last map placed is the pivot.
+    """
+    config = config if config is not None else MergeConfig()
+    started = time.perf_counter()
+    clean = [_as_map(m) for m in maps]
+    if not clean:
+        return OrderedMerge("pivot", [], [], np.zeros((0, 4)), np.zeros(0, np.int64), 0, 0.0)
+    segments = clean[0]
+    owner = np.zeros(len(segments), dtype=np.int64)
+    placed: dict[int, FloatArray] = {0: np.eye(3)}
+    links: list[Link] = []
+    pivot = 0
+    for i in range(1, len(clean)):
+        result = match_maps(clean[pivot], clean[i], config)
+        links.append(_link(str(pivot), str(i), result))
+        if not result.valid:
+            continue
+        placed[i] = placed[pivot] @ result.matrix  # t_1,i = t_1,pivot t_pivot,i
+        moved = se2.transform_segments(placed[i], clean[i])
+        segments, owner = _fuse(
+            segments, owner, moved, np.full(len(moved), i, dtype=np.int64), config
+        )
+        pivot = i
+    return _ordered_result("pivot", len(clean), placed, links, segments, owner, started)
