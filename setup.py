@@ -27,6 +27,7 @@ setup(
     entry_points={
         "console_scripts": [
             "robot_mapper = multi_robot_mapper.ros.robot_mapper:main",
+            "map_merger = multi_robot_mapper.ros.map_merger:main",
             "mrm = multi_robot_mapper.cli.main:main",
         ],
     },

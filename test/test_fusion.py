@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from multi_robot_mapper.core.fusion import chain_polyline, fuse, matching_chains
 from multi_robot_mapper.core.matching import IntegrateConfig
@@ -30,7 +31,7 @@ def test_a_wall_seen_twice_becomes_one_polyline_and_unmatched_walls_stay() -> No
     assert len(fused) == 3
     wall = fused[np.isclose(fused[:, 1], 0.0, atol=0.01) & np.isclose(fused[:, 3], 0.0, atol=0.01)]
     assert len(wall) == 1
-    assert sorted([wall[0, 0], wall[0, 2]]) == [0.0, 6.0]
+    assert sorted([wall[0, 0], wall[0, 2]]) == pytest.approx([0.0, 6.0], abs=1e-3)
     assert owner[(fused[:, 0] == 10.0)].tolist() == [1]
     assert set(owner.tolist()) == {0, 1}
 
@@ -45,6 +46,31 @@ def test_every_fused_segment_stays_within_the_tolerance_of_its_polyline() -> Non
     assert len(pieces) >= 1
     for member in members:
         assert _max_distance_to(pieces, np.asarray(member)) <= 0.015 + 1e-9
+
+
+def test_pieces_of_one_wall_fuse_to_one_line_within_tolerance_of_every_member() -> None:
+    # Two scans of one wall, 1.5 cm apart (noise within FUSIONTOLERANCE): one straight
+    # segment spanning both, not a zig-zag.
+    members = np.array([[0.0, 0.0, 2.0, 0.0], [0.5, 0.015, 2.5, 0.015]])
+    pieces = chain_polyline(members, tolerance=0.02)
+    assert len(pieces) == 1
+    for member in members:
+        assert _max_distance_to(pieces, member) <= 0.02
+
+
+def test_a_curved_wall_seen_all_around_is_not_cut_by_chords() -> None:
+    # A round wall of radius 7 m in 0.6 m pieces, seen twice (second copy 1 cm out): pieces
+    # chain around the whole circle; no fused segment may cut across the room.
+    angles = np.arange(0.0, 2 * np.pi, 0.6 / 7.0)
+    ring = np.column_stack((np.cos(angles), np.sin(angles)))
+    pieces = np.hstack((7.0 * ring, 7.0 * np.roll(ring, -1, axis=0)))
+    again = np.hstack((7.01 * ring, 7.01 * np.roll(ring, -1, axis=0)))
+    owners = np.zeros(len(pieces), dtype=np.int64)
+    fused, _ = fuse(pieces, owners, again, owners + 1, CONFIG, 0.02)
+    middle = 0.5 * (fused[:, :2] + fused[:, 2:])
+    assert np.hypot(middle[:, 0], middle[:, 1]).min() > 6.9
+    length = np.hypot(fused[:, 2] - fused[:, 0], fused[:, 3] - fused[:, 1]).sum()
+    assert length < 2.2 * 2 * np.pi * 7.0
 
 
 def test_parallel_walls_apart_are_not_fused() -> None:

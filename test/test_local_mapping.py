@@ -74,6 +74,7 @@ def test_the_same_place_scanned_again_and_again_does_not_grow_the_map() -> None:
     # duplicated; what grows are few-centimetre corner fragments no other segment overlaps.
     assert len(mapper.keyframes()) == 20
     assert sizes[-1] <= 0.35 * raw
+    assert sizes[-1] <= 2 * sizes[0]
     fused = mapper.map_segments
     length = np.hypot(fused[:, 2] - fused[:, 0], fused[:, 3] - fused[:, 1])
     assert np.count_nonzero(length > 0.5) <= 5

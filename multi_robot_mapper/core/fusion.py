@@ -18,6 +18,7 @@ from multi_robot_mapper.core.matching import IntegrateConfig, lines_of, score_pa
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 
 MIN_PIECE_M = 1e-3  # polyline pieces shorter than this are dropped (duplicate vertices)
 
@@ -87,6 +88,15 @@ def chain_polyline(members: FloatArray, tolerance: float) -> FloatArray:
     farthest one is within ``tolerance`` (l. 7).
     """
     ends = members.reshape(-1, 2)
+    # The common case first: every member within tolerance of one total-least-squares line
+    # (the same wall seen twice) becomes that line over the members' whole extent, instead of
+    # following whichever member the greedy pass inserts last.
+    centre = ends.mean(axis=0)
+    _, _, vt = np.linalg.svd(ends - centre, full_matrices=False)
+    direction, normal = vt[0], vt[1]
+    if float(np.abs((ends - centre) @ normal).max()) <= tolerance:
+        t = (ends - centre) @ direction
+        return np.concatenate((centre + t.min() * direction, centre + t.max() * direction))[None]
     gap = ends[:, None, :] - ends[None, :, :]
     i, j = np.unravel_index(int(np.argmax(np.einsum("ijk,ijk->ij", gap, gap))), gap.shape[:2])
     origin, far = ends[i], ends[j]
@@ -110,9 +120,60 @@ def chain_polyline(members: FloatArray, tolerance: float) -> FloatArray:
         keep = (t_vertices < t_piece.min()) | (t_vertices > t_piece.max())
         vertices = np.vstack((vertices[keep], piece))
         vertices = vertices[np.argsort(along(vertices), kind="stable")]
+    vertices = _simplified(vertices, tolerance)
     pieces = np.hstack((vertices[:-1], vertices[1:]))
     length = np.hypot(pieces[:, 2] - pieces[:, 0], pieces[:, 3] - pieces[:, 1])
     return np.asarray(pieces[length >= MIN_PIECE_M])
+
+
+def _covered(segments: FloatArray, reference: FloatArray, distance: float) -> BoolArray:
+    """Segments whose two end points both lie within ``distance`` of one reference segment."""
+    if len(segments) == 0 or len(reference) == 0:
+        return np.zeros(len(segments), dtype=bool)
+    a, b = reference[None, :, :2], reference[None, :, 2:]
+    ab = b - a
+    span = np.maximum(np.einsum("ijk,ijk->ij", ab, ab), 1e-18)
+    near = np.ones((len(segments), len(reference)), dtype=bool)
+    for end in (segments[:, None, :2], segments[:, None, 2:]):
+        t = np.clip(np.einsum("ijk,ijk->ij", end - a, ab) / span, 0.0, 1.0)
+        gap = end - (a + t[..., None] * ab)
+        near &= np.hypot(gap[..., 0], gap[..., 1]) <= distance
+    return np.asarray(near.any(axis=1))
+
+
+def _simplified(vertices: FloatArray, tolerance: float) -> FloatArray:
+    """Douglas-Peucker on the polyline's vertices: the greedy insertion joins each inserted
+    segment to its neighbours, which leaves centimetre zig-zags across a wall seen with
+    noise; vertices within ``tolerance`` of the chord are dropped (the polyline moves by at
+    most ``tolerance``)."""
+    keep = np.zeros(len(vertices), dtype=bool)
+    keep[[0, -1]] = True
+    stack = [(0, len(vertices) - 1)]
+    while stack:
+        first, last = stack.pop()
+        if last - first < 2:
+            continue
+        chord = vertices[last] - vertices[first]
+        span = max(float(np.hypot(*chord)), 1e-12)
+        inner = vertices[first + 1 : last] - vertices[first]
+        distance = np.abs(inner[:, 0] * chord[1] - inner[:, 1] * chord[0]) / span
+        worst = int(np.argmax(distance))
+        if distance[worst] > tolerance:
+            keep[first + 1 + worst] = True
+            stack.extend(((first, first + 1 + worst), (first + 1 + worst, last)))
+    return np.asarray(vertices[keep])
+
+
+def _roughly_straight(members: FloatArray, max_angle: float = np.radians(30.0)) -> bool:
+    """Every member within ``max_angle`` of the axis through the chain's farthest end points."""
+    ends = members.reshape(-1, 2)
+    gap = ends[:, None, :] - ends[None, :, :]
+    i, j = np.unravel_index(int(np.argmax(np.einsum("ijk,ijk->ij", gap, gap))), gap.shape[:2])
+    axis = ends[j] - ends[i]
+    axis = axis / max(float(np.hypot(*axis)), 1e-12)
+    d = members[:, 2:] - members[:, :2]
+    length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)
+    return bool((np.abs(d @ axis) / length >= np.cos(max_angle)).all())
 
 
 def _distance_to_polyline(segments: FloatArray, vertices: FloatArray) -> FloatArray:
@@ -145,11 +206,21 @@ def fuse(
     """
     limit = 3.0 * tolerance if max_distance is None else max_distance
     chain1, chain2, count = matching_chains(segments1, segments2, config, limit)
-    parts = [segments1[chain1 < 0], segments2[chain2 < 0]]
-    owners = [owner1[chain1 < 0], owner2[chain2 < 0]]
+    # An unmatched S2 piece lying along S1 within the fusion distance adds nothing (a corner
+    # sliver or a short piece the matching value ignores); keeping it would grow the map with
+    # every keyframe of the same place.
+    fresh = (chain2 < 0) & ~_covered(segments2, segments1, limit)
+    parts = [segments1[chain1 < 0], segments2[fresh]]
+    owners = [owner1[chain1 < 0], owner2[fresh]]
     for chain in range(count):
         in1, in2 = chain1 == chain, chain2 == chain
         members = np.vstack((segments1[in1], segments2[in2]))
+        if not _roughly_straight(members):
+            # A long curved wall chains into a shape the projection in chain_polyline cannot
+            # order; leave its pieces as they are rather than draw chords through the room.
+            parts.extend((segments1[in1], segments2[in2]))
+            owners.extend((owner1[in1], owner2[in2]))
+            continue
         polyline = chain_polyline(members, tolerance)
         parts.append(polyline)
         owners.append(np.full(len(polyline), int(owner1[in1].min()), dtype=np.int64))

@@ -72,18 +72,19 @@ class LocalMapperConfig:
         unit="",
         doc="a scan is integrated when its match with the last scan overlaps at least "
         "integrate.min_match_value and its net value (overlap minus length seen through the "
-        "other scan's free space) is at least this fraction of the shorter scan's length. "
-        "Lower than integrate.min_match_fraction, which judges unrelated maps: on a sparse "
-        "log consecutive scans share a fifth of their walls; unrelated rooms reach 0.10",
+        "other scan's free space) is at least this fraction of the shorter scan's length. Far "
+        "below integrate.min_match_fraction (which judges unrelated maps): on the sparse logs "
+        "right scan matches go down to 0.1, and an unrelated simulated room reaches 0.10",
         minimum=-1.0,
         maximum=1.0,
     )
     min_cross_support: float = param(
         0.0,
         unit="m",
-        doc="matched length across the weakest direction a scan needs; 0 because INTEGRATE "
-        "places a scan along a bare corridor by free space (where the other scan's beams "
-        "ended), which overlap length cannot see",
+        doc="matched length across the weakest direction a scan match needs. Most wrong scan "
+        "matches on the logs have < 0.1 m, but so do many corridor scans, and every scan set "
+        "aside makes the next match harder (bench/scan_gate.py); with a value > 0 a scan set "
+        "aside for this alone is bridged when the next scan matches it validly",
         minimum=0.0,
     )
     map_refine_limit: float = param(
@@ -155,13 +156,14 @@ class LocalMapper:
         self._velocity: FloatArray | None = None  # T_prev_last per second (x, y, theta)
         # The newest set-aside scan and its best (invalid) T_last_pending, while no scan since
         # was accepted: the next scan's motion through it is one more hypothesis.
-        self._pending: tuple[FloatArray, LaserScanData, FloatArray] | None = None
+        self._pending: tuple[FloatArray, LaserScanData, FloatArray, bool] | None = None
 
     # --- the method -------------------------------------------------------------------------
 
     def add_scan(self, stamp: float, segments: SegmentScan, view: LaserScanData) -> LocalUpdate:
         """Place one scan (its segments and the scan they came from) and extend the map."""
         new = np.asarray(segments.segments, dtype=np.float64).reshape(-1, 4)
+        new = new[np.isfinite(new).all(axis=1)]  # a NaN would never fuse nor leave the map
         integrate_config = self.config.integrate
         if float(lines_of(new).length.sum()) < integrate_config.min_match_value:
             return self._set_aside("too little structure in the scan")
@@ -199,13 +201,14 @@ class LocalMapper:
             )
             if searched.fraction > result.fraction or not self._passes(last, new, result):
                 result = searched
-            if not self._passes(last, new, result) and self._pending is not None:
-                result = self._through_pending(last, new, view, result)
-        if self._passes(last, new, result):
+        accepted = self._passes(last, new, result)
+        if not accepted and self._pending is not None:
+            result, accepted = self._through_pending(last, new, view, result)
+        if accepted:
             # Hold drift down: pull the scan onto the partial map around it (Cox least
             # squares), unless that moves it far from what the scans agreed on.
             result = self._refined_on_map(T_robotmap_last, new, result)
-        if not self._passes(last, new, result):
+        else:
             if self.scans_accepted == 1:
                 # A start that no second scan confirms is not a map (a poor first scan would
                 # otherwise hold the robot forever): start again from this scan.
@@ -215,7 +218,9 @@ class LocalMapper:
                 )
                 self.scans_set_aside += 1
                 return self._start(stamp, new, view)
-            self._pending = (new, view, _pose_triple(result.T_1_2))
+            # Only a match that failed on cross support alone (a corridor) may be bridged.
+            plausible = self._passes(last, new, result, cross=0.0)
+            self._pending = (new, view, _pose_triple(result.T_1_2), plausible)
             return self._set_aside("no valid match", result.value, result.fraction)
         T_last_new = _pose_triple(result.T_1_2)
         T_robotmap_new = se2.pose_from_matrix(
@@ -245,15 +250,24 @@ class LocalMapper:
 
     def _through_pending(
         self, last: FloatArray, new: FloatArray, view: LaserScanData, result: MatchResult
-    ) -> MatchResult:
-        """After a set-aside scan: the motion through it (last -> pending -> new), when the new
-        scan validly matches the pending one, judged against the last scan like any other."""
+    ) -> tuple[MatchResult, bool]:
+        """After a set-aside scan P: the motion last -> P -> new, and whether it is accepted.
+
+        Accepted when the new scan validly matches P and P's own match with the last scan
+        failed on cross support alone (a corridor, where the offset along the walls rests on
+        free space): one weak link is bridged by a strong one, instead of losing the robot
+        for good as it drives out of the last scan's view. Otherwise the composed motion is
+        only one more candidate, judged against the last scan like any other.
+        """
         assert self._pending is not None
-        segments_p, view_p, T_last_pending = self._pending
+        segments_p, view_p, T_last_pending, plausible = self._pending
         via = integrate(segments_p, new, self.config.integrate, views=(view_p, view))
         if not self._passes(segments_p, new, via):
-            return result
+            return result, False
         composed = _compose(T_last_pending, _pose_triple(via.T_1_2))
+        if plausible:
+            T_1_2 = np.array([composed[2], composed[0], composed[1]])
+            return dataclasses.replace(via, T_1_2=T_1_2), True
         judged = integrate(
             last,
             new,
@@ -262,7 +276,8 @@ class LocalMapper:
             extra_hypotheses=_as_hypotheses([composed]),
             views=(self._last_view, view),
         )
-        return judged if judged.fraction > result.fraction else result
+        best = judged if judged.fraction > result.fraction else result
+        return best, self._passes(last, new, best)
 
     def _refined_on_map(
         self, T_robotmap_last: FloatArray, new: FloatArray, result: MatchResult
@@ -280,6 +295,19 @@ class LocalMapper:
         ):
             return result
         return dataclasses.replace(result, T_1_2=refined)
+
+    def snapshot(self) -> dict[str, object]:
+        """The mapper's state (containers and arrays copied one level deep, cheap: a few
+        arrays and lists), so a caller can undo a scan that failed half-way."""
+        return {
+            name: value.copy() if isinstance(value, (list, dict, set, np.ndarray)) else value
+            for name, value in vars(self).items()
+        }
+
+    def restore(self, saved: dict[str, object]) -> None:
+        """Put back a :meth:`snapshot`."""
+        vars(self).clear()
+        vars(self).update(saved)
 
     # --- the partial map --------------------------------------------------------------------
 
@@ -310,8 +338,8 @@ class LocalMapper:
 
     # --- steps ------------------------------------------------------------------------------
 
-    def _near(self, T_robotmap_laser: FloatArray) -> BoolArray:
-        """Which map segments pass within ``submap_radius`` of the laser's position."""
+    def _near(self, T_robotmap_laser: FloatArray, radius: float | None = None) -> BoolArray:
+        """Which map segments pass within ``radius`` (default ``submap_radius``) of the laser."""
         segments = self._map_segments
         x, y = float(T_robotmap_laser[0]), float(T_robotmap_laser[1])
         distance = point_segment_distance(
@@ -322,7 +350,8 @@ class LocalMapper:
             segments[:, 2],
             segments[:, 3],
         )
-        return np.asarray(distance <= self.config.submap_radius)
+        limit = self.config.submap_radius if radius is None else radius
+        return np.asarray(distance <= limit)
 
     def _submap(self, T_robotmap_last: FloatArray) -> FloatArray:
         """Map segments within ``submap_radius`` of the last pose, in the last scan's frame."""
@@ -363,7 +392,13 @@ class LocalMapper:
     def _fuse(self, placed: FloatArray, index: int, T_robotmap_new: FloatArray) -> None:
         """Alg. 5 between the map near the new keyframe and the keyframe's segments."""
         segments, owner = self._map_segments, self._map_owner
-        near = self._near(T_robotmap_new)
+        # Candidates: map segments near any placed one (the laser sees beyond submap_radius).
+        reach = float(
+            np.hypot(placed[:, 0::2] - T_robotmap_new[0], placed[:, 1::2] - T_robotmap_new[1]).max(
+                initial=0.0
+            )
+        )
+        near = self._near(T_robotmap_new, max(self.config.submap_radius, reach) + 0.5)
         fused, fused_owner = fuse(
             segments[near],
             owner[near],
@@ -375,14 +410,21 @@ class LocalMapper:
         self._map_segments = np.vstack((segments[~near], fused))
         self._map_owner = np.concatenate((owner[~near], fused_owner))
 
-    def _passes(self, reference: FloatArray, new: FloatArray, result: MatchResult) -> bool:
-        """The validity threshold of a scan against a reference (see ``min_match_fraction``)."""
+    def _passes(
+        self,
+        reference: FloatArray,
+        new: FloatArray,
+        result: MatchResult,
+        cross: float | None = None,
+    ) -> bool:
+        """The validity threshold of a scan against a reference (``min_match_fraction``,
+        ``min_cross_support`` unless ``cross`` replaces it)."""
         integrate_config = self.config.integrate
+        needed = self.config.min_cross_support if cross is None else cross
         return (
             result.value >= integrate_config.min_match_value
             and result.fraction >= self.config.min_match_fraction
-            and cross_support(reference, new, result.T_1_2, integrate_config)
-            >= self.config.min_cross_support
+            and cross_support(reference, new, result.T_1_2, integrate_config) >= needed
         )
 
     def _set_aside(self, reason: str, value: float = 0.0, fraction: float = 0.0) -> LocalUpdate:

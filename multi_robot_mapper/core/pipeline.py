@@ -154,6 +154,7 @@ def _run_local(
     trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
     per_robot: dict[str, dict[str, object]] = {}
     scan_times: list[float] = []
+    mapping_errors = 0
     for index, robot in enumerate(robots):
         mapper = LocalMapper(config)
         stamps: list[float] = []
@@ -171,8 +172,15 @@ def _run_local(
             finally:
                 front_end_s += time.perf_counter() - t0
             t1 = time.perf_counter()
-            update = mapper.add_scan(item.stamp, segments, item.scan)
-            elapsed = time.perf_counter() - t1
+            saved = mapper.snapshot()
+            try:
+                update = mapper.add_scan(item.stamp, segments, item.scan)
+            except Exception:  # as the node does: count it, undo the scan, keep the map
+                mapper.restore(saved)
+                mapping_errors += 1
+                continue
+            finally:
+                elapsed = time.perf_counter() - t1
             mapping_s += elapsed
             scan_times.append(elapsed)
             if update.restarted:  # the scans placed before are no longer in this map
@@ -205,6 +213,7 @@ def _run_local(
         "segments": int(sum(len(s) for s in segment_sets)),
         "front_end_s": round(front_end_s, 4),
         "local_mapping_s": round(mapping_s, 4),
+        "mapping_errors": mapping_errors,
         "local_mapping_median_ms": round(float(np.median(times)) * 1e3, 3),
         "local_mapping_p95_ms": round(float(np.percentile(times, 95)) * 1e3, 3),
         "robots": per_robot,

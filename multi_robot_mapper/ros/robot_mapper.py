@@ -142,11 +142,11 @@ class RobotMapper(Node):
                 width=self.config.segment_marker_width,
             )
         )
-        saved = _snapshot(self.mapper)
+        saved = self.mapper.snapshot()
         try:
             update = self.mapper.add_scan(stamp, segments, view)
         except Exception:  # the map built so far stays; the next scan is tried as usual
-            _restore(self.mapper, saved)  # undo whatever the failed scan half-changed
+            self.mapper.restore(saved)  # undo whatever the failed scan half-changed
             self.mapping_errors += 1
             self.last_update = None
             self.warnings.warn(
@@ -201,21 +201,6 @@ class RobotMapper(Node):
         marker = keyframe_marker(keyframe, header, self.config.segment_marker_width)
         self._marker_cache[keyframe.index] = (key, marker)
         return marker
-
-
-def _snapshot(obj: object) -> dict[str, object]:
-    """The attributes of ``obj``, containers and arrays copied one level deep (cheap: the
-    mapper holds a few arrays and lists; the fused map is a few thousand rows)."""
-    return {
-        name: value.copy() if isinstance(value, (list, dict, set, np.ndarray)) else value
-        for name, value in vars(obj).items()
-    }
-
-
-def _restore(obj: object, saved: dict[str, object]) -> None:
-    """Put back the attributes taken by :func:`_snapshot`."""
-    vars(obj).clear()
-    vars(obj).update(saved)
 
 
 def main(args: list[str] | None = None) -> int:

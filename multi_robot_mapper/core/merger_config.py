@@ -1,0 +1,89 @@
+"""Configuration of the map merger: everything ``map_merger`` reads."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from multi_robot_mapper.core.config import ConfigError, param, validate
+from multi_robot_mapper.core.merging import MergeConfig
+
+METHODS = ("pivot", "ffs")
+IMPLEMENTED_METHODS = ("pivot",)
+
+
+@dataclasses.dataclass(frozen=True)
+class MapMergerConfig:
+    """Map merger node. ROS parameter names are the dotted field names (``merge.*``,
+    ``merge.integrate.*``)."""
+
+    robots: str = param(
+        "",
+        unit="",
+        doc="comma-separated robot namespaces to merge (e.g. 'robot1,robot2'); empty: "
+        "discover every '<namespace>/partial_map' topic as it appears",
+    )
+    discovery_period: float = param(
+        2.0,
+        unit="s",
+        doc="how often the topic list is searched for new '<namespace>/partial_map' topics "
+        "(only when robots is empty)",
+        minimum=0.0,
+        maximum=3600.0,
+        exclusive_minimum=True,
+    )
+    merge_period: float = param(
+        1.0,
+        unit="s",
+        doc="how often the partial maps are merged again, when one of them changed",
+        minimum=0.0,
+        maximum=3600.0,
+        exclusive_minimum=True,
+    )
+    map_frame: str = param(
+        "map",
+        unit="",
+        doc="frame of global_map and of every robot frame's pose (the reference robot's map)",
+    )
+    method: str = param(
+        "pivot",
+        unit="",
+        doc="merging method: 'pivot' (INTEGRATE on every pair, spanning tree of the valid "
+        "links) or 'ffs' (Force Field Simulation, not implemented yet: refused at start-up)",
+        choices=METHODS,
+    )
+    marker_width: float = param(
+        0.05,
+        unit="m",
+        doc="line width of the global map's segment markers (visualisation only)",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    warning_period: float = param(
+        10.0,
+        unit="s",
+        doc="the same kind of message (a robot still unmerged, a failed merge) is logged at "
+        "most once per this period",
+        minimum=0.0,
+    )
+    merge: MergeConfig = dataclasses.field(default_factory=MergeConfig)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    def robot_names(self) -> list[str]:
+        """The ``robots`` list as robot names: namespaces without leading/trailing slashes,
+        blanks and repeats dropped, in the given order."""
+        names: list[str] = []
+        for item in self.robots.split(","):
+            name = item.strip().strip("/")
+            if name and name not in names:
+                names.append(name)
+        return names
+
+    def require_implemented(self) -> None:
+        """Raise :class:`ConfigError` when ``method`` names a method not implemented yet."""
+        if self.method not in IMPLEMENTED_METHODS:
+            raise ConfigError(
+                f"parameter 'method' = {self.method!r}: Force Field Simulation is not "
+                f"implemented yet; use one of: {', '.join(IMPLEMENTED_METHODS)}"
+            )

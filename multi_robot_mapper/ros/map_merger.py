@@ -1,0 +1,427 @@
+"""``map_merger``: the robots' partial maps in; one global map and every robot frame in it out.
+
+Robots come from the ``robots`` parameter (namespaces) or, when it is empty, from the topic
+list: every ``<ns>/partial_map`` that appears is a robot named ``<ns>`` (no leading slash).
+
+Topics (the merger's own are relative to its namespace):
+  sub ``/<ns>/partial_map``   visualization_msgs/MarkerArray, reliable + transient local,
+                              depth 1 (what robot_mapper offers: a late merger gets the map)
+  sub ``/<ns>/pose``          geometry_msgs/PoseStamped, the robot's current pose in its map
+  pub ``global_map``          visualization_msgs/MarkerArray in ``map_frame``: a DELETEALL
+                              marker, then the fused segments as one LINE_LIST per robot
+                              (coloured per robot), each merged robot's current pose as an
+                              ARROW and its name as TEXT_VIEW_FACING; stamped with the newest
+                              input (partial map or pose) it shows, never now(); reliable,
+                              transient local, depth 1
+  pub ``robot_frames/<ns>``   geometry_msgs/PoseStamped: T_map_robotmap, the robot's map frame
+                              in ``map_frame``, for merged robots only (an unmerged robot gets
+                              nothing, and a throttled log line); reliable, transient local
+  TF ``map_frame`` -> ``<ns>/map`` for merged robots, when ``tf2_ros`` can be imported
+                              (static broadcaster, stamped from the input)
+
+Merging runs on a timer in its own callback group, so a long merge never blocks the
+subscriptions (spin with a MultiThreadedExecutor, as :func:`main` does); it re-merges only
+when some partial map changed and passes the previous result on (pair results reused, the
+tree and the reference kept). Parameters: the fields of :class:`MapMergerConfig`
+(``config/map_merger.yaml``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import threading
+import traceback
+from typing import Any
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped, TransformStamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.config import ConfigError, config_from_flat, field_specs
+from multi_robot_mapper.core.merger_config import MapMergerConfig
+from multi_robot_mapper.core.merging import MergeResult, merge
+from multi_robot_mapper.io.messages import (
+    keyframes_from_markers,
+    pose_from_msg,
+    pose_msg,
+    pose_stamped,
+    segments_marker,
+)
+from multi_robot_mapper.ros.parameters import declare_config
+from multi_robot_mapper.ros.throttle import ThrottledWarnings
+
+try:  # PyPI has no tf2_ros; with an apt-installed ROS 2 the frames go to TF as well.
+    from tf2_ros import StaticTransformBroadcaster
+except ImportError:  # pragma: no cover - depends on the installation
+    StaticTransformBroadcaster = None
+
+FloatArray = np.typing.NDArray[np.float64]
+
+LATCHED_QOS = QoSProfile(
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+POSE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+PARTIAL_MAP_TYPE = "visualization_msgs/msg/MarkerArray"
+
+# Tableau-like colours, one per robot (by the robot's place in the sorted list of robots).
+PALETTE = (
+    (0.12, 0.47, 0.71),
+    (1.00, 0.50, 0.05),
+    (0.17, 0.63, 0.17),
+    (0.84, 0.15, 0.16),
+    (0.58, 0.40, 0.74),
+    (0.55, 0.34, 0.29),
+    (0.89, 0.47, 0.76),
+    (0.50, 0.50, 0.50),
+    (0.74, 0.74, 0.13),
+    (0.09, 0.75, 0.81),
+)
+
+
+def robot_color(index: int) -> tuple[float, float, float, float]:
+    """The colour of the ``index``-th robot (RGBA)."""
+    r, g, b = PALETTE[index % len(PALETTE)]
+    return (r, g, b, 1.0)
+
+
+def _key(stamp: Time) -> tuple[int, int]:
+    return (int(stamp.sec), int(stamp.nanosec))
+
+
+def newest(stamps: list[Time]) -> Time:
+    """The latest of ``stamps`` (a zero stamp when there are none)."""
+    return max(stamps, key=_key) if stamps else Time()
+
+
+def partial_map_segments(msg: MarkerArray) -> FloatArray:
+    """A ``partial_map`` MarkerArray as ``(N, 4)`` segments in the robot's map frame: each
+    keyframe's segments moved by the keyframe's pose."""
+    pieces = [
+        se2.transform_segments(se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments)
+        for kf in keyframes_from_markers(msg)
+        if len(kf.segments)
+    ]
+    return np.vstack(pieces) if pieces else np.zeros((0, 4))
+
+
+@dataclasses.dataclass
+class RobotState:
+    """What the merger knows of one robot (guarded by the node's lock)."""
+
+    name: str
+    segments: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 4)))
+    map_stamp: Time | None = None  # header stamp of the last partial map
+    map_frame: str = ""  # the robot's own map frame (the partial map's frame_id)
+    version: int = 0  # partial maps received
+    pose: FloatArray | None = None  # T_robotmap_laser of the newest pose message
+    pose_stamp: Time | None = None
+    subscriptions: list[Subscription] = dataclasses.field(default_factory=list)
+
+
+class MapMerger(Node):
+    """Merges the partial maps of robots whose relative poses are unknown."""
+
+    def __init__(self, node_name: str = "map_merger", **kwargs: object) -> None:
+        super().__init__(node_name, **kwargs)  # type: ignore[arg-type]
+        self.config = declare_config(self, MapMergerConfig)
+        self.config.require_implemented()
+        self.notes = ThrottledWarnings(self.get_logger().info, self.config.warning_period)
+        self.warnings = ThrottledWarnings(self.get_logger().warning, self.config.warning_period)
+        self._lock = threading.Lock()
+        self.robots: dict[str, RobotState] = {}
+        self.result: MergeResult | None = None
+        self.merges = 0  # merge() runs
+        self.merge_errors = 0
+        self.global_maps_published = 0
+        self._merged_versions: dict[str, int] = {}  # partial map versions of the last merge
+        self._shown: tuple[object, ...] | None = None  # what the last global_map showed
+        self._input_groups = MutuallyExclusiveCallbackGroup()
+        self._merge_group = MutuallyExclusiveCallbackGroup()
+        self._map_pub = self.create_publisher(MarkerArray, "global_map", LATCHED_QOS)
+        self._frame_pubs: dict[str, Publisher] = {}
+        self._tf = StaticTransformBroadcaster(self) if StaticTransformBroadcaster else None
+        self._transforms: dict[str, TransformStamped] = {}
+        self._discovery_timer = self.create_timer(
+            self.config.discovery_period, self.discover, callback_group=self._input_groups
+        )
+        self._merge_timer = self.create_timer(
+            self.config.merge_period, self.merge_now, callback_group=self._merge_group
+        )
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.discover()
+
+    # --- Robots and their inputs ------------------------------------------------------------
+
+    def discover(self) -> list[str]:
+        """Subscribe to every robot not yet known (from ``robots``, or from the topic list
+        when it is empty); returns the robots added."""
+        wanted = self.config.robot_names()
+        if not wanted:
+            suffix = "/partial_map"
+            wanted = sorted(
+                name[: -len(suffix)].strip("/")
+                for name, types in self.get_topic_names_and_types()
+                if name.endswith(suffix) and PARTIAL_MAP_TYPE in types
+            )
+        added = [name for name in wanted if name and name not in self.robots]
+        for name in added:
+            self._add_robot(name)
+        return added
+
+    def _add_robot(self, name: str) -> None:
+        state = RobotState(name)
+        with self._lock:
+            self.robots[name] = state
+        state.subscriptions = [
+            self.create_subscription(
+                MarkerArray,
+                f"/{name}/partial_map",
+                lambda msg, n=name: self._on_partial_map(n, msg),
+                LATCHED_QOS,
+                callback_group=self._input_groups,
+            ),
+            self.create_subscription(
+                PoseStamped,
+                f"/{name}/pose",
+                lambda msg, n=name: self._on_pose(n, msg),
+                POSE_QOS,
+                callback_group=self._input_groups,
+            ),
+        ]
+        self.get_logger().info(f"merging robot '{name}' (/{name}/partial_map)")
+
+    def _on_partial_map(self, name: str, msg: MarkerArray) -> None:
+        try:
+            segments = partial_map_segments(msg)
+        except Exception:
+            self.warnings.warn(
+                f"bad_map:{name}",
+                f"partial map of '{name}' ignored after an error:\n{traceback.format_exc()}",
+            )
+            return
+        markers = msg.markers
+        stamp = newest([m.header.stamp for m in markers]) if markers else None
+        with self._lock:
+            state = self.robots[name]
+            state.segments = segments
+            state.map_stamp = stamp
+            state.map_frame = markers[0].header.frame_id if markers else state.map_frame
+            state.version += 1
+
+    def _on_pose(self, name: str, msg: PoseStamped) -> None:
+        pose = pose_from_msg(msg.pose)
+        with self._lock:
+            state = self.robots[name]
+            state.pose = pose
+            state.pose_stamp = msg.header.stamp
+
+    # --- Merging and output -----------------------------------------------------------------
+
+    def merge_now(self) -> bool:
+        """Merge again if some partial map changed, and publish what changed; True when a
+        merge ran."""
+        config = self.config
+        with self._lock:
+            maps = {n: s.segments for n, s in self.robots.items() if len(s.segments)}
+            versions = {n: s.version for n, s in self.robots.items() if len(s.segments)}
+            stamps = {n: s.map_stamp for n, s in self.robots.items() if s.map_stamp is not None}
+            frames = {n: s.map_frame for n, s in self.robots.items()}
+            poses = {
+                n: (s.pose, s.pose_stamp)
+                for n, s in self.robots.items()
+                if s.pose is not None and s.pose_stamp is not None
+            }
+        merged = False
+        if maps and versions != self._merged_versions:
+            reference = config.merge.reference
+            if reference and reference not in maps:
+                self.notes.warn(
+                    "no_reference", f"waiting for the reference robot '{reference}' to send a map"
+                )
+                return False
+            try:
+                self.result = merge(maps, config.merge, previous=self.result)
+            except Exception:
+                self.merge_errors += 1
+                self.warnings.warn(
+                    "merge_error",
+                    f"merge failed (the last global map stays):\n{traceback.format_exc()}",
+                )
+                return False
+            self._merged_versions = versions
+            self.merges += 1
+            merged = True
+        result = self.result
+        if result is None:
+            return merged
+        map_stamp = newest([stamps[r] for r in result.robots if r in stamps])
+        pose_key = tuple(
+            sorted((n, tuple(p.tolist()), _key(t)) for n, (p, t) in poses.items() if p is not None)
+        )
+        shown = (self.merges, config.map_frame, config.marker_width, pose_key)
+        if shown != self._shown:
+            self._publish_global_map(result, map_stamp, poses)
+            self._shown = shown
+        if merged:
+            self._publish_frames(result, map_stamp, frames)
+        for robot in result.unmerged:
+            self.notes.warn(
+                f"unmerged:{robot}",
+                f"robot '{robot}' is unmerged: its map has no valid link to the reference "
+                f"'{result.reference}' yet (nothing published for it)",
+            )
+        return merged
+
+    def _publish_global_map(
+        self,
+        result: MergeResult,
+        map_stamp: Time,
+        poses: dict[str, tuple[FloatArray | None, Time | None]],
+    ) -> None:
+        frame = self.config.map_frame
+        width = self.config.marker_width
+        shown_poses: dict[str, FloatArray] = {}
+        pose_stamps: list[Time] = []
+        for robot, (pose, stamp) in poses.items():
+            T_map_robot = result.matrix(robot)
+            if T_map_robot is None or pose is None or stamp is None:
+                continue
+            T_robot_laser = se2.matrix_from_pose(*pose)
+            shown_poses[robot] = np.array(se2.pose_from_matrix(T_map_robot @ T_robot_laser))
+            pose_stamps.append(stamp)
+        header = Header(frame_id=frame, stamp=newest([map_stamp, *pose_stamps]))
+        clear = Marker(header=header, action=Marker.DELETEALL)
+        markers = [clear]
+        for index in range(len(result.robots)):
+            own = result.segments[result.segment_robot == index]
+            if len(own):
+                markers.append(
+                    segments_marker(own, header, "global_map", width, robot_color(index), index)
+                )
+        for index, robot in enumerate(result.robots):
+            T_map_robot = result.matrix(robot)
+            if T_map_robot is None:
+                continue
+            where = shown_poses.get(robot, np.array(se2.pose_from_matrix(T_map_robot)))
+            color = robot_color(index)
+            if robot in shown_poses:
+                arrow = Marker(header=header, ns="robot_poses", id=index)
+                arrow.type = Marker.ARROW
+                arrow.action = Marker.ADD
+                arrow.pose = pose_msg(where.tolist())
+                arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.6, 0.12, 0.12
+                arrow.color = ColorRGBA(r=color[0], g=color[1], b=color[2], a=color[3])
+                markers.append(arrow)
+            text = Marker(header=header, ns="robot_names", id=index)
+            text.type = Marker.TEXT_VIEW_FACING
+            text.action = Marker.ADD
+            text.pose = pose_msg(where.tolist())
+            text.pose.position.z = 0.6
+            text.scale.z = 0.4
+            text.color = ColorRGBA(r=color[0], g=color[1], b=color[2], a=color[3])
+            text.text = robot
+            markers.append(text)
+        self._map_pub.publish(MarkerArray(markers=markers))
+        self.global_maps_published += 1
+
+    def _publish_frames(self, result: MergeResult, stamp: Time, frames: dict[str, str]) -> None:
+        map_frame = self.config.map_frame
+        for robot in result.robots:
+            pose = result.placements.get(robot)
+            if pose is None:
+                self._transforms.pop(robot, None)  # no longer placed: out of TF from now on
+                continue
+            publisher = self._frame_pubs.get(robot)
+            if publisher is None:
+                publisher = self.create_publisher(PoseStamped, f"robot_frames/{robot}", LATCHED_QOS)
+                self._frame_pubs[robot] = publisher
+            publisher.publish(pose_stamped(pose, stamp, map_frame))
+            if self._tf is not None:
+                transform = TransformStamped()
+                transform.header = Header(frame_id=map_frame, stamp=stamp)
+                transform.child_frame_id = frames.get(robot) or f"{robot}/map"
+                placed = pose_msg(pose)
+                transform.transform.translation.x = placed.position.x
+                transform.transform.translation.y = placed.position.y
+                transform.transform.rotation = placed.orientation
+                self._transforms[robot] = transform
+        if self._tf is not None and self._transforms:
+            self._tf.sendTransform(list(self._transforms.values()))
+
+    # --- Parameters -------------------------------------------------------------------------
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        values: dict[str, Any] = {
+            spec.name: self.get_parameter(spec.name).value for spec in field_specs(MapMergerConfig)
+        }
+        values.update({p.name: p.value for p in params})
+        try:
+            config = config_from_flat(MapMergerConfig, values)
+            config.require_implemented()
+        except ConfigError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self._apply_config(config)
+        return SetParametersResult(successful=True)
+
+    def _apply_config(self, config: MapMergerConfig) -> None:
+        old = self.config
+        self.config = config
+        self.notes.period = self.warnings.period = config.warning_period
+        if config.discovery_period != old.discovery_period:
+            self.destroy_timer(self._discovery_timer)
+            self._discovery_timer = self.create_timer(
+                config.discovery_period, self.discover, callback_group=self._input_groups
+            )
+        if config.merge_period != old.merge_period:
+            self.destroy_timer(self._merge_timer)
+            self._merge_timer = self.create_timer(
+                config.merge_period, self.merge_now, callback_group=self._merge_group
+            )
+        if config.merge != old.merge:
+            self._merged_versions = {}  # merge again with the new settings
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console entry point (``ros2 run multi_robot_mapper map_merger``)."""
+    rclpy.init(args=args)
+    try:
+        node = MapMerger()
+    except ConfigError as exc:
+        print(f"map_merger: invalid parameters: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    executor = MultiThreadedExecutor(num_threads=2)
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:
+        # A SIGTERM can shut the context down while spin() builds its wait set (an rclpy race);
+        # that is a normal shutdown. Anything while the context is still valid is a real error.
+        if rclpy.ok():
+            raise
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,341 @@
+"""A real map_merger with real robot_mapper nodes, in-process: simulated scans go out on
+``/robotK/scan``, the merger discovers the robots' ``partial_map`` topics, and the global map
+and the robot frames come back over real topics.
+
+One drive is simulated and fed once (module fixture): robots 1-3 drive partly overlapping
+stretches of the office world, robot 4 drives through another building that shares nothing
+with it. The merger runs on its own MultiThreadedExecutor in a thread, as ``main()`` runs it.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import LaserScan
+from visualization_msgs.msg import Marker, MarkerArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.config import ConfigError
+from multi_robot_mapper.core.simulation import (
+    SIM_START_S,
+    LaserModel,
+    SimulatedRobot,
+    arc,
+    drive_path,
+    polygon,
+    simulate_robots,
+    simulate_scan,
+)
+from multi_robot_mapper.io.messages import (
+    pose_from_msg,
+    scan_to_msg,
+    seconds_from_stamp,
+    segments_from_marker,
+    stamp_from_seconds,
+)
+from multi_robot_mapper.ros.map_merger import LATCHED_QOS, MapMerger, main
+from multi_robot_mapper.ros.robot_mapper import RobotMapper
+from multi_robot_mapper.ros.testing import default_domain_id, isolated_context, spin_until
+
+pytestmark = pytest.mark.ros
+
+OFFICE_ROBOTS = ("robot1", "robot2", "robot3")
+STRANGER = "robot4"
+DURATION = 12.0  # s of driving per robot (about 10 m; neighbours share about 3 m of it)
+EVERY = 4  # every 4th scan of the 40 Hz drive: 10 Hz, as test_robot_mapper_node feeds it
+TIME_LIMIT = 45.0  # s from the first scan until every office robot is merged
+
+
+def stranger_run(duration: float, seed: int) -> SimulatedRobot:
+    """A drive through another building: a slanted hall with a round end, a pillar, crates.
+
+    Not the built-in ``rooms`` or ``corridors`` worlds: those are drawn on the same grid of
+    right angles as the office, and segment overlap alone cannot tell look-alike rectilinear
+    buildings apart (see core/merging.py's notes; the merger links them).
+    """
+    walls = np.vstack(
+        (
+            polygon([(0.0, 0.0), (9.0, -2.0), (14.0, 3.0)], closed=False),
+            arc((11.0, 7.0), 5.0, -0.93, 2.2, pieces=20),
+            polygon([(8.0, 11.2), (1.5, 9.0), (-1.0, 4.5), (0.0, 0.0)], closed=False),
+            arc((6.0, 4.0), 0.5, 0.0, 2 * np.pi, pieces=10),
+            polygon([(2.0, 2.0), (3.2, 1.4), (3.7, 2.4), (2.5, 3.0)]),
+            polygon([(9.0, 6.0), (10.5, 7.1), (9.8, 8.0), (8.3, 6.9)]),
+        )
+    )
+    laser = LaserModel()
+    route = np.array([(2.5, 5.5), (5.0, 6.5), (8.0, 5.0), (11.0, 3.5)])
+    poses = drive_path(route, 0.8, laser.rate, duration)
+    rng = np.random.default_rng(seed)
+    stamps = SIM_START_S + np.arange(len(poses), dtype=np.float64) / laser.rate
+    scans = [simulate_scan(walls, (p[0], p[1], p[2]), laser, rng) for p in poses]
+    return SimulatedRobot(stamps=stamps, T_world_laser=poses, scans=scans)
+
+
+@dataclass
+class Outcome:
+    """What came out of the one simulated drive."""
+
+    runs: dict[str, SimulatedRobot]
+    merger: MapMerger
+    mappers: dict[str, RobotMapper]
+    global_maps: list[MarkerArray]
+    frames: dict[str, list[PoseStamped]]
+    logged: list[str]
+    seconds_to_merged: float | None
+    map_stamps: dict[str, tuple[int, int]] = field(default_factory=dict)
+
+
+def _stamp(msg_stamp: object) -> tuple[int, int]:
+    return (msg_stamp.sec, msg_stamp.nanosec)  # type: ignore[attr-defined]
+
+
+@pytest.fixture(scope="module")
+def outcome() -> Iterator[Outcome]:
+    office = simulate_robots("office", 3, LaserModel(), seed=0, duration=DURATION)
+    runs = dict(zip(OFFICE_ROBOTS, office, strict=True))
+    runs[STRANGER] = stranger_run(DURATION, seed=0)
+    with isolated_context() as context:
+        fast_map = [Parameter("partial_map_period", value=0.5)]
+        mappers = {
+            name: RobotMapper(context=context, namespace=name, parameter_overrides=fast_map)
+            for name in runs
+        }
+        merger = MapMerger(
+            context=context,
+            parameter_overrides=[
+                Parameter("discovery_period", value=0.3),
+                Parameter("merge_period", value=0.5),
+            ],
+        )
+        logged: list[str] = []
+        merger.notes.log = logged.append
+        driver = Node("driver", context=context)
+        scan_pubs = {
+            name: driver.create_publisher(LaserScan, f"/{name}/scan", qos_profile_sensor_data)
+            for name in runs
+        }
+        global_maps: list[MarkerArray] = []
+        driver.create_subscription(MarkerArray, "/global_map", global_maps.append, LATCHED_QOS)
+        frames: dict[str, list[PoseStamped]] = {name: [] for name in runs}
+        for name in runs:
+            driver.create_subscription(
+                PoseStamped, f"/robot_frames/{name}", frames[name].append, LATCHED_QOS
+            )
+        executor = SingleThreadedExecutor(context=context)
+        for node in (*mappers.values(), driver):
+            executor.add_node(node)
+        merger_executor = MultiThreadedExecutor(num_threads=2, context=context)
+        merger_executor.add_node(merger)
+        thread = threading.Thread(target=merger_executor.spin, daemon=True)
+        thread.start()
+        try:
+            assert spin_until(
+                executor,
+                lambda: all(p.get_subscription_count() > 0 for p in scan_pubs.values()),
+                timeout=10.0,
+            )
+            started = time.monotonic()
+            merged_at: list[float] = []
+
+            def all_office_merged() -> bool:
+                if not merged_at and all(frames[name] for name in OFFICE_ROBOTS):
+                    merged_at.append(time.monotonic() - started)
+                return bool(merged_at)
+
+            count = len(office[0].scans)
+            for i in range(0, count, EVERY):
+                before = {name: m.scans_received for name, m in mappers.items()}
+                for name, run in runs.items():
+                    stamp = stamp_from_seconds(run.stamps[i])
+                    scan_pubs[name].publish(
+                        scan_to_msg(run.scans[i], f"{name}/laser", stamp, 0.025)
+                    )
+                assert spin_until(
+                    executor,
+                    lambda b=before: all(m.scans_received > b[n] for n, m in mappers.items()),
+                    timeout=5.0,
+                )
+                all_office_merged()
+
+            def settled() -> bool:
+                """Every final partial map published, received and merged."""
+                all_office_merged()
+                local_done = all(m.published_version == m.mapper.version for m in mappers.values())
+                with merger._lock:
+                    versions = {n: s.version for n, s in merger.robots.items()}
+                    received = all(
+                        len(s.segments)
+                        and s.map_stamp is not None
+                        and seconds_from_stamp(s.map_stamp)
+                        == max(kf.stamp for kf in mappers[n].mapper.keyframes())
+                        for n, s in merger.robots.items()
+                    )
+                return (
+                    local_done
+                    and received
+                    and set(versions) == set(runs)
+                    and merger._merged_versions == versions
+                    and bool(merged_at)
+                )
+
+            spin_until(
+                executor, settled, timeout=max(5.0, TIME_LIMIT - (time.monotonic() - started))
+            )
+            spin_until(executor, lambda: False, timeout=1.0)  # the last messages arrive
+        finally:
+            merger_executor.shutdown()
+            thread.join(timeout=10.0)
+            executor.shutdown()
+        result = Outcome(
+            runs=runs,
+            merger=merger,
+            mappers=mappers,
+            global_maps=global_maps,
+            frames=frames,
+            logged=logged,
+            seconds_to_merged=merged_at[0] if merged_at else None,
+        )
+        with merger._lock:
+            result.map_stamps = {
+                n: _stamp(s.map_stamp) for n, s in merger.robots.items() if s.map_stamp
+            }
+        yield result
+        for node in (*mappers.values(), merger, driver):
+            node.destroy_node()
+
+
+def truth(run: SimulatedRobot) -> np.ndarray:
+    """T_world_robotmap: the robot's map frame is its laser at the first scan."""
+    return se2.matrix_from_pose(*run.T_world_laser[0])
+
+
+def test_every_office_robot_is_merged_in_time_where_the_truth_puts_it(outcome: Outcome) -> None:
+    merger = outcome.merger
+    assert outcome.seconds_to_merged is not None, (merger.result, outcome.logged)
+    assert outcome.seconds_to_merged < TIME_LIMIT
+    result = merger.result
+    assert result is not None and result.reference in OFFICE_ROBOTS
+    assert set(merger.robots) == {*OFFICE_ROBOTS, STRANGER}  # all four discovered
+    T_world_map = truth(outcome.runs[result.reference])
+    for name in OFFICE_ROBOTS:
+        message = outcome.frames[name][-1]
+        assert message.header.frame_id == "map"
+        got = pose_from_msg(message.pose)
+        want = se2.pose_from_matrix(se2.invert(T_world_map) @ truth(outcome.runs[name]))
+        assert math.hypot(got[0] - want[0], got[1] - want[1]) < 0.10, (name, got, want)
+        assert abs(math.remainder(got[2] - want[2], math.tau)) < math.radians(1.0), name
+        np.testing.assert_allclose(got, result.placements[name], atol=1e-9)
+    assert result.placements[result.reference] == (0.0, 0.0, 0.0)
+    assert merger.merges >= 1 and merger.merge_errors == 0
+
+
+def test_the_global_map_clears_then_shows_segments_poses_and_names(outcome: Outcome) -> None:
+    assert outcome.global_maps
+    array = outcome.global_maps[-1]
+    first = array.markers[0]
+    assert first.action == Marker.DELETEALL
+    for marker in array.markers:
+        assert marker.header.frame_id == "map"
+        assert marker.header.stamp == first.header.stamp
+    # Stamped from the input (simulated scans start in 2001), never from now().
+    stamp = seconds_from_stamp(first.header.stamp)
+    newest_scan = max(run.stamps[-1] for run in outcome.runs.values())
+    assert SIM_START_S <= stamp <= newest_scan
+    assert _stamp(first.header.stamp) >= max(outcome.map_stamps.values())
+    lines = [m for m in array.markers[1:] if m.type == Marker.LINE_LIST]
+    assert len(lines) == 3 and all(m.ns == "global_map" for m in lines)
+    colors = {(m.color.r, m.color.g, m.color.b) for m in lines}
+    assert len(colors) == 3  # one colour per robot
+    segments = np.vstack([segments_from_marker(m) for m in lines])
+    assert len(segments) >= 100
+    names = {m.text for m in array.markers if m.type == Marker.TEXT_VIEW_FACING}
+    assert names == set(OFFICE_ROBOTS)
+    arrows = [m for m in array.markers[1:] if m.type == Marker.ARROW]
+    assert len(arrows) == 3
+    # Each arrow is its robot's newest pose, placed in map: near where the truth has it.
+    result = outcome.merger.result
+    assert result is not None
+    T_world_map = truth(outcome.runs[result.reference])
+    for arrow in arrows:
+        robot = result.robots[arrow.id]
+        run = outcome.runs[robot]
+        got = pose_from_msg(arrow.pose)
+        distances = [
+            math.hypot(*(se2.invert(T_world_map) @ np.array([x, y, 1.0]))[:2] - got[:2])
+            for x, y, _ in run.T_world_laser[-EVERY * 3 :]
+        ]
+        assert min(distances) < 0.2, (robot, got)
+
+
+def test_a_robot_whose_map_never_overlaps_ends_unmerged(outcome: Outcome) -> None:
+    merger = outcome.merger
+    state = merger.robots[STRANGER]
+    assert len(state.segments) >= 50  # it did send a map...
+    assert merger.result is not None and merger.result.placements[STRANGER] is None
+    said = [line for line in outcome.logged if f"'{STRANGER}' is unmerged" in line]
+    assert said and len(said) <= 5  # ...it is logged as unmerged, throttled...
+    array = outcome.global_maps[-1]
+    assert STRANGER not in {m.text for m in array.markers}  # ...and not drawn
+    assert len({m.id for m in array.markers[1:] if m.type == Marker.LINE_LIST}) == 3
+
+
+@pytest.mark.xfail(
+    reason="core merge() accepts false links to the stranger's map at some intermediate "
+    "stages of the growing maps (valid, fraction 0.4-0.7, tight 0.18-0.28), so a frame is "
+    "published for it for a while; the final merge refuses it",
+    strict=False,
+)
+def test_a_robot_whose_map_never_overlaps_never_gets_a_frame(outcome: Outcome) -> None:
+    assert outcome.frames[STRANGER] == []
+
+
+def test_listed_robots_are_subscribed_without_discovery(ros_context) -> None:
+    node = MapMerger(
+        context=ros_context, parameter_overrides=[Parameter("robots", value="/alpha, beta/")]
+    )
+    try:
+        assert sorted(node.robots) == ["alpha", "beta"]
+        topics = {s.topic_name for state in node.robots.values() for s in state.subscriptions}
+        assert topics == {"/alpha/partial_map", "/alpha/pose", "/beta/partial_map", "/beta/pose"}
+        assert node.merge_now() is False  # no map yet: nothing to merge, nothing published
+        assert node.global_maps_published == 0
+    finally:
+        node.destroy_node()
+
+
+def test_method_ffs_is_refused_and_runtime_changes_are_validated(ros_context) -> None:
+    with pytest.raises(ConfigError, match=r"ffs.*not implemented yet"):
+        MapMerger(context=ros_context, parameter_overrides=[Parameter("method", value="ffs")])
+    node = MapMerger(context=ros_context, node_name="merger_two")
+    try:
+        results = node.set_parameters([Parameter("method", value="ffs")])
+        assert not results[0].successful and "not implemented" in results[0].reason
+        results = node.set_parameters([Parameter("merge.link_min_value", value=-1.0)])
+        assert not results[0].successful and "link_min_value" in results[0].reason
+        results = node.set_parameters([Parameter("merge_period", value=0.25)])
+        assert results[0].successful and node._merge_timer.timer_period_ns == 250_000_000
+        assert node.config.method == "pivot"
+    finally:
+        node.destroy_node()
+
+
+def test_main_exits_2_with_one_line_for_ffs(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(default_domain_id()))
+    code = main(["map_merger", "--ros-args", "-p", "method:=ffs"])
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "ffs" in err and "not implemented yet" in err
