@@ -92,10 +92,26 @@ def test_simulate_replay_local_evaluate_scores_each_robot_in_its_own_frame(
         assert robot["reported_unmerged"]
 
 
+def test_simulate_replay_pivot_evaluate_merges_the_robots(capsys, tmp_path: Path) -> None:
+    bag = tmp_path / "sim"
+    args = ("--robots", 2, "--out", bag, "--duration", 8, "--rate", 10, "--seed", 3)
+    assert mrm(capsys, "simulate", *args)[0] == 0
+    out = tmp_path / "pivot"
+    code, _, err = mrm(capsys, "replay", bag, "--out", out, "--method", "pivot")
+    assert code == 0, err
+    robots = json.loads((out / "robots.json").read_text())
+    assert all(frame != "unmerged" for frame in robots.values()), robots
+    assert mrm(capsys, "evaluate", out, "--bag", bag, "--json")[0] == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["robots_merged"] == metrics["robots_total"] == 2
+    assert metrics["ate_rmse_m"] < 0.15
+    assert metrics["map_precision"] > 0.9
+
+
 def test_methods_not_built_yet_exit_2_and_say_so(capsys, tmp_path: Path) -> None:
     bag = tmp_path / "sim"
     assert mrm(capsys, "simulate", "--robots", 1, "--out", bag, "--duration", 1)[0] == 0
-    for method in ("pivot", "ffs"):
+    for method in ("ffs",):
         code, _, err = mrm(capsys, "replay", bag, "--out", tmp_path / method, "--method", method)
         assert code == 2
         assert "not implemented yet" in err and err.count("\n") == 1

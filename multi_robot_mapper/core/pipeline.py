@@ -8,8 +8,10 @@ front end (scan -> segments), then a placement method. Methods:
 - ``local``: odometry-free local mapping only (:class:`LocalMapper`, one per robot). Every
   robot's trajectory and partial map are in its own map frame and every robot frame is
   reported ``"unmerged"``: no placement between robots is claimed.
-- ``pivot`` and ``ffs``: local mapping and merging (their own issues); until they exist they
-  raise :class:`MethodNotImplementedError` rather than return anything.
+- ``pivot``: ``local``, then the partial maps merged with no pose information
+  (:func:`multi_robot_mapper.core.merging.merge`: INTEGRATE on every pair, valid links only,
+  maximum-value spanning tree); a robot with no valid link stays ``"unmerged"``.
+- ``ffs``: its own issue; until it exists it raises :class:`MethodNotImplementedError`.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
 from multi_robot_mapper.core.local_mapping import LocalMapper, LocalMapperConfig
+from multi_robot_mapper.core.merging import MergeConfig, merge
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
 
 FloatArray = NDArray[np.float64]
@@ -31,7 +34,7 @@ IntArray = NDArray[np.int64]
 Pose = tuple[float, float, float]
 
 METHODS = ("reference", "local", "pivot", "ffs")
-IMPLEMENTED_METHODS = ("reference", "local")
+IMPLEMENTED_METHODS = ("reference", "local", "pivot")
 
 
 class MethodNotImplementedError(NotImplementedError):
@@ -79,11 +82,13 @@ def run_offline(
     extraction: ExtractionConfig,
     progress: Progress | None = None,
     local_mapping: LocalMapperConfig | None = None,
+    merging: MergeConfig | None = None,
 ) -> OfflineMap:
     """Run the front end on every scan of every robot, then place them with ``method``."""
     require_method(method)
-    if method == "local":
-        return _run_local(recordings, extraction, local_mapping or LocalMapperConfig(), progress)
+    if method in ("local", "pivot"):
+        local = _run_local(recordings, extraction, local_mapping or LocalMapperConfig(), progress)
+        return local if method == "local" else _merged(local, merging or MergeConfig())
     robots = sorted(recordings)
     total = sum(len(recordings[r]) for r in robots)
     done = 0
@@ -226,5 +231,48 @@ def _run_local(
         np.concatenate(owners) if owners else np.zeros(0, dtype=np.int64),
         trajectories,
         frames,
+        stats,
+    )
+
+
+def _merged(local: OfflineMap, config: MergeConfig) -> OfflineMap:
+    """Place the robots of a ``local`` run in one ``map`` frame (the merging stage)."""
+    started = time.perf_counter()
+    maps = {
+        robot: local.map_segments[local.segment_robot == index]
+        for index, robot in enumerate(local.robots)
+    }
+    result = merge(maps, config)
+    trajectories = {}
+    for robot, (stamps, poses) in local.trajectories.items():
+        T_map_robot = result.matrix(robot)
+        if T_map_robot is None or len(poses) == 0:
+            trajectories[robot] = (stamps, poses)  # unmerged: still in its own frame
+            continue
+        placed = [se2.pose_from_matrix(T_map_robot @ se2.matrix_from_pose(*pose)) for pose in poses]
+        trajectories[robot] = (stamps, np.asarray(placed, dtype=np.float64).reshape(-1, 3))
+    owner_name = [result.robots[i] for i in result.segment_robot]
+    segment_robot = np.asarray([local.robots.index(name) for name in owner_name], dtype=np.int64)
+    stats = dict(local.stats)
+    stats.update(
+        {
+            "method": "pivot",
+            "segments": len(result.segments),
+            "merge_reference": result.reference,
+            "merge_links": [
+                {"a": link.robot_a, "b": link.robot_b, "value": round(link.value, 3)}
+                for link in result.links
+            ],
+            "merge_s": round(time.perf_counter() - started, 4),
+            "robots_unmerged": result.unmerged,
+        }
+    )
+    stats["total_s"] = round(float(str(stats["total_s"])) + float(str(stats["merge_s"])), 4)
+    return OfflineMap(
+        local.robots,
+        result.segments,
+        segment_robot.reshape(-1),
+        trajectories,
+        dict(result.placements),
         stats,
     )
