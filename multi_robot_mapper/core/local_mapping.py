@@ -157,6 +157,7 @@ class LocalMapper:
         # The newest set-aside scan and its best (invalid) T_last_pending, while no scan since
         # was accepted: the next scan's motion through it is one more hypothesis.
         self._pending: tuple[FloatArray, LaserScanData, FloatArray, bool] | None = None
+        self._cross_memo: tuple[MatchResult, FloatArray, FloatArray, float] | None = None
 
     # --- the method -------------------------------------------------------------------------
 
@@ -266,8 +267,7 @@ class LocalMapper:
             return result, False
         composed = _compose(T_last_pending, _pose_triple(via.T_1_2))
         if plausible:
-            T_1_2 = np.array([composed[2], composed[0], composed[1]])
-            return dataclasses.replace(via, T_1_2=T_1_2), True
+            return dataclasses.replace(via, T_1_2=_as_hypotheses([composed])[0]), True
         judged = integrate(
             last,
             new,
@@ -419,13 +419,22 @@ class LocalMapper:
     ) -> bool:
         """The validity threshold of a scan against a reference (``min_match_fraction``,
         ``min_cross_support`` unless ``cross`` replaces it)."""
-        integrate_config = self.config.integrate
         needed = self.config.min_cross_support if cross is None else cross
         return (
-            result.value >= integrate_config.min_match_value
+            result.value >= self.config.integrate.min_match_value
             and result.fraction >= self.config.min_match_fraction
-            and cross_support(reference, new, result.T_1_2, integrate_config) >= needed
+            and self._cross_support(reference, new, result) >= needed
         )
+
+    def _cross_support(self, reference: FloatArray, new: FloatArray, result: MatchResult) -> float:
+        """``cross_support`` of a result, computed once: one scan asks it of the same result
+        up to four times (tracking, search, gate, bridge)."""
+        memo = self._cross_memo
+        if memo is not None and memo[0] is result and memo[1] is reference and memo[2] is new:
+            return memo[3]
+        support = cross_support(reference, new, result.T_1_2, self.config.integrate)
+        self._cross_memo = (result, reference, new, support)
+        return support
 
     def _set_aside(self, reason: str, value: float = 0.0, fraction: float = 0.0) -> LocalUpdate:
         self.scans_set_aside += 1

@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.extraction import ExtractionConfig, SegmentScan, extract_scan
 from multi_robot_mapper.core.local_mapping import LocalMapper, LocalMapperConfig
 from multi_robot_mapper.core.merging import MergeConfig, merge
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
@@ -65,6 +65,38 @@ class OfflineMap:
 Progress = Callable[[str, int, int], None]  # (robot, scans done, scans total)
 
 
+@dataclasses.dataclass
+class _FrontEnd:
+    """Scans to segments for every placement method, with the counts they all report."""
+
+    extraction: ExtractionConfig
+    progress: Progress | None
+    total: int  # scans of every robot
+    done: int = 0
+    seconds: float = 0.0  # spent extracting
+    rejected: dict[str, int] = dataclasses.field(default_factory=dict)  # ScanError kind -> scans
+
+    def scans(
+        self, robot: str, items: Sequence[TimedLaserScan], needs_reference: bool = False
+    ) -> Iterator[tuple[TimedLaserScan, SegmentScan]]:
+        """Each usable scan of ``robot`` with its segments; unusable ones are counted."""
+        for item in items:
+            self.done += 1
+            if self.progress is not None:
+                self.progress(robot, self.done, self.total)
+            if needs_reference and item.reference_pose is None:
+                continue
+            started = time.perf_counter()
+            try:
+                segments, _ = extract_scan(item.scan, self.extraction)
+            except ScanError as exc:
+                self.rejected[exc.kind] = self.rejected.get(exc.kind, 0) + 1
+                continue
+            finally:
+                self.seconds += time.perf_counter() - started
+            yield item, segments
+
+
 def require_method(method: str) -> None:
     """Raise unless ``method`` exists and is built (MethodNotImplementedError if not built yet)."""
     if method not in METHODS:
@@ -90,31 +122,17 @@ def run_offline(
         local = _run_local(recordings, extraction, local_mapping or LocalMapperConfig(), progress)
         return local if method == "local" else _merged(local, merging or MergeConfig())
     robots = sorted(recordings)
-    total = sum(len(recordings[r]) for r in robots)
-    done = 0
+    front_end = _FrontEnd(extraction, progress, sum(len(recordings[r]) for r in robots))
     segment_sets: list[FloatArray] = []
     owners: list[IntArray] = []
     trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
-    rejected: dict[str, int] = {}
     started = time.perf_counter()
-    front_end_s = 0.0
     for index, robot in enumerate(robots):
         stamps: list[float] = []
         poses: list[Pose] = []
-        for item in recordings[robot]:
-            done += 1
-            if progress is not None:
-                progress(robot, done, total)
-            if item.reference_pose is None:
-                continue  # 'reference' can only place scans that have one
-            t0 = time.perf_counter()
-            try:
-                segments, _ = extract_scan(item.scan, extraction)
-            except ScanError as exc:
-                rejected[exc.kind] = rejected.get(exc.kind, 0) + 1
-                continue
-            finally:
-                front_end_s += time.perf_counter() - t0
+        # 'reference' can only place scans that have a reference pose.
+        for item, segments in front_end.scans(robot, recordings[robot], needs_reference=True):
+            assert item.reference_pose is not None
             T_map_laser = se2.matrix_from_pose(*item.reference_pose)
             segment_sets.append(se2.transform_segments(T_map_laser, segments.segments))
             owners.append(np.full(len(segments), index, dtype=np.int64))
@@ -129,11 +147,11 @@ def run_offline(
     posed = sum(len(t[0]) for t in trajectories.values())
     stats: dict[str, object] = {
         "method": method,
-        "scans_total": total,
+        "scans_total": front_end.total,
         "scans_posed": posed,
-        "scans_rejected": rejected,
+        "scans_rejected": front_end.rejected,
         "segments": len(map_segments),
-        "front_end_s": round(front_end_s, 4),
+        "front_end_s": round(front_end.seconds, 4),
         "total_s": round(time.perf_counter() - started, 4),
     }
     # With reference poses every robot frame is the reference world frame.
@@ -149,11 +167,9 @@ def _run_local(
 ) -> OfflineMap:
     """One :class:`LocalMapper` per robot, exactly as ``robot_mapper`` runs it."""
     robots = sorted(recordings)
-    total = sum(len(recordings[r]) for r in robots)
-    done = 0
+    front_end = _FrontEnd(extraction, progress, sum(len(recordings[r]) for r in robots))
     started = time.perf_counter()
-    front_end_s = mapping_s = 0.0
-    rejected: dict[str, int] = {}
+    mapping_s = 0.0
     segment_sets: list[FloatArray] = []
     owners: list[IntArray] = []
     trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
@@ -164,18 +180,7 @@ def _run_local(
         mapper = LocalMapper(config)
         stamps: list[float] = []
         poses: list[Pose] = []
-        for item in recordings[robot]:
-            done += 1
-            if progress is not None:
-                progress(robot, done, total)
-            t0 = time.perf_counter()
-            try:
-                segments, _ = extract_scan(item.scan, extraction)
-            except ScanError as exc:
-                rejected[exc.kind] = rejected.get(exc.kind, 0) + 1
-                continue
-            finally:
-                front_end_s += time.perf_counter() - t0
+        for item, segments in front_end.scans(robot, recordings[robot]):
             t1 = time.perf_counter()
             saved = mapper.snapshot()
             try:
@@ -212,11 +217,11 @@ def _run_local(
     times = np.asarray(scan_times) if scan_times else np.zeros(1)
     stats: dict[str, object] = {
         "method": "local",
-        "scans_total": total,
+        "scans_total": front_end.total,
         "scans_posed": sum(len(t[0]) for t in trajectories.values()),
-        "scans_rejected": rejected,
+        "scans_rejected": front_end.rejected,
         "segments": int(sum(len(s) for s in segment_sets)),
-        "front_end_s": round(front_end_s, 4),
+        "front_end_s": round(front_end.seconds, 4),
         "local_mapping_s": round(mapping_s, 4),
         "mapping_errors": mapping_errors,
         "local_mapping_median_ms": round(float(np.median(times)) * 1e3, 3),
@@ -249,10 +254,14 @@ def _merged(local: OfflineMap, config: MergeConfig) -> OfflineMap:
         if T_map_robot is None or len(poses) == 0:
             trajectories[robot] = (stamps, poses)  # unmerged: still in its own frame
             continue
-        placed = [se2.pose_from_matrix(T_map_robot @ se2.matrix_from_pose(*pose)) for pose in poses]
-        trajectories[robot] = (stamps, np.asarray(placed, dtype=np.float64).reshape(-1, 3))
-    owner_name = [result.robots[i] for i in result.segment_robot]
-    segment_robot = np.asarray([local.robots.index(name) for name in owner_name], dtype=np.int64)
+        turn = float(np.arctan2(T_map_robot[1, 0], T_map_robot[0, 0]))
+        placed = np.column_stack(
+            (se2.transform_points(T_map_robot, poses[:, :2]), se2.wrap_angle(poses[:, 2] + turn))
+        )
+        trajectories[robot] = (stamps, placed)
+    # Both robot lists are sorted names: merge's owner indices are ours (asserted, not assumed).
+    assert result.robots == local.robots
+    segment_robot = np.asarray(result.segment_robot, dtype=np.int64)
     stats = dict(local.stats)
     stats.update(
         {

@@ -35,12 +35,11 @@ import traceback
 from typing import Any
 
 import numpy as np
-import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
@@ -60,6 +59,7 @@ from multi_robot_mapper.io.messages import (
     pose_stamped,
     segments_marker,
 )
+from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.parameters import declare_config
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
 
@@ -398,29 +398,8 @@ class MapMerger(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console entry point (``ros2 run multi_robot_mapper map_merger``)."""
-    rclpy.init(args=args)
-    try:
-        node = MapMerger()
-    except ConfigError as exc:
-        print(f"map_merger: invalid parameters: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    executor = MultiThreadedExecutor(num_threads=2)
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        # A SIGTERM can shut the context down while spin() builds its wait set (an rclpy race);
-        # that is a normal shutdown. Anything while the context is still valid is a real error.
-        if rclpy.ok():
-            raise
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    # Merges run on their own callback group: a second thread keeps subscriptions served.
+    return run_node("map_merger", MapMerger, args, lambda: MultiThreadedExecutor(num_threads=2))
 
 
 if __name__ == "__main__":

@@ -20,10 +20,8 @@ import sys
 import traceback
 
 import numpy as np
-import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import (
     DurabilityPolicy,
@@ -35,7 +33,6 @@ from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from multi_robot_mapper.core.config import ConfigError
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalUpdate
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
@@ -48,6 +45,7 @@ from multi_robot_mapper.io.messages import (
     segments_marker,
     stamp_from_seconds,
 )
+from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.parameters import declare_config, on_config_change
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
 
@@ -205,26 +203,7 @@ class RobotMapper(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console entry point (``ros2 run multi_robot_mapper robot_mapper``)."""
-    rclpy.init(args=args)
-    try:
-        node = RobotMapper()
-    except ConfigError as exc:
-        print(f"robot_mapper: invalid parameters: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        # A SIGTERM can shut the context down while spin() builds its wait set (an rclpy race);
-        # that is a normal shutdown. Anything while the context is still valid is a real error.
-        if rclpy.ok():
-            raise
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node("robot_mapper", RobotMapper, args)
 
 
 if __name__ == "__main__":
