@@ -21,6 +21,9 @@ reference-placed scans (fused, untrimmed) in its own first scan's frame, merges 
 no particular order and prints robots merged, the worst placement error, the number of valid
 links that are wrong (> 0.3 m from the reference) and the merge time. The maps are reference
 maps, not local-mapping output: this measures merging alone.
+
+Both modes pass the scans' poses as the robots' viewpoints, as the node passes keyframe
+poses, so links are also judged on free space; ``--no-views`` merges on segments alone.
 """
 
 from __future__ import annotations
@@ -46,8 +49,11 @@ from multi_robot_mapper.io.carmen import CarmenScan, carmen_scan_data, read_carm
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
 
 
-def partial_map(scans: list[CarmenScan], segments: int) -> tuple[np.ndarray, np.ndarray]:
-    """Reference-placed, fused, trimmed; returns (T_world_robot, map in the robot's frame)."""
+def partial_map(
+    scans: list[CarmenScan], segments: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Reference-placed, fused, trimmed; returns (T_world_robot, map in the robot's frame,
+    the scans' poses in the robot's frame: the viewpoints)."""
     world = np.zeros((0, 4))
     owner = np.zeros(0, dtype=np.int64)
     config = IntegrateConfig()
@@ -56,11 +62,19 @@ def partial_map(scans: list[CarmenScan], segments: int) -> tuple[np.ndarray, np.
         placed = se2.transform_segments(se2.matrix_from_pose(*scan.reference_pose), found)
         world, owner = fuse(world, owner, placed, np.zeros(len(placed), np.int64), config, 0.02)
     T_world_robot = se2.matrix_from_pose(*scans[0].reference_pose)
-    own = se2.transform_segments(se2.invert(T_world_robot), longest(world, segments))
-    return T_world_robot, own
+    T_robot_world = se2.invert(T_world_robot)
+    own = se2.transform_segments(T_robot_world, longest(world, segments))
+    poses = np.array([scan.reference_pose for scan in scans])
+    views = np.column_stack(
+        (
+            se2.transform_points(T_robot_world, poses[:, :2]),
+            se2.wrap_angle(poses[:, 2] - scans[0].reference_pose[2]),
+        )
+    )
+    return T_world_robot, own, views
 
 
-def split_runs(name: str, robots: int, overlap: int) -> None:
+def split_runs(name: str, robots: int, overlap: int, use_views: bool) -> None:
     """Merge a whole log cut into ``robots`` reference-placed partial maps; print one line."""
     path = DATA / f"{name}.log.gz"
     if not path.is_file():
@@ -68,12 +82,12 @@ def split_runs(name: str, robots: int, overlap: int) -> None:
         return
     scans = list(read_carmen(path))
     size = len(scans) // robots
-    frames, maps = {}, {}
+    frames, maps, views = {}, {}, {}
     for k in range(robots):
         run = scans[max(0, k * size - overlap) : (k + 1) * size : 2]
-        frames[f"robot{k}"], maps[f"robot{k}"] = partial_map(run, 10**9)
+        frames[f"robot{k}"], maps[f"robot{k}"], views[f"robot{k}"] = partial_map(run, 10**9)
     started = time.perf_counter()
-    result = merge(maps, MergeConfig())
+    result = merge(maps, MergeConfig(), viewpoints=views if use_views else None)
     elapsed = time.perf_counter() - started
     worst = 0.0
     reference = result.reference
@@ -108,11 +122,16 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--split", type=int, nargs="*", default=[])
     parser.add_argument("--logs", nargs="*", default=["intel", "aces", "fhw", "csail"])
+    parser.add_argument(
+        "--no-views",
+        action="store_true",
+        help="merge on segments alone, without the scans' poses as viewpoints (free space)",
+    )
     args = parser.parse_args()
     if args.split:
         for name in args.logs:
             for robots in args.split:
-                split_runs(name, robots, args.overlap)
+                split_runs(name, robots, args.overlap, not args.no_views)
         return
     path = DATA / f"{args.log}.log.gz"
     if not path.is_file():
@@ -124,23 +143,26 @@ def main() -> None:
         if len(scans) >= args.scans:
             break
     half, extra = len(scans) // 2, args.overlap // 2
-    T_world_a, map_a = partial_map(scans[: half + extra], args.segments)
-    T_world_b, map_b = partial_map(scans[half - extra :], args.segments)
+    T_world_a, map_a, views_a = partial_map(scans[: half + extra], args.segments)
+    T_world_b, map_b, views_b = partial_map(scans[half - extra :], args.segments)
     T_a_b = se2.invert(T_world_a) @ T_world_b
     maps = {"robot_a": map_a, "robot_b": map_b}
+    # The scans' poses are the viewpoints, as keyframe poses are in the node (--no-views: none).
+    views = None if args.no_views else {"robot_a": views_a, "robot_b": views_b}
     config = MergeConfig(reference="robot_a")
     times, cpu, parts = [], [], []
-    result = merge(maps, config)
+    result = merge(maps, config, viewpoints=views)
     for _ in range(args.repeats):
         started, started_cpu = time.perf_counter(), time.process_time()
-        result = merge(maps, config)
+        result = merge(maps, config, viewpoints=views)
         times.append(time.perf_counter() - started)
         cpu.append(time.process_time() - started_cpu)
         parts.append(result.timings)
     pose = result.placements["robot_b"]
     print(
         f"{args.log}: scans [0, {half + extra}) and [{half - extra}, {len(scans)}), "
-        f"{len(map_a)} x {len(map_b)} segments"
+        f"{len(map_a)} x {len(map_b)} segments, "
+        f"{'without viewpoints' if views is None else 'free space from the scans poses'}"
     )
     if pose is None:
         print("robot_b unmerged: no valid link")
@@ -161,7 +183,7 @@ def main() -> None:
     )
     load = os.getloadavg()[0]
     print(f"CPU time per merge: median {np.median(cpu) * 1e3:.1f} ms (load average {load:.1f})")
-    reuse = merge(maps, config, previous=result)
+    reuse = merge(maps, config, previous=result, viewpoints=views)
     print(
         f"re-run with previous (maps unchanged, pair reused): "
         f"{reuse.timings['total_s'] * 1e3:.1f} ms"

@@ -24,12 +24,15 @@ from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.merging import (
     Link,
+    MapViews,
     MergeConfig,
     MergeResult,
+    free_space_conflict,
     merge,
     merge_pivot,
     merge_sequential,
     merge_tree,
+    seen_through_length,
     spanning_tree,
 )
 from multi_robot_mapper.core.simulation import (
@@ -62,14 +65,37 @@ def fused_map(walls: np.ndarray, poses: np.ndarray, rng: np.random.Generator) ->
 
 
 @functools.cache
-def world_maps(world: str, robots: int, distance: float = 40.0) -> tuple[np.ndarray, ...]:
-    """Partial maps (world frame) of robots driving overlapping stretches of a route."""
+def world_runs(
+    world: str, robots: int, distance: float = 40.0
+) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """(partial map, laser poses), world frame, of robots driving overlapping stretches of a
+    route."""
     walls = WORLDS[world]()
     paths = plan_paths(ROUTES[world], robots, distance, overlap=0.3)
-    return tuple(
-        fused_map(walls, drive_path(wp, 0.8, 1.0, distance / 0.8), np.random.default_rng(k))
-        for k, wp in enumerate(paths)
-    )
+    runs = []
+    for k, waypoints in enumerate(paths):
+        poses = drive_path(waypoints, 0.8, 1.0, distance / 0.8)
+        runs.append((fused_map(walls, poses, np.random.default_rng(k)), poses))
+    return tuple(runs)
+
+
+def world_maps(world: str, robots: int, distance: float = 40.0) -> tuple[np.ndarray, ...]:
+    """Partial maps (world frame) of robots driving overlapping stretches of a route."""
+    return tuple(segments for segments, _ in world_runs(world, robots, distance))
+
+
+def poses_in_own_frames(
+    world_poses: tuple[np.ndarray, ...], frames: list[np.ndarray], names: list[str]
+) -> dict[str, np.ndarray]:
+    """Laser poses (world frame) as viewpoints in each robot's map frame."""
+    out = {}
+    for name, T, poses in zip(names, frames, world_poses, strict=True):
+        T_robot_world = se2.invert(T)
+        turn = float(np.arctan2(T_robot_world[1, 0], T_robot_world[0, 0]))
+        out[name] = np.column_stack(
+            (se2.transform_points(T_robot_world, poses[:, :2]), se2.wrap_angle(poses[:, 2] + turn))
+        )
+    return out
 
 
 def random_frames(count: int, seed: int) -> list[np.ndarray]:
@@ -136,7 +162,8 @@ def stranger_map() -> np.ndarray:
     """A partial map of another building: a slanted hall with a round end, a pillar, crates.
 
     Not of the office's grid of right angles: two unrelated rectilinear buildings do look
-    alike to segment overlap (see merging's module notes), which no threshold can tell.
+    alike to segment overlap, which no threshold on it can tell; that case needs the robots'
+    viewpoints (the look-alike test below).
     """
     walls = np.vstack(
         (
@@ -158,8 +185,10 @@ def stranger_map() -> np.ndarray:
 def test_four_robots_in_unknown_order_are_placed_to_centimetres() -> None:
     names = ["alpha", "bravo", "charlie", "delta"]
     frames = random_frames(4, seed=1)
-    maps = in_own_frames(world_maps("office", 4), frames, names)
-    result = merge(maps, CONFIG)
+    runs = world_runs("office", 4)
+    maps = in_own_frames(tuple(m for m, _ in runs), frames, names)
+    views = poses_in_own_frames(tuple(p for _, p in runs), frames, names)
+    result = merge(maps, CONFIG, viewpoints=views)
     assert_placed(result, dict(zip(names, frames, strict=True)), TOLERANCE_M, TOLERANCE_RAD)
     assert result.unmerged == []
     assert len(result.links) == 3 and all(link.valid for link in result.links)
@@ -204,6 +233,54 @@ def test_a_robot_whose_map_never_overlaps_stays_unmerged() -> None:
     assert 3 not in set(result.segment_robot.tolist())  # its segments are not in the map
     placed = {n: f for n, f in zip(names, frames, strict=True) if n != "stranger"}
     assert_placed(result, placed, TOLERANCE_M, TOLERANCE_RAD)
+
+
+def test_a_look_alike_building_is_refused_by_the_free_space_the_robots_saw() -> None:
+    # The corridors world is drawn on the office's grid of right angles: one of its robots'
+    # maps overlaps an office map by 26 m of walls at a wrong place, and segments alone link it.
+    # Its walls then cross rooms the office robot saw empty (and the office's cross its
+    # corridors): with the keyframe poses as viewpoints the link is refused.
+    office, corridors = world_runs("office", 3), world_runs("corridors", 2)
+    names = ["r1", "r2", "r3", "lookalike"]
+    runs = (*office, corridors[1])
+    frames = random_frames(4, seed=4)
+    maps = in_own_frames(tuple(m for m, _ in runs), frames, names)
+    views = poses_in_own_frames(tuple(p for _, p in runs), frames, names)
+    blind = merge(maps, CONFIG)
+    assert blind.placements["lookalike"] is not None  # the wrong link segments alone accept
+    result = merge(maps, CONFIG, viewpoints=views)
+    assert result.unmerged == ["lookalike"]
+    refused = [r.link for k, r in result.pairs.items() if blind.pairs[k].link.valid]
+    refused = [lk for lk in refused if not lk.valid]
+    assert refused and all("lookalike" in (lk.robot_a, lk.robot_b) for lk in refused)
+    assert all(lk.seen_through > CONFIG.link_max_seen_through for lk in refused)
+    # Another of its links passes on the two maps alone; joining the office group it is
+    # refused because its walls cross rooms a third robot saw empty (spanning_tree's check).
+    passed = [r.link for k, r in result.pairs.items() if "lookalike" in k and r.link.valid]
+    assert passed and not any("lookalike" in (lk.robot_a, lk.robot_b) for lk in result.links)
+    placed = {n: f for n, f in zip(names, frames, strict=True) if n != "lookalike"}
+    assert_placed(result, placed, TOLERANCE_M, TOLERANCE_RAD)
+    # The true links pass the free-space test: nothing of one map in the other's free space.
+    assert all(lk.seen_through <= 0.5 for lk in result.links)
+
+
+def test_free_space_is_what_the_laser_could_see_of_its_own_map() -> None:
+    # A closed 10 m x 10 m room seen from its centre, facing +x, with a 180 degree view.
+    room = polygon([(-5.0, -5.0), (5.0, -5.0), (5.0, 5.0), (-5.0, 5.0)])
+    views = MapViews.of(room, np.array([[0.0, 0.0, 0.0]]), CONFIG)
+    ahead = np.array([[1.0, -2.0, 1.0, 2.0]])  # 4 m of wall in front: all in free space
+    assert seen_through_length(views, ahead, CONFIG) == pytest.approx(4.0, abs=0.21)
+    behind = np.array([[-1.0, -2.0, -1.0, 2.0]])  # behind the laser: never seen
+    outside = np.array([[6.0, -2.0, 6.0, 2.0]])  # beyond the room's own wall
+    along = np.array([[4.7, -2.0, 4.7, 2.0]])  # within free_space_margin of the wall
+    short = np.array([[1.0, 0.0, 1.0, 0.5]])  # furniture-sized: not tested
+    for segments in (behind, outside, along, short):
+        assert seen_through_length(views, segments, CONFIG) == 0.0
+    # Map b is moved into a's frame by T_a_b first: to x = 4.8 (margin) or x = 2 (free).
+    T_a_b = se2.matrix_from_pose(3.8, 0.0, 0.0)
+    assert free_space_conflict(room, views, ahead, None, T_a_b, CONFIG) == 0.0
+    T_a_b = se2.matrix_from_pose(1.0, 0.0, 0.0)
+    assert free_space_conflict(room, views, ahead, None, T_a_b, CONFIG) > 3.9
 
 
 def test_a_wrong_looking_link_below_the_threshold_is_refused() -> None:

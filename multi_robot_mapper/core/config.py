@@ -9,6 +9,7 @@ Values are validated on load and errors name the parameter, the value and the ru
 from __future__ import annotations
 
 import dataclasses
+import functools
 import typing
 from collections.abc import Mapping
 from typing import Any, TypeVar
@@ -72,14 +73,15 @@ class FieldSpec:
         return f"{self.doc}{unit}.{bounds}"
 
 
-def _resolved_hints(cls: type) -> dict[str, Any]:
-    return typing.get_type_hints(cls)
-
-
 def field_specs(cls: type, prefix: str = "") -> list[FieldSpec]:
     """The scalar fields of a (possibly nested) config dataclass, with dotted names."""
+    return list(_field_specs(cls, prefix))
+
+
+@functools.cache  # every validate() needs them; resolving the type hints is the slow part
+def _field_specs(cls: type, prefix: str) -> tuple[FieldSpec, ...]:
     specs: list[FieldSpec] = []
-    hints = _resolved_hints(cls)
+    hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         kind = hints[f.name]
         name = f"{prefix}{f.name}"
@@ -102,7 +104,7 @@ def field_specs(cls: type, prefix: str = "") -> list[FieldSpec]:
                 choices=md.get("choices"),
             )
         )
-    return specs
+    return tuple(specs)
 
 
 def _coerce(spec: FieldSpec, value: Any) -> Any:
@@ -179,7 +181,7 @@ def config_from_flat(cls: type[C], values: Mapping[str, Any]) -> C:
 
 def _build(cls: type[C], values: Mapping[str, Any], prefix: str) -> C:
     kwargs: dict[str, Any] = {}
-    hints = _resolved_hints(cls)
+    hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(typing.cast(Any, cls)):
         kind = hints[f.name]
         name = f"{prefix}{f.name}"

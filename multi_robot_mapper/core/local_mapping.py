@@ -3,9 +3,10 @@
 Frames: ``robotmap`` is the robot's own map frame (the laser frame of its first accepted
 scan); ``T_robotmap_laser`` places a scan in it. Each new scan is matched by INTEGRATE against
 the partial map near the robot's last pose, with the constant-velocity prediction as one more
-hypothesis (never a requirement). A scan whose best transformation fails the validity
-threshold is set aside and counted: a wrong integration is worse than a missing one. Scans
-that moved more than ``keyframe_distance`` or turned more than ``keyframe_angle`` since the
+hypothesis (never a requirement). A scan the last scan cannot place is searched on the partial
+map around the last pose, within reach of it. A scan whose best transformation fails the
+validity threshold is set aside and counted: a wrong integration is worse than a missing one.
+Scans that moved more than ``keyframe_distance`` or turned more than ``keyframe_angle`` since the
 last keyframe become keyframes and are fused into the partial map (Amigoni Alg. 5).
 """
 
@@ -22,10 +23,17 @@ from multi_robot_mapper.core.extraction import SegmentScan
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.matching import (
+    HEURISTICS,
     IntegrateConfig,
     MatchResult,
+    _longest,
+    _prescreen_values,
     cross_support,
+    distinct_hypotheses,
+    endpoint_hypotheses,
+    hypotheses,
     integrate,
+    landmarks,
     lines_of,
     refine,
 )
@@ -102,6 +110,23 @@ class LocalMapperConfig:
         minimum=0.0,
         maximum=1.0,
     )
+    submap_reach: float = param(
+        1.5,
+        unit="m",
+        doc="a scan set aside by its match with the last scan is matched against the partial "
+        "map around the last pose, and placed there only within this distance of the last "
+        "scan: wrong map matches on the logs jump >= 2 m (right ones <= 1.3 m; the sparse "
+        "logs step <= 1.8 m, a fast laser a few cm); 0 turns map matching off",
+        minimum=0.0,
+    )
+    submap_turn: float = param(
+        1.2,
+        unit="rad",
+        doc="a scan placed by its match against the partial map (see submap_reach) is turned "
+        "at most this much from the last scan: wrong map matches on the logs turn >= 1.5 rad, "
+        "mostly half round in a symmetric corridor; right ones <= 0.9 rad",
+        minimum=0.0,
+    )
     integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
 
     def __post_init__(self) -> None:
@@ -146,6 +171,7 @@ class LocalMapper:
         self.scans_accepted = 0
         self.scans_set_aside = 0
         self.scans_tracked = 0  # accepted from the prediction alone, without a global search
+        self.scans_on_submap = 0  # placed by a match against the partial map, not the last scan
         self.set_aside_reasons: dict[str, int] = {}
         self._map_segments = np.zeros((0, 4))  # fused partial map, robotmap frame
         self._map_owner = np.zeros(0, dtype=np.int64)  # keyframe index owning each segment
@@ -205,6 +231,8 @@ class LocalMapper:
         accepted = self._passes(last, new, result)
         if not accepted and self._pending is not None:
             result, accepted = self._through_pending(last, new, view, result)
+        if not accepted and self.config.submap_reach > 0.0:
+            result, accepted = self._on_submap(T_robotmap_last, new, view, result)
         if accepted:
             # Hold drift down: pull the scan onto the partial map around it (Cox least
             # squares), unless that moves it far from what the scans agreed on.
@@ -278,6 +306,81 @@ class LocalMapper:
         )
         best = judged if judged.fraction > result.fraction else result
         return best, self._passes(last, new, best)
+
+    def _on_submap(
+        self, T_robotmap_last: FloatArray, new: FloatArray, view: LaserScanData, result: MatchResult
+    ) -> tuple[MatchResult, bool]:
+        """INTEGRATE of a scan the last scan could not place against the partial map around
+        the last pose; returns the result to use and whether the scan is accepted.
+
+        A scan that overlaps the last one little (a turn, a door, a set-aside scan before it)
+        is where the mapper loses the robot, although the map behind it holds the walls it
+        sees: on aces 9 scans in a row were set aside whose true pose explains 25-36 % of
+        them on the map, and each set-aside scan makes the next match harder. The map lies
+        in the last scan's frame, so both scans' free space applies; the scan-to-scan result
+        stays a hypothesis. The map has far more walls to overlap by chance than one scan,
+        and every wrong map match on the logs jumped metres or turned half round (a symmetric
+        corridor): the result must stay within ``submap_reach`` / ``submap_turn`` of the last
+        scan.
+        """
+        reference = self._submap(T_robotmap_last)
+        if len(reference) < 2:
+            return result, False
+        candidates = np.vstack(
+            (
+                _as_hypotheses([_pose_triple(result.T_1_2)]),
+                self._hypotheses_in_reach(reference, new),
+            )
+        )
+        on_map = integrate(
+            reference,
+            new,
+            self.config.integrate,
+            heuristics=(),
+            extra_hypotheses=candidates,
+            views=(self._last_view, view),
+        )
+        theta, tx, ty = (float(v) for v in on_map.T_1_2)
+        if (
+            float(np.hypot(tx, ty)) > self.config.submap_reach
+            or abs(float(se2.wrap_angle(theta))) > self.config.submap_turn
+            or not self._passes(reference, new, on_map)
+        ):
+            return result, False
+        self.scans_on_submap += 1
+        return on_map, True
+
+    def _hypotheses_in_reach(self, reference: FloatArray, new: FloatArray) -> FloatArray:
+        """INTEGRATE's hypotheses (Alg. 2 and the heuristics) of the scan on the map, only
+        those within ``submap_reach`` / ``submap_turn`` of the last scan, the
+        ``candidate_pool`` best by the prescreen value: the search of :func:`integrate`
+        restricted to where the robot can be, so that a far, wrong match that happens to
+        overlap more cannot hide a right one nearby."""
+        config = self.config.integrate
+        rng = np.random.default_rng(config.seed)
+        # The map's segments are in no scan order: no consecutive pairs on that side.
+        marks1 = landmarks(reference, HEURISTICS, config, False, rng)
+        marks2 = landmarks(new, HEURISTICS, config, True, rng) if len(new) > 1 else None
+        raw = [endpoint_hypotheses(reference, new, config)]
+        if marks2 is not None:
+            raw.append(hypotheses(reference, marks1, new, marks2, config))
+        transforms, _ = distinct_hypotheses(
+            np.vstack(raw),
+            config.hypothesis_angle_cell,
+            config.hypothesis_distance_cell,
+            config.max_hypotheses,
+        )
+        reach = (np.hypot(transforms[:, 1], transforms[:, 2]) <= self.config.submap_reach) & (
+            np.abs(se2.wrap_angle(transforms[:, 0])) <= self.config.submap_turn
+        )
+        transforms = transforms[reach]
+        if len(transforms) > config.candidate_pool:
+            long1 = _longest(reference, config.prescreen_segments)
+            long2 = _longest(new, config.prescreen_segments)
+            rough = _prescreen_values(reference[long1], new[long2], transforms, config)
+            transforms = transforms[np.argpartition(-rough, config.candidate_pool - 1)]
+            transforms = transforms[: config.candidate_pool]
+        return np.asarray(transforms, dtype=np.float64).reshape(-1, 3)
 
     def _refined_on_map(
         self, T_robotmap_last: FloatArray, new: FloatArray, result: MatchResult

@@ -17,11 +17,14 @@ none. ``merge(..., previous=result)`` re-runs cheaply as the maps grow: a pair w
 barely changed keeps its earlier result, and the previous tree is kept unless a clearly
 better link appears.
 
-Known limit: segment overlap cannot tell two look-alike places apart (a grid of equal rooms,
-a ring of equal corridors, two rectilinear buildings drawn on the same grid): a wrong link
-can then score as high as the true one. The validity thresholds are set on real data (intel,
-aces: no wrong link accepted, see bench/merge_speed.py and test_merging); free space (the
-robots' scans or paths) would be the evidence that separates them, and maps carry none.
+Segment overlap alone cannot tell two look-alike places apart (a grid of equal rooms, a ring
+of equal corridors, two rectilinear buildings drawn on the same grid): a wrong link can score
+as high as the true one. Free space separates them: given each robot's keyframe poses
+(``viewpoints``, on the wire with every partial map), :class:`MapViews` ray casts the robot's
+own map from where its laser stood, and a link is refused when the other map's walls lie in
+that free space (:func:`free_space_conflict`), both for the pair alone and, when two groups of
+already linked robots join in the spanning tree, against every viewpoint of the other group
+(:func:`free_space_join`).
 
 Frames: each robot's partial map is in its own map frame ``robot``; ``T_map_robot`` places it
 in the global ``map`` frame, which is the reference robot's map frame. Poses are ``(x, y,
@@ -34,7 +37,7 @@ import dataclasses
 import hashlib
 import itertools
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,8 +52,10 @@ from multi_robot_mapper.core.matching import (
     integrate,
     landmarks_from_pairs,
     lines_of,
+    sample_segments,
     score_pairs,
 )
+from multi_robot_mapper.core.simulation import raycast_fans
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -214,6 +219,79 @@ class MergeConfig:
         "exceeds it by this fraction (placements do not flip between similar links)",
         minimum=0.0,
     )
+    link_max_seen_through: float = param(
+        1.0,
+        unit="m",
+        doc="validity threshold: a link is refused when more than this length of either map "
+        "(and more than link_max_seen_through_fraction of its value) lies in free space the "
+        "other robot saw from its keyframes (only when keyframe poses are given)",
+        minimum=0.0,
+    )
+    link_max_seen_through_fraction: float = param(
+        0.1,
+        unit="",
+        doc="see link_max_seen_through: the allowance as a fraction of the link's value (large "
+        "overlaps of drifting maps tolerate a little more)",
+        minimum=0.0,
+    )
+    free_space_margin: float = param(
+        0.5,
+        unit="m",
+        doc="a wall of the other map is in a robot's free space when it lies at least this much "
+        "nearer a viewpoint than the robot's own map along the same bearing",
+        minimum=0.0,
+    )
+    free_space_min_length: float = param(
+        1.0,
+        unit="m",
+        doc="only segments at least this long are tested against the other robot's free space "
+        "(walls; short pieces are furniture, exhibits and people, which move or are seen from "
+        "one side only)",
+        minimum=0.0,
+    )
+    view_spacing: float = param(
+        1.0,
+        unit="m",
+        doc="viewpoints (keyframe poses) closer than this to one already kept add no evidence",
+        minimum=0.0,
+    )
+    max_views: int = param(
+        60,
+        unit="",
+        doc="at most this many viewpoints per map, evenly spread over the kept ones",
+        minimum=1,
+    )
+    view_range: float = param(
+        8.0,
+        unit="m",
+        doc="free space reaches at most this far from a viewpoint (a wall must be seen in the "
+        "robot's own map within it)",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    view_spread: int = param(
+        6,
+        unit="bearings",
+        doc="free space along a bearing reaches only the nearest wall within this many "
+        "bearings either side (gaps between a map's segments are not seen through)",
+        minimum=0,
+    )
+    view_field: float = param(
+        float(np.pi),
+        unit="rad",
+        doc="field of view claimed around each keyframe's heading (the laser's forward "
+        "direction; 180 degrees is the narrowest common laser: wider ones claim less than they "
+        "saw, never more)",
+        minimum=0.0,
+        exclusive_minimum=True,
+        maximum=2.0 * np.pi,
+    )
+    view_beams: int = param(
+        360,
+        unit="",
+        doc="bearings per full turn at which the robot's own map is ray cast",
+        minimum=8,
+    )
     fusion_tolerance: float = param(
         0.05,
         unit="m",
@@ -254,6 +332,7 @@ class Link:
     fraction: float  # value / shorter map's total segment length
     valid: bool  # passes the link_* thresholds
     tight_fraction: float = 0.0  # overlap within tight_distance / shorter map's length
+    seen_through: float = 0.0  # m of either map in the other's free space (0: not checked)
 
     @property
     def matrix(self) -> FloatArray:
@@ -322,15 +401,22 @@ class MapMatch:
 
     result: MatchResult  # T_1_2 (theta, tx, ty): map b in map a; value, fraction
     tight_fraction: float  # overlap within tight_distance / shorter judged set's length
-    valid: bool  # INTEGRATE's validity with the link_* thresholds, and the tight overlap
+    valid: bool  # INTEGRATE's validity with the link_* thresholds, tight overlap, free space
     integrate_calls: int
+    seen_through: float = 0.0  # m of either map in the other's free space (0: not checked)
 
     @property
     def matrix(self) -> FloatArray:
         return self.result.matrix
 
 
-def match_maps(map_a: FloatArray, map_b: FloatArray, config: MergeConfig) -> MapMatch:
+def match_maps(
+    map_a: FloatArray,
+    map_b: FloatArray,
+    config: MergeConfig,
+    views_a: MapViews | None = None,
+    views_b: MapViews | None = None,
+) -> MapMatch:
     """INTEGRATE for two partial maps: how map b lies in map a, and whether to trust it.
 
     Partial maps hold hundreds or thousands of segments, too many for INTEGRATE's heuristics
@@ -344,7 +430,8 @@ def match_maps(map_a: FloatArray, map_b: FloatArray, config: MergeConfig) -> Map
     (``wide_*``), then corners anywhere in the maps (:func:`corner_hypotheses`); the best
     judged candidate wins. Finally the overlap within ``tight_distance`` must reach
     ``link_min_tight_fraction``: two unrelated places overlap roughly, one place to
-    centimetres.
+    centimetres. With the robots' views (:class:`MapViews`), neither map may lie in the other's
+    free space beyond ``link_max_seen_through`` (and that fraction of the value).
     """
     result, calls = _match_maps(map_a, map_b, config)
     if result.value <= 0.0:
@@ -352,7 +439,15 @@ def match_maps(map_a: FloatArray, map_b: FloatArray, config: MergeConfig) -> Map
     judge_a = longest(map_a, config.judge_segments)
     judge_b = longest(map_b, config.judge_segments)
     tight = tight_fraction(judge_a, judge_b, result.T_1_2, config)
-    return MapMatch(result, tight, result.valid and tight >= config.link_min_tight_fraction, calls)
+    valid = result.valid and tight >= config.link_min_tight_fraction
+    through = 0.0
+    if valid and (views_a is not None or views_b is not None):
+        through = free_space_conflict(map_a, views_a, map_b, views_b, result.matrix, config)
+        allowed = max(
+            config.link_max_seen_through, config.link_max_seen_through_fraction * result.value
+        )
+        valid = through <= allowed
+    return MapMatch(result, tight, valid, calls, through)
 
 
 def tight_fraction(
@@ -368,6 +463,126 @@ def tight_fraction(
     scores = score_pairs(segments1, segments2, np.asarray(T_1_2)[None, :], tight)
     shorter = min(float(lines_of(segments1).length.sum()), float(lines_of(segments2).length.sum()))
     return float(scores.value.sum()) / max(shorter, 1e-9)
+
+
+# --- Free space: what a robot saw from its keyframes ------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class MapViews:
+    """Free space a robot saw: its own map ray cast from its viewpoints (``view_field``
+    around each keyframe's heading).
+
+    A partial map carries no scans, but its keyframe poses say where the laser stood; the
+    robot's own walls seen from there bound the space its beams crossed (a door the map does
+    not close leaves no wall on that bearing, and nothing is claimed there). Another robot's
+    wall placed inside that space contradicts the placement: the two buildings only look alike
+    (the look-alike rooms and corridors segment overlap cannot tell apart).
+    """
+
+    poses: FloatArray  # (K, 3) viewpoints (laser poses) in the robot's map frame
+    ranges: FloatArray  # (K, B) the map's range at each bearing of each view (inf: no wall)
+    angle_min: float  # bearing of column 0 in each viewpoint's frame (rad)
+    angle_increment: float  # rad between columns
+
+    @staticmethod
+    def of(segments: FloatArray, keyframe_poses: FloatArray, config: MergeConfig) -> MapViews:
+        """The views of a map from its keyframe poses, at least ``view_spacing`` apart and at
+        most ``max_views`` of them, ``view_field`` wide around each heading."""
+        poses = np.asarray(keyframe_poses, dtype=np.float64).reshape(-1, 3)
+        kept: list[int] = []
+        for index in range(len(poses)):  # greedy thinning over keyframes (a few hundred)
+            if (
+                not kept
+                or np.min(np.hypot(*(poses[kept, :2] - poses[index, :2]).T)) >= config.view_spacing
+            ):
+                kept.append(index)
+        if len(kept) > config.max_views:
+            kept = [kept[i] for i in np.linspace(0, len(kept) - 1, config.max_views).astype(int)]
+        chosen = poses[kept]
+        step = 2.0 * np.pi / config.view_beams
+        beams = max(2, round(config.view_field / step) + 1)
+        first = -0.5 * step * (beams - 1)
+        ranges = raycast_fans(segments, chosen, first, step, beams, config.view_range)
+        return MapViews(chosen, ranges, first, step)
+
+    def free_limits(self, spread: int) -> FloatArray:
+        """(K, B) how far free space reaches along each bearing: the nearest wall within
+        ``spread`` bearings either side (a gap between two segments is not seen through), and
+        nothing (-inf) where some bearing of that window hits no wall."""
+        limits = np.where(np.isfinite(self.ranges), self.ranges, -np.inf)
+        if spread > 0 and limits.shape[1]:
+            padded = np.pad(limits, ((0, 0), (spread, spread)), constant_values=-np.inf)
+            windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * spread + 1, axis=1)
+            limits = windows.min(axis=2)
+        return np.asarray(limits)
+
+
+def seen_through_length(views: MapViews, segments: FloatArray, config: MergeConfig) -> float:
+    """Length of the walls among ``segments`` (in the views' map frame; those at least
+    ``free_space_min_length`` long) lying in the free space of ``views``: nearer some
+    viewpoint than the map's own wall on that bearing by ``free_space_margin``."""
+    spacing = 0.2  # walls are at least free_space_min_length long: 5+ samples each
+    walls = segments[lines_of(segments).length >= config.free_space_min_length]
+    if len(walls) == 0 or len(views.poses) == 0:
+        return 0.0
+    points, _ = sample_segments(walls, spacing)
+    limits = views.free_limits(config.view_spread)
+    # Every point in every viewpoint's frame at once: (K, P) bearings and distances.
+    dx = points[None, :, 0] - views.poses[:, 0, None]
+    dy = points[None, :, 1] - views.poses[:, 1, None]
+    bearing = se2.wrap_angle(np.arctan2(dy, dx) - views.poses[:, 2, None])
+    distance = np.hypot(dx, dy)
+    column = np.rint((bearing - views.angle_min) / views.angle_increment).astype(np.int64)
+    inside = (column >= 0) & (column < limits.shape[1])
+    reach = np.take_along_axis(limits, np.where(inside, column, 0), axis=1)
+    seen = inside & (distance < reach - config.free_space_margin)
+    return float(seen.any(axis=0).sum()) * spacing
+
+
+ViewSource = Callable[[str], "MapViews | None"]
+
+
+def _no_views(robot: str) -> MapViews | None:
+    return None
+
+
+def view_source(
+    maps: Mapping[str, FloatArray], viewpoints: Mapping[str, FloatArray], config: MergeConfig
+) -> ViewSource:
+    """Each robot's :class:`MapViews` (None without viewpoints), cast on first use: a re-run
+    whose pairs are all reused casts none."""
+    cache: dict[str, MapViews | None] = {}
+
+    def views(robot: str) -> MapViews | None:
+        if robot not in cache:
+            poses = viewpoints.get(robot)
+            cache[robot] = (
+                None
+                if poses is None
+                else MapViews.of(maps[robot], np.asarray(poses, dtype=np.float64), config)
+            )
+        return cache[robot]
+
+    return views
+
+
+def free_space_conflict(
+    map_a: FloatArray,
+    views_a: MapViews | None,
+    map_b: FloatArray,
+    views_b: MapViews | None,
+    T_a_b: FloatArray,
+    config: MergeConfig,
+) -> float:
+    """The larger of: map b (moved by ``T_a_b``) in a's free space, map a in b's (metres)."""
+    through = 0.0
+    if views_a is not None:
+        through = seen_through_length(views_a, se2.transform_segments(T_a_b, map_b), config)
+    if views_b is not None:
+        back = se2.transform_segments(se2.invert(T_a_b), map_a)
+        through = max(through, seen_through_length(views_b, back, config))
+    return through
 
 
 def _match_maps(
@@ -512,6 +727,7 @@ def _link(robot_a: str, robot_b: str, match: MapMatch) -> Link:
         result.fraction,
         match.valid,
         match.tight_fraction,
+        match.seen_through,
     )
 
 
@@ -575,9 +791,12 @@ def pair_links(
     maps: Mapping[str, FloatArray],
     config: MergeConfig,
     previous: Mapping[tuple[str, str], PairRecord] | None = None,
+    views: ViewSource | None = None,
 ) -> tuple[dict[tuple[str, str], PairRecord], int]:
     """INTEGRATE every pair (a, b) with a < b, reusing earlier results where maps barely
-    changed (:meth:`MapSignature.close_to`). Returns the records and the INTEGRATE calls."""
+    changed (:meth:`MapSignature.close_to`), each judged on free space where ``views`` has
+    the robots' views. Returns the records and the INTEGRATE calls."""
+    view = views or _no_views
     robots = sorted(maps)
     signatures = {r: MapSignature.of(maps[r]) for r in robots}
     records: dict[tuple[str, str], PairRecord] = {}
@@ -592,10 +811,13 @@ def pair_links(
             ):
                 records[(a, b)] = dataclasses.replace(old, reused=True)
                 continue
-            match = match_maps(maps[a], maps[b], config)
+            match = match_maps(maps[a], maps[b], config, view(a), view(b))
             calls += match.integrate_calls
             records[(a, b)] = PairRecord(_link(a, b, match), signatures[a], signatures[b], False)
     return records, calls
+
+
+JoinCheck = Callable[[Link, Mapping[str, FloatArray], Mapping[str, FloatArray], FloatArray], bool]
 
 
 def spanning_tree(
@@ -603,12 +825,16 @@ def spanning_tree(
     links: Sequence[Link],
     previous_edges: set[tuple[str, str]] | None = None,
     margin: float = 0.0,
+    joins: JoinCheck | None = None,
 ) -> list[Link]:
     """Maximum-value spanning forest of the valid links (Kruskal).
 
     Edges of the previous tree count as ``(1 + margin)`` times their value, so a new link
     replaces one only when clearly better. Ties break on the robot names: the result does not
-    depend on the order the robots or links come in.
+    depend on the order the robots or links come in. ``joins(link, group_a, group_b,
+    T_ga_gb)``, when given, may refuse a link that would join two groups of robots (each
+    ``robot -> T_group_robot``; ``T_ga_gb`` places group b in group a): the next link is
+    tried instead.
     """
     kept = previous_edges or set()
 
@@ -620,6 +846,7 @@ def spanning_tree(
         (lk for lk in links if lk.valid), key=lambda lk: (-weight(lk), lk.robot_a, lk.robot_b)
     )
     parent = {r: r for r in robots}
+    groups: dict[str, dict[str, FloatArray]] = {r: {r: np.eye(3)} for r in robots}
 
     def root(r: str) -> str:
         while parent[r] != r:
@@ -630,10 +857,59 @@ def spanning_tree(
     tree: list[Link] = []
     for link in order:
         ra, rb = root(link.robot_a), root(link.robot_b)
-        if ra != rb:
-            parent[max(ra, rb)] = min(ra, rb)
-            tree.append(link)
+        if ra == rb:
+            continue
+        group_a, group_b = groups[ra], groups[rb]
+        T_ga_gb = group_a[link.robot_a] @ link.matrix @ se2.invert(group_b[link.robot_b])
+        if joins is not None and not joins(link, group_a, group_b, T_ga_gb):
+            continue
+        if ra < rb:  # the smaller name stays the root; the other group moves into its frame
+            group_a.update({r: T_ga_gb @ T for r, T in group_b.items()})
+            parent[rb] = ra
+            del groups[rb]
+        else:
+            T_gb_ga = se2.invert(T_ga_gb)
+            group_b.update({r: T_gb_ga @ T for r, T in group_a.items()})
+            parent[ra] = rb
+            del groups[ra]
+        tree.append(link)
     return tree
+
+
+def free_space_join(
+    maps: Mapping[str, FloatArray], views: ViewSource, config: MergeConfig
+) -> JoinCheck:
+    """A :func:`spanning_tree` join check: two groups of robots join only if no robot's walls
+    lie in the free space any robot of the other group saw (beyond the link's allowance,
+    ``link_max_seen_through`` or that fraction of its value).
+
+    A pair's own link was judged on the two maps alone; a group has more viewpoints. A
+    look-alike place can fit one robot's map and still cross rooms a third robot saw empty.
+    """
+
+    def joins(
+        link: Link,
+        group_a: Mapping[str, FloatArray],
+        group_b: Mapping[str, FloatArray],
+        T_ga_gb: FloatArray,
+    ) -> bool:
+        if len(group_a) == 1 and len(group_b) == 1:
+            return True  # exactly the pair match_maps judged
+        allowed = max(
+            config.link_max_seen_through, config.link_max_seen_through_fraction * link.value
+        )
+        for x, T_ga_x in group_a.items():
+            for y, T_gb_y in group_b.items():
+                view_x, view_y = views(x), views(y)
+                if view_x is None and view_y is None:
+                    continue
+                T_x_y = se2.invert(T_ga_x) @ T_ga_gb @ T_gb_y
+                through = free_space_conflict(maps[x], view_x, maps[y], view_y, T_x_y, config)
+                if through > allowed:
+                    return False
+        return True
+
+    return joins
 
 
 def _components(robots: Sequence[str], tree: Sequence[Link]) -> list[list[str]]:
@@ -728,10 +1004,14 @@ def merge(
     config: MergeConfig | None = None,
     previous: MergeResult | None = None,
     reference: str | None = None,
+    viewpoints: Mapping[str, FloatArray] | None = None,
 ) -> MergeResult:
     """Merge partial maps whose relative poses are unknown, in no particular order.
 
-    ``maps``: robot name -> (N, 4) segments in that robot's own map frame. ``reference`` (or
+    ``maps``: robot name -> (N, 4) segments in that robot's own map frame. ``viewpoints``:
+    robot name -> (K, 3) keyframe poses in the same frame, where the robot's laser stood; a
+    link putting either map in the free space the other robot saw is refused (a robot without
+    viewpoints is judged on segments alone). ``reference`` (or
     ``config.reference``) names the robot whose frame becomes ``map``; by default the previous
     run's reference is kept, else the largest map of the largest linked group is taken.
     ``previous`` (the last result) supplies pair results to reuse and the tree to keep.
@@ -746,12 +1026,14 @@ def merge(
     if not robots:
         empty = np.zeros((0, 4))
         return MergeResult([], {}, None, [], {}, empty, np.zeros(0, dtype=np.int64), {}, {})
-    records, calls = pair_links(clean, config, None if previous is None else previous.pairs)
+    views = view_source(clean, viewpoints or {}, config)
+    records, calls = pair_links(clean, config, None if previous is None else previous.pairs, views)
     pairs_done = time.perf_counter()
     lengths = {r: MapSignature.of(clean[r]).length for r in robots}
     kept = set() if previous is None else {(lk.robot_a, lk.robot_b) for lk in previous.links}
     all_links = [record.link for record in records.values()]
-    tree = spanning_tree(robots, all_links, kept, config.stability_margin)
+    joins = free_space_join(clean, views, config) if viewpoints else None
+    tree = spanning_tree(robots, all_links, kept, config.stability_margin, joins)
     if chosen is None:
         chosen = choose_reference(
             robots, tree, lengths, None if previous is None else previous.reference

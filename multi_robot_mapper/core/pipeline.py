@@ -60,6 +60,8 @@ class OfflineMap:
     trajectories: dict[str, tuple[FloatArray, FloatArray]]  # robot -> stamps (N,), poses (N, 3)
     robot_frames: dict[str, Pose | None]  # T_map_robotmap as (x, y, theta); None = unmerged
     stats: dict[str, object]
+    # robot -> (K, 3) keyframe poses in the robot's own map frame (local mapping only)
+    keyframe_poses: dict[str, FloatArray] = dataclasses.field(default_factory=dict)
 
 
 Progress = Callable[[str, int, int], None]  # (robot, scans done, scans total)
@@ -173,6 +175,7 @@ def _run_local(
     segment_sets: list[FloatArray] = []
     owners: list[IntArray] = []
     trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
+    keyframe_poses: dict[str, FloatArray] = {}
     per_robot: dict[str, dict[str, object]] = {}
     scan_times: list[float] = []
     mapping_errors = 0
@@ -200,6 +203,10 @@ def _run_local(
                 stamps.append(item.stamp)
                 poses.append(update.pose)
         map_segments = mapper.map_segments
+        keyframes = mapper.keyframes()
+        keyframe_poses[robot] = np.array(
+            [kf.T_robotmap_keyframe for kf in keyframes], dtype=np.float64
+        ).reshape(-1, 3)
         segment_sets.append(map_segments)
         owners.append(np.full(len(map_segments), index, dtype=np.int64))
         trajectories[robot] = (
@@ -211,7 +218,7 @@ def _run_local(
             "scans_set_aside": mapper.scans_set_aside,
             "scans_tracked": mapper.scans_tracked,
             "set_aside_reasons": dict(mapper.set_aside_reasons),
-            "keyframes": len(mapper.keyframes()),
+            "keyframes": len(keyframes),
             "map_segments": len(map_segments),
         }
     times = np.asarray(scan_times) if scan_times else np.zeros(1)
@@ -237,6 +244,7 @@ def _run_local(
         trajectories,
         frames,
         stats,
+        keyframe_poses,
     )
 
 
@@ -247,7 +255,7 @@ def _merged(local: OfflineMap, config: MergeConfig) -> OfflineMap:
         robot: local.map_segments[local.segment_robot == index]
         for index, robot in enumerate(local.robots)
     }
-    result = merge(maps, config)
+    result = merge(maps, config, viewpoints=local.keyframe_poses)
     trajectories = {}
     for robot, (stamps, poses) in local.trajectories.items():
         T_map_robot = result.matrix(robot)
@@ -272,6 +280,8 @@ def _merged(local: OfflineMap, config: MergeConfig) -> OfflineMap:
                 {"a": link.robot_a, "b": link.robot_b, "value": round(link.value, 3)}
                 for link in result.links
             ],
+            "merge_links_valid": result.stats["links_valid"],
+            "merge_pairs": len(result.pairs),
             "merge_s": round(time.perf_counter() - started, 4),
             "robots_unmerged": result.unmerged,
         }
@@ -284,4 +294,5 @@ def _merged(local: OfflineMap, config: MergeConfig) -> OfflineMap:
         trajectories,
         dict(result.placements),
         stats,
+        local.keyframe_poses,
     )

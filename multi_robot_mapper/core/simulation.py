@@ -148,10 +148,24 @@ def raycast_fan(
     (beam, wall) pairs are solved, with one beam of slack either side; each pair uses exactly
     the arithmetic of :func:`raycast`, so the ranges are bitwise the same (test_simulation).
     """
+    poses = np.asarray(pose, dtype=np.float64).reshape(1, 3)
+    return np.asarray(raycast_fans(walls, poses, angle_min, angle_increment, beams, max_range)[0])
+
+
+def raycast_fans(
+    walls: FloatArray,
+    poses: FloatArray,
+    angle_min: float,
+    angle_increment: float,
+    beams: int,
+    max_range: float,
+) -> FloatArray:
+    """:func:`raycast_fan` from each of the ``(K, 3)`` laser poses at once: ``(K, beams)``."""
     angles = angle_min + angle_increment * np.arange(beams, dtype=np.float64)
+    count = len(poses)
     if beams < 2 or angle_increment == 0.0 or len(walls) == 0:
-        return raycast(walls, pose, angles, max_range)
-    x, y, theta = pose
+        return np.array([raycast(walls, (p[0], p[1], p[2]), angles, max_range) for p in poses])
+    x, y, theta = (poses[:, i, None] for i in range(3))  # (K, 1) against (N,) walls
     ax, ay = walls[:, 0] - x, walls[:, 1] - y
     ex, ey = walls[:, 2] - walls[:, 0], walls[:, 3] - walls[:, 1]
     turn = 2.0 * np.pi
@@ -165,23 +179,28 @@ def raycast_fan(
     short = ccw <= np.pi
     lo = np.where(short, phi_a, phi_b)
     hi = lo + np.where(short, ccw, turn - ccw)
-    # Beam index ranges [start, stop) per wall; the second copy catches sectors past 2 pi.
-    first = np.ceil(np.concatenate((lo, lo - turn)) / step).astype(np.int64) - 1
-    last = np.floor(np.concatenate((hi, hi - turn)) / step).astype(np.int64) + 1
-    start = np.clip(first, 0, beams)
-    stop = np.clip(last + 1, 0, beams)
-    ranges = np.full(beams, np.inf)
+    # Beam index ranges [start, stop) per (pose, wall); the second copy catches sectors past
+    # 2 pi.
+    first = np.ceil(np.hstack((lo, lo - turn)) / step).astype(np.int64) - 1
+    last = np.floor(np.hstack((hi, hi - turn)) / step).astype(np.int64) + 1
+    start = np.clip(first, 0, beams).ravel()
+    stop = np.clip(last + 1, 0, beams).ravel()
+    ranges = np.full((count, beams), np.inf)
     seen = stop > start  # ranges_index takes no empty ranges
     if not seen.any():
         return ranges
     beam, owner, _ = ranges_index(start[seen], stop[seen])
-    wall = np.tile(np.arange(len(walls)), 2)[seen][owner]
+    pair = np.flatnonzero(seen)[owner]  # index into the (K, 2N) grid
+    row, wall = np.divmod(pair, 2 * len(walls))
+    wall = wall % len(walls)
     if angle_increment < 0:
         beam = beams - 1 - beam  # counted from the lowest beam, which is the last one
-    dx, dy = np.cos(theta + angles)[beam], np.sin(theta + angles)[beam]
-    t, hit = _ray_wall_hits(dx, dy, ax[wall], ay[wall], ex[wall], ey[wall], max_range)
-    np.minimum.at(ranges, beam[hit], t[hit])
-    return ranges
+    heading = poses[row, 2] + angles[beam]
+    dx, dy = np.cos(heading), np.sin(heading)
+    t, hit = _ray_wall_hits(dx, dy, ax[row, wall], ay[row, wall], ex[wall], ey[wall], max_range)
+    flat = ranges.ravel()
+    np.minimum.at(flat, (row * beams + beam)[hit], t[hit])
+    return flat.reshape(count, beams)
 
 
 def simulate_scan(

@@ -108,15 +108,18 @@ def newest(stamps: list[Time]) -> Time:
     return max(stamps, key=_key) if stamps else Time()
 
 
-def partial_map_segments(msg: MarkerArray) -> FloatArray:
-    """A ``partial_map`` MarkerArray as ``(N, 4)`` segments in the robot's map frame: each
-    keyframe's segments moved by the keyframe's pose."""
+def partial_map_contents(msg: MarkerArray) -> tuple[FloatArray, FloatArray]:
+    """A ``partial_map`` MarkerArray as ``(N, 4)`` segments in the robot's map frame (each
+    keyframe's segments moved by the keyframe's pose) and the ``(K, 3)`` keyframe poses: where
+    the robot's laser stood, the viewpoints of its free space."""
+    keyframes = keyframes_from_markers(msg)
     pieces = [
         se2.transform_segments(se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments)
-        for kf in keyframes_from_markers(msg)
+        for kf in keyframes
         if len(kf.segments)
     ]
-    return np.vstack(pieces) if pieces else np.zeros((0, 4))
+    poses = np.array([kf.T_robotmap_keyframe for kf in keyframes], dtype=np.float64)
+    return (np.vstack(pieces) if pieces else np.zeros((0, 4))), poses.reshape(-1, 3)
 
 
 @dataclasses.dataclass
@@ -125,6 +128,7 @@ class RobotState:
 
     name: str
     segments: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 4)))
+    keyframe_poses: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
     map_stamp: Time | None = None  # header stamp of the last partial map
     map_frame: str = ""  # the robot's own map frame (the partial map's frame_id)
     version: int = 0  # partial maps received
@@ -207,7 +211,7 @@ class MapMerger(Node):
 
     def _on_partial_map(self, name: str, msg: MarkerArray) -> None:
         try:
-            segments = partial_map_segments(msg)
+            segments, keyframe_poses = partial_map_contents(msg)
         except Exception:
             self.warnings.warn(
                 f"bad_map:{name}",
@@ -219,6 +223,7 @@ class MapMerger(Node):
         with self._lock:
             state = self.robots[name]
             state.segments = segments
+            state.keyframe_poses = keyframe_poses
             state.map_stamp = stamp
             state.map_frame = markers[0].header.frame_id if markers else state.map_frame
             state.version += 1
@@ -239,6 +244,7 @@ class MapMerger(Node):
         with self._lock:
             maps = {n: s.segments for n, s in self.robots.items() if len(s.segments)}
             versions = {n: s.version for n, s in self.robots.items() if len(s.segments)}
+            viewpoints = {n: s.keyframe_poses for n, s in self.robots.items() if len(s.segments)}
             stamps = {n: s.map_stamp for n, s in self.robots.items() if s.map_stamp is not None}
             frames = {n: s.map_frame for n, s in self.robots.items()}
             poses = {
@@ -255,7 +261,7 @@ class MapMerger(Node):
                 )
                 return False
             try:
-                self.result = merge(maps, config.merge, previous=self.result)
+                self.result = merge(maps, config.merge, previous=self.result, viewpoints=viewpoints)
             except Exception:
                 self.merge_errors += 1
                 self.warnings.warn(

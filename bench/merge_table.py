@@ -1,0 +1,157 @@
+"""The merging table of issue 5: each CARMEN log cut into 2, 4 and 8 robots, mapped and merged.
+
+For every log and robot count K the real pipeline runs end to end, each step in its own ``mrm``
+process: ``mrm import-carmen LOG --robots K`` (the bag is cached under ``--work`` and reused),
+``mrm replay BAG --method pivot`` (local mapping per robot, then merging of the partial maps)
+and ``mrm evaluate`` against the log's reference poses.
+
+    .venv/bin/python bench/merge_table.py [--logs intel aces fhw csail] [--robots 2 4 8]
+        [--jobs 1] [--work bench_output/merge_table] [--json PATH] [--overlap-scans 0]
+        [--set NAME=VALUE ...] [--quick]
+
+Prints one Markdown table (ready for the README) on standard output, each row on standard
+error as soon as its run is done, and writes every figure (stats.json and metrics.json of each
+run, the wall time of each step) to ``--json`` (default WORK/merge_table.json). ``--jobs N``
+runs N (log, K) cases at once; every child is limited to one thread. ``--quick`` is intel,
+K = 2 only. A missing log is skipped with a note; a failing step is reported in its row.
+
+Target (issue 5): every robot merged in every case, ATE <= 0.15 m.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any
+
+from multi_robot_mapper.cli.evaluate import METRICS_FILE
+from multi_robot_mapper.io.results import read_results
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data" / "carmen"
+ONE_THREAD = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+COLUMNS = (
+    "log | robots | merged | ATE merged (m) | ATE all (m) | map error (m) | coverage | "
+    "precision | merge (s) | replay (s) | pair_success | links tree/valid"
+)
+
+
+def mrm(args: list[str], log: Path) -> float:
+    """Run ``mrm ARGS`` in a child process (output appended to ``log``); its wall time in s."""
+    started = time.perf_counter()
+    with log.open("a") as out:
+        out.write(f"$ mrm {' '.join(args)}\n")
+        out.flush()
+        code = subprocess.run(
+            [sys.executable, "-m", "multi_robot_mapper.cli.main", *args],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env={**os.environ, **ONE_THREAD},
+            cwd=REPO,
+        ).returncode
+    if code:
+        tail = log.read_text().strip().splitlines()[-1:]
+        raise RuntimeError(f"mrm {args[0]} exited {code}: {' '.join(tail)} (see {log})")
+    return time.perf_counter() - started
+
+
+def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]:
+    """Import (or reuse) the bag, replay with pivot, evaluate; every figure as one dict."""
+    row: dict[str, Any] = {"log": name, "robots": robots}
+    tag = f"{name}_{robots}" + (f"_o{args.overlap_scans}" if args.overlap_scans else "")
+    bag, out = args.work / "bags" / tag, args.work / "runs" / tag
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / "mrm.log"
+    log.write_text("")
+    try:
+        if not bag.exists():
+            partial = bag.with_name(tag + ".partial")
+            shutil.rmtree(partial, ignore_errors=True)  # left by an interrupted import
+            imported = [str(DATA / f"{name}.log.gz"), "--robots", str(robots)]
+            imported += ["--overlap-scans", str(args.overlap_scans), "--out", str(partial)]
+            mrm(["import-carmen", *imported], log)
+            partial.rename(bag)
+        overrides = [item for pair in args.set for item in ("--set", pair)]
+        row["replay_wall_s"] = mrm(
+            ["replay", str(bag), "--out", str(out), "--method", "pivot", *overrides], log
+        )
+        row["evaluate_wall_s"] = mrm(["evaluate", str(out), "--bag", str(bag), "--json"], log)
+        row["stats"] = read_results(out).stats
+        row["metrics"] = json.loads((out / METRICS_FILE).read_text())
+    except Exception as exc:  # one failing case must not stop the table
+        row["error"] = str(exc)
+    return row
+
+
+def fmt(value: Any, digits: int = 3) -> str:
+    return "n/a" if value is None or value != value else f"{value:.{digits}f}"
+
+
+def table_row(row: dict[str, Any]) -> str:
+    head = f"| {row['log']} | {row['robots']} | "
+    if "error" in row:
+        return head + f"failed: {row['error'][:90]} |" + " |" * 9  # all of it in the JSON
+    m, s = row["metrics"], row["stats"]
+    links = f"{len(s.get('merge_links', []))}/{s.get('merge_links_valid', '?')}"
+    cells = [
+        f"{m['robots_merged']}/{m['robots_total']}",
+        fmt(m["ate_rmse_m"], 4),
+        fmt(m["ate_all_rmse_m"], 3),
+        fmt(m["map_error_m"], 4),
+        fmt(m["map_coverage"]),
+        fmt(m["map_precision"]),
+        fmt(s.get("merge_s"), 1),
+        fmt(s.get("total_s"), 1),
+        fmt(m["pair_success"]),
+        links,
+    ]
+    return head + " | ".join(cells) + " |"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--logs", nargs="+", default=["intel", "aces", "fhw", "csail"])
+    parser.add_argument("--robots", type=int, nargs="+", default=[2, 4, 8])
+    parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--work", type=Path, default=REPO / "bench_output" / "merge_table")
+    parser.add_argument("--json", type=Path, help="default WORK/merge_table.json")
+    parser.add_argument("--overlap-scans", type=int, default=0)
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    parser.add_argument("--quick", action="store_true", help="intel, 2 robots only")
+    args = parser.parse_args()
+    if args.quick:
+        args.logs, args.robots = ["intel"], [2]
+    args.work = args.work.resolve()
+    cases = []
+    for name in args.logs:
+        if (DATA / f"{name}.log.gz").is_file():
+            cases += [(name, k) for k in args.robots]
+        else:
+            print(f"{name}: skipped, {DATA / f'{name}.log.gz'} not found", file=sys.stderr)
+    started = time.perf_counter()
+    with ThreadPoolExecutor(max(1, args.jobs)) as pool:  # the work is in the mrm children
+        futures = [pool.submit(run_case, name, k, args) for name, k in cases]
+        for future in as_completed(futures):
+            print(table_row(future.result()), file=sys.stderr, flush=True)
+    rows = [future.result() for future in futures]  # in grid order
+    wall = time.perf_counter() - started
+    path = args.json or args.work / "merge_table.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    report = {"wall_s": wall, "jobs": args.jobs, "overrides": args.set, "rows": rows}
+    path.write_text(json.dumps(report, indent=1) + "\n")
+    print(f"| {COLUMNS} |\n|" + " --- |" * (COLUMNS.count("|") + 1))
+    print("\n".join(table_row(row) for row in rows))
+    print(
+        f"{len(rows)} runs, wall {wall / 60:.1f} min, --jobs {args.jobs} -> {path}", file=sys.stderr
+    )
+
+
+if __name__ == "__main__":
+    main()
