@@ -42,9 +42,9 @@ bench: $(STAMP)
 	$(BIN)/python bench/merge_speed.py
 	$(BIN)/python bench/live_rate.py --seconds 20
 
-# Rewrite config/robot_mapper.yaml from the documented dataclass defaults.
+# Rewrite config/robot_mapper.yaml and config/map_merger.yaml from the documented dataclass defaults.
 config: $(STAMP)
-	$(BIN)/python -m multi_robot_mapper.io.config_files config/robot_mapper.yaml
+	$(BIN)/python -m multi_robot_mapper.io.config_files config
 
 clean:
 	rm -rf $(VENV) build install log demo_output bench_output .pytest_cache .mypy_cache .ruff_cache

@@ -34,12 +34,14 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import dataclasses  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from multi_robot_mapper.core import se2  # noqa: E402
+from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
 from multi_robot_mapper.core.fusion import fuse  # noqa: E402
 from multi_robot_mapper.core.matching import IntegrateConfig  # noqa: E402
@@ -74,7 +76,7 @@ def partial_map(
     return T_world_robot, own, views
 
 
-def split_runs(name: str, robots: int, overlap: int, use_views: bool) -> None:
+def split_runs(name: str, robots: int, overlap: int, use_views: bool, config: MergeConfig) -> None:
     """Merge a whole log cut into ``robots`` reference-placed partial maps; print one line."""
     path = DATA / f"{name}.log.gz"
     if not path.is_file():
@@ -87,7 +89,7 @@ def split_runs(name: str, robots: int, overlap: int, use_views: bool) -> None:
         run = scans[max(0, k * size - overlap) : (k + 1) * size : 2]
         frames[f"robot{k}"], maps[f"robot{k}"], views[f"robot{k}"] = partial_map(run, 10**9)
     started = time.perf_counter()
-    result = merge(maps, MergeConfig(), viewpoints=views if use_views else None)
+    result = merge(maps, config, viewpoints=views if use_views else None)
     elapsed = time.perf_counter() - started
     worst = 0.0
     reference = result.reference
@@ -127,11 +129,20 @@ def main() -> None:
         action="store_true",
         help="merge on segments alone, without the scans' poses as viewpoints (free space)",
     )
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override a MergeConfig field, e.g. --set link_min_fraction=0.2",
+    )
     args = parser.parse_args()
+    base = config_from_flat(MergeConfig, dict(parse_override(o) for o in args.overrides))
     if args.split:
         for name in args.logs:
             for robots in args.split:
-                split_runs(name, robots, args.overlap, not args.no_views)
+                split_runs(name, robots, args.overlap, not args.no_views, base)
         return
     path = DATA / f"{args.log}.log.gz"
     if not path.is_file():
@@ -149,7 +160,7 @@ def main() -> None:
     maps = {"robot_a": map_a, "robot_b": map_b}
     # The scans' poses are the viewpoints, as keyframe poses are in the node (--no-views: none).
     views = None if args.no_views else {"robot_a": views_a, "robot_b": views_b}
-    config = MergeConfig(reference="robot_a")
+    config = dataclasses.replace(base, reference="robot_a")
     times, cpu, parts = [], [], []
     result = merge(maps, config, viewpoints=views)
     for _ in range(args.repeats):

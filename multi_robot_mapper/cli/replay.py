@@ -1,4 +1,5 @@
-"""``mrm replay BAG --out DIR [--method local|pivot|ffs|reference] [--config YAML]``.
+"""``mrm replay BAG --out DIR [--method local|pivot|ffs|reference] [--config YAML]
+[--merger-config YAML] [--set NAME=VALUE]``.
 
 Runs the pipeline offline, as fast as the CPU allows, through the same core the nodes use, and
 writes DIR/map.json, map.svg, map.png, trajectories/<robot>.tum, robots.json and stats.json.
@@ -13,7 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from multi_robot_mapper.cli.common import CliError, add_config_options, load_mapper_config
+from multi_robot_mapper.cli.common import (
+    CliError,
+    add_config_options,
+    load_mapper_config,
+    load_merger_config,
+)
 from multi_robot_mapper.core.pipeline import METHODS, TimedLaserScan
 
 
@@ -23,7 +29,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     parser.add_argument("--method", choices=METHODS, default="local")
     parser.add_argument("--scan-topics", default="/*/scan", help="topic pattern (fnmatch)")
-    add_config_options(parser)
+    add_config_options(parser, merging=True)
     parser.set_defaults(func=run)
 
 
@@ -39,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from multi_robot_mapper.io.results import ReplayResult, write_results
 
     config = load_mapper_config(args)
+    merging = load_merger_config(args).merge
     try:
         require_method(args.method)  # before reading a large bag
     except MethodNotImplementedError as exc:
@@ -64,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
             config.extraction,
             progress=bar,
             local_mapping=config.local_mapping,
+            merging=merging,
         )
     finally:
         bar.close()

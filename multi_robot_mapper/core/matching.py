@@ -715,8 +715,8 @@ def refused(
         & (along_b > margin)
         & (along_b < lines2.length[b] - margin)
     )
-    np.logical_or.at(out, h, steep & inside)
-    return out
+    # The grid is hypothesis-major: each hypothesis owns one contiguous block of pairs.
+    return np.asarray((steep & inside).reshape(len(transforms), -1).any(axis=1))
 
 
 def transform_values(scores: PairScores, count: int) -> FloatArray:
@@ -955,13 +955,21 @@ def _distinct_candidates(
     order = order[values[order] > 0.0][: config.candidate_pool]
     if order.size == 0:
         return order
-    order = order[~refused(segments1, segments2, transforms[order], config)]
     pool = transforms[order]
     free = np.ones(len(order), dtype=bool)
+    allowed = np.zeros(len(order), dtype=bool)
+    checked, chunk = 0, 8  # the refusal test runs on the pool best first, in growing chunks
     taken: list[int] = []
     limit = config.refine_candidates if limit is None else limit
     while len(taken) < limit and free.any():
         k = int(np.argmax(free))  # best remaining, the pool being sorted
+        if k >= checked:
+            end = min(len(order), k + chunk)
+            allowed[k:end] = ~refused(segments1, segments2, pool[k:end], config)
+            checked, chunk = end, 2 * chunk
+        if not allowed[k]:
+            free[k] = False
+            continue
         taken.append(int(order[k]))
         turn = np.abs(se2.wrap_angle(pool[:, 0] - pool[k, 0]))
         shift = np.hypot(pool[:, 1] - pool[k, 1], pool[:, 2] - pool[k, 2])

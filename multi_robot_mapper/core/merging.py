@@ -44,14 +44,21 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import param, validate
+from multi_robot_mapper.core.correlation import (
+    CorrelationConfig,
+    Drawing,
+    correlation_peaks,
+    placement_scores,
+    rotation_candidates,
+)
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.matching import (
     IntegrateConfig,
     MatchResult,
-    hypotheses,
     integrate,
-    landmarks_from_pairs,
     lines_of,
+    refine_many,
+    refused,
     sample_segments,
     score_pairs,
 )
@@ -80,17 +87,27 @@ class MergeConfig:
         "segment length) among the largest group of linked robots",
     )
     link_min_value: float = param(
-        5.0,
+        15.0,
         unit="m",
         doc="validity threshold: a link's best transformation must overlap at least this "
-        "length of matching segments",
+        "length of matching segments (more than the walls of one room: a single room or "
+        "corner looks alike in many places)",
         minimum=0.0,
     )
     link_min_fraction: float = param(
         0.3,
         unit="",
-        doc="validity threshold: overlap at least this fraction of the shorter map's total "
-        "segment length",
+        doc="validity threshold on segments alone (a robot without viewpoints): overlap at "
+        "least this fraction of the shorter map's total segment length",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    viewed_link_min_fraction: float = param(
+        0.1,
+        unit="",
+        doc="link_min_fraction when both robots' viewpoints are known: free space and "
+        "uniqueness (link_min_uniqueness) then tell look-alike places apart, and robots that "
+        "share a small part of their maps can be linked",
         minimum=0.0,
         maximum=1.0,
     )
@@ -104,9 +121,16 @@ class MergeConfig:
     link_min_tight_fraction: float = param(
         0.15,
         unit="",
-        doc="validity threshold: segments matched within tight_distance must overlap at least "
-        "this fraction of the shorter map (the same walls coincide to centimetres, look-alike "
-        "walls of other places only roughly)",
+        doc="validity threshold on segments alone: segments matched within tight_distance must "
+        "overlap at least this fraction of the shorter map (the same walls coincide to "
+        "centimetres, look-alike walls of other places only roughly)",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    viewed_link_min_tight_fraction: float = param(
+        0.05,
+        unit="",
+        doc="link_min_tight_fraction when both robots' viewpoints are known",
         minimum=0.0,
         maximum=1.0,
     )
@@ -131,45 +155,6 @@ class MergeConfig:
         "then refined and judged on the whole maps",
         minimum=2,
     )
-    wide_hypothesis_segments: int = param(
-        16,
-        unit="segments",
-        doc="second try, when the first finds no clear link: angles between this many "
-        "longest segments",
-        minimum=2,
-    )
-    wide_coarse_segments: int = param(
-        60,
-        unit="segments",
-        doc="second try: hypotheses ranked on this many longest segments",
-        minimum=2,
-    )
-    corner_min_length: float = param(
-        0.3,
-        unit="m",
-        doc="corner landmarks join two segments at least this long",
-        minimum=0.0,
-    )
-    corner_gap: float = param(
-        0.3,
-        unit="m",
-        doc="two segments with end points this close form a corner landmark",
-        minimum=0.0,
-        exclusive_minimum=True,
-    )
-    corner_vote_cell: float = param(
-        0.2,
-        unit="m",
-        doc="corner hypotheses vote in cells of this size (and 2 degrees)",
-        minimum=0.0,
-        exclusive_minimum=True,
-    )
-    corner_candidates: int = param(
-        40,
-        unit="",
-        doc="the most voted corner hypotheses ranked on the judged sets",
-        minimum=1,
-    )
     judge_segments: int = param(
         250,
         unit="segments",
@@ -177,25 +162,41 @@ class MergeConfig:
         "map (short pieces add cost, not evidence)",
         minimum=2,
     )
+    correlation_candidates: int = param(
+        8,
+        unit="",
+        doc="the best placements of the map correlation (every translation, for each rotation "
+        "the wall directions allow) refined and judged with INTEGRATE's own hypothesis",
+        minimum=1,
+    )
+    correlation_cell: float = param(
+        0.3,
+        unit="m",
+        doc="grid cell of the map correlation (its walls are blurred by one cell)",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    free_space_weight: float = param(
+        2.0,
+        unit="",
+        doc="in the correlation score, a metre of wall lying in the other robot's free space "
+        "counts against as this many metres of matched wall",
+        minimum=0.0,
+    )
+    link_min_uniqueness: float = param(
+        2.0,
+        unit="",
+        doc="validity threshold: the link's correlation score (matched wall minus wall in free "
+        "space, m) must be at least this many times that of the best distinct placement "
+        "(> 2 m or 10 degrees away): a place that fits twice is ambiguous (symmetric "
+        "corridors, rows of equal rooms) and is refused",
+        minimum=1.0,
+    )
     max_hypotheses: int = param(
         150,
         unit="",
         doc="at most this many most-voted hypotheses are ranked per pair and order",
         minimum=1,
-    )
-    both_orders: bool = param(
-        True,
-        unit="",
-        doc="a link not clearly valid is searched in the other order too (ranking map a on "
-        "map b), the better kept: finds links one order misses, for twice the work",
-    )
-    confident_fraction: float = param(
-        0.5,
-        unit="",
-        doc="a valid link overlapping at least this fraction of the shorter map is clear: "
-        "the other order is not searched",
-        minimum=0.0,
-        maximum=1.0,
     )
     reuse_length_change: float = param(
         5.0,
@@ -305,12 +306,19 @@ class MergeConfig:
     def __post_init__(self) -> None:
         validate(self)
 
-    def link_config(self, hypotheses: int | None = None) -> IntegrateConfig:
-        """``integrate`` with this config's validity thresholds and hypothesis budget."""
+    def correlation(self) -> CorrelationConfig:
+        """The map correlation's settings from this config."""
+        return CorrelationConfig(
+            cell=self.correlation_cell, free_space_weight=self.free_space_weight
+        )
+
+    def link_config(self, hypotheses: int | None = None, viewed: bool = False) -> IntegrateConfig:
+        """``integrate`` with this config's validity thresholds (``viewed``: those for two
+        robots whose viewpoints are known) and hypothesis budget."""
         return dataclasses.replace(
             self.integrate,
             min_match_value=self.link_min_value,
-            min_match_fraction=self.link_min_fraction,
+            min_match_fraction=self.viewed_link_min_fraction if viewed else self.link_min_fraction,
             min_cross_support=self.link_min_cross_support,
             max_hypotheses=self.max_hypotheses if hypotheses is None else hypotheses,
             all_pairs_below=self.hypothesis_segments,
@@ -333,6 +341,7 @@ class Link:
     valid: bool  # passes the link_* thresholds
     tight_fraction: float = 0.0  # overlap within tight_distance / shorter map's length
     seen_through: float = 0.0  # m of either map in the other's free space (0: not checked)
+    uniqueness: float = 0.0  # correlation score / best distinct placement's (link_min_uniqueness)
 
     @property
     def matrix(self) -> FloatArray:
@@ -388,22 +397,18 @@ def longest(segments: FloatArray, count: int) -> FloatArray:
     return np.asarray(segments[order[:count]])
 
 
-def _inverse_row(T_1_2: FloatArray) -> FloatArray:
-    """``(theta, tx, ty)`` of T_2_1 from that of T_1_2 (INTEGRATE's row convention)."""
-    T = se2.invert(se2.matrix_from_pose(float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0])))
-    x, y, theta = se2.pose_from_matrix(T)
-    return np.array([theta, x, y])
-
-
 @dataclasses.dataclass(frozen=True)
 class MapMatch:
-    """The result of matching two maps: INTEGRATE's best transformation and the verdict."""
+    """The result of matching two maps: the best transformation and the verdict."""
 
-    result: MatchResult  # T_1_2 (theta, tx, ty): map b in map a; value, fraction
+    result: MatchResult  # INTEGRATE's T_1_2 (theta, tx, ty): map b in map a; value, fraction
     tight_fraction: float  # overlap within tight_distance / shorter judged set's length
-    valid: bool  # INTEGRATE's validity with the link_* thresholds, tight overlap, free space
+    valid: bool  # INTEGRATE's validity with the link_* thresholds, tight overlap, free space,
+    # uniqueness
     integrate_calls: int
     seen_through: float = 0.0  # m of either map in the other's free space (0: not checked)
+    score: float = 0.0  # correlation score of the placement (m)
+    uniqueness: float = 0.0  # score / score of the best distinct placement
 
     @property
     def matrix(self) -> FloatArray:
@@ -416,30 +421,77 @@ def match_maps(
     config: MergeConfig,
     views_a: MapViews | None = None,
     views_b: MapViews | None = None,
+    drawings: tuple[Drawing, Drawing] | None = None,
 ) -> MapMatch:
-    """INTEGRATE for two partial maps: how map b lies in map a, and whether to trust it.
+    """How map b lies in map a, and whether to trust it.
 
-    Partial maps hold hundreds or thousands of segments, too many for INTEGRATE's heuristics
-    over all of them; the transformations that matter superimpose long walls. So, as the
-    paper's random heuristic does, hypotheses come from angles between the longest segments
-    (every pair of the ``hypothesis_segments`` longest of each map), the most voted are ranked
-    on the ``coarse_segments`` longest, and the best is refined and judged on the
-    ``judge_segments`` longest (no views: a map has no single scan). The search stops at the
-    first clear answer (valid, fraction at least ``confident_fraction``); until then it tries
-    the other order (``both_orders``: map a's segments ranked on map b's), then more segments
-    (``wide_*``), then corners anywhere in the maps (:func:`corner_hypotheses`); the best
-    judged candidate wins. Finally the overlap within ``tight_distance`` must reach
-    ``link_min_tight_fraction``: two unrelated places overlap roughly, one place to
-    centimetres. With the robots' views (:class:`MapViews`), neither map may lie in the other's
-    free space beyond ``link_max_seen_through`` (and that fraction of the value).
+    Candidates: INTEGRATE's own hypotheses (Amigoni Alg. 2: equal angles between pairs of the
+    ``hypothesis_segments`` longest segments, ranked on the ``coarse_segments`` longest) and the
+    ``correlation_candidates`` best placements of the map correlation
+    (:mod:`multi_robot_mapper.core.correlation`: every translation, for each rotation the wall
+    directions allow; with the robots' views, walls in the other's free space count against).
+    Partial maps hold hundreds or thousands of segments, too many for INTEGRATE's landmark
+    heuristics, and on self-similar buildings a corridor slid along itself overlaps more than
+    the true placement of a small overlap: the correlation finds it there.
+
+    Every candidate is refined (Cox, on the ``judge_segments`` longest segments) and scored by
+    the correlation; the best is evaluated by INTEGRATE (Alg. 4) and is valid when it passes
+    the ``link_*`` thresholds: its value, fraction and cross support; the overlap within
+    ``tight_distance`` (one place coincides to centimetres, look-alike places only roughly);
+    free space (with views, neither map may lie in the other's free space beyond
+    ``link_max_seen_through`` or that fraction of the value); and uniqueness (its score at
+    least ``link_min_uniqueness`` times that of the best distinct placement: a place that fits
+    twice is ambiguous). ``drawings`` are the two maps drawn for the correlation
+    (:func:`draw_map`) when the caller keeps them from one pair to the next.
     """
-    result, calls = _match_maps(map_a, map_b, config)
-    if result.value <= 0.0:
-        return MapMatch(result, 0.0, False, calls)
+    empty = MapMatch(MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0), 0.0, False, 0)
+    if len(map_a) == 0 or len(map_b) == 0:
+        return empty
+    drawing_a, drawing_b = drawings or (
+        draw_map(map_a, views_a, config),
+        draw_map(map_b, views_b, config),
+    )
     judge_a = longest(map_a, config.judge_segments)
     judge_b = longest(map_b, config.judge_segments)
+    candidates, calls = _candidates(map_a, map_b, drawing_a, drawing_b, config)
+    if len(candidates) == 0:
+        return empty
+    refined = refine_many(judge_a, judge_b, candidates, config.link_config())
+    scores = placement_scores(drawing_a, drawing_b, refined, config.correlation())
+    # Long walls crossing each other refuse a placement outright (Alg. 4 l. 6-7).
+    scores[refused(judge_a, judge_b, refined, config.link_config())] = -np.inf
+    if not np.isfinite(scores).any():
+        return empty
+    best = int(np.argmax(scores))
+    turn = np.abs(se2.wrap_angle(refined[:, 0] - refined[best, 0]))
+    shift = np.hypot(refined[:, 1] - refined[best, 1], refined[:, 2] - refined[best, 2])
+    distinct = (shift > _DISTINCT_SHIFT) | (turn > _DISTINCT_TURN)
+    rival = float(scores[distinct].max()) if distinct.any() else 0.0
+    score = float(scores[best])
+    uniqueness = score / rival if rival > 0.0 else (np.inf if score > 0.0 else 0.0)
+    # Uniqueness needs free space: on walls alone a repeated building (a row of equal rooms)
+    # fits at several places and every link would be ambiguous. With both robots' free space
+    # it is measured, and a smaller overlap is trusted.
+    viewed = views_a is not None and views_b is not None
+    # INTEGRATE evaluates the chosen place (Alg. 4): every candidate there, the best refined.
+    same_place = refined[~distinct]
+    result = integrate(
+        judge_a,
+        judge_b,
+        config.link_config(hypotheses=len(same_place), viewed=viewed),
+        heuristics=(),
+        ordered=(False, False),
+        extra_hypotheses=same_place,
+    )
+    calls += 1
+    if result.value <= 0.0:
+        return MapMatch(result, 0.0, False, calls, 0.0, score, uniqueness)
     tight = tight_fraction(judge_a, judge_b, result.T_1_2, config)
-    valid = result.valid and tight >= config.link_min_tight_fraction
+    valid = result.valid and tight >= (
+        config.viewed_link_min_tight_fraction if viewed else config.link_min_tight_fraction
+    )
+    if viewed:
+        valid = valid and uniqueness >= config.link_min_uniqueness
     through = 0.0
     if valid and (views_a is not None or views_b is not None):
         through = free_space_conflict(map_a, views_a, map_b, views_b, result.matrix, config)
@@ -447,7 +499,47 @@ def match_maps(
             config.link_max_seen_through, config.link_max_seen_through_fraction * result.value
         )
         valid = through <= allowed
-    return MapMatch(result, tight, valid, calls, through)
+    return MapMatch(result, tight, valid, calls, through, score, uniqueness)
+
+
+_DISTINCT_SHIFT = 2.0  # m: placements farther apart than this (or turned more) are rivals
+_DISTINCT_TURN = float(np.radians(10.0))
+
+
+def draw_map(segments: FloatArray, views: MapViews | None, config: MergeConfig) -> Drawing:
+    """A map drawn for the correlation, with its free space when its views are known (one
+    point per cell along each bearing marks every cell the beams cross)."""
+    cell = config.correlation_cell
+    free = np.zeros((0, 2)) if views is None else views.free_points(config, cell)
+    return Drawing.of(segments, free, cell)
+
+
+def _candidates(
+    map_a: FloatArray,
+    map_b: FloatArray,
+    drawing_a: Drawing,
+    drawing_b: Drawing,
+    config: MergeConfig,
+) -> tuple[FloatArray, int]:
+    """Candidate placements ``(theta, tx, ty)`` of map b in map a and the INTEGRATE calls."""
+    rows: list[FloatArray] = []
+    k, c = config.hypothesis_segments, config.coarse_segments
+    ranking = dataclasses.replace(config.link_config(), all_pairs_below=k)
+    angles = integrate(
+        longest(map_a, c),
+        longest(map_b, c),
+        ranking,
+        heuristics=("all",),
+        ordered=(False, False),
+        hypothesis_sets=(longest(map_a, k), longest(map_b, k)),
+    )
+    if angles.value > 0.0:
+        rows.append(angles.T_1_2.reshape(1, 3))
+    correlation = config.correlation()
+    rotations = rotation_candidates(map_a, map_b, correlation.rotations)
+    peaks, _ = correlation_peaks(drawing_a, drawing_b, rotations, correlation)
+    rows.append(peaks[: config.correlation_candidates])
+    return np.vstack(rows), 1
 
 
 def tight_fraction(
@@ -517,6 +609,24 @@ class MapViews:
             limits = windows.min(axis=2)
         return np.asarray(limits)
 
+    def free_points(self, config: MergeConfig, spacing: float) -> FloatArray:
+        """Points every ``spacing`` metres along every bearing of every view, out to
+        ``free_space_margin`` before the wall that ends it (:meth:`free_limits`): where the
+        robot's laser saw nothing."""
+        reach = self.free_limits(config.view_spread) - config.free_space_margin
+        steps = np.arange(spacing, config.view_range, spacing)
+        view, bearing, step = np.nonzero(reach[:, :, None] > steps[None, None, :])
+        if view.size == 0:
+            return np.zeros((0, 2))
+        heading = self.poses[view, 2] + self.angle_min + self.angle_increment * bearing
+        distance = steps[step]
+        return np.column_stack(
+            (
+                self.poses[view, 0] + distance * np.cos(heading),
+                self.poses[view, 1] + distance * np.sin(heading),
+            )
+        )
+
 
 def seen_through_length(views: MapViews, segments: FloatArray, config: MergeConfig) -> float:
     """Length of the walls among ``segments`` (in the views' map frame; those at least
@@ -585,137 +695,6 @@ def free_space_conflict(
     return through
 
 
-def _match_maps(
-    map_a: FloatArray, map_b: FloatArray, config: MergeConfig
-) -> tuple[MatchResult, int]:
-    """:func:`match_maps` and the number of INTEGRATE calls it took."""
-    if len(map_a) == 0 or len(map_b) == 0:
-        return MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0), 0
-    coarse_config = config.link_config()
-    k, c, j = config.hypothesis_segments, config.coarse_segments, config.judge_segments
-    judge_a, judge_b = longest(map_a, j), longest(map_b, j)
-    candidates: list[FloatArray] = []
-    calls = 0
-    result = MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0)
-
-    def add(row: FloatArray) -> bool:
-        """Judge the candidates with ``row`` added; True when the answer is clear."""
-        nonlocal result, calls
-        for old in candidates:
-            turn = abs(float(se2.wrap_angle(row[0] - old[0])))
-            if turn < 1e-3 and float(np.hypot(row[1] - old[1], row[2] - old[2])) < 0.01:
-                return False  # the same answer again
-        candidates.append(row)
-        result = integrate(
-            judge_a,
-            judge_b,
-            config.link_config(hypotheses=len(candidates)),
-            heuristics=(),
-            ordered=(False, False),
-            extra_hypotheses=np.vstack(candidates),
-        )
-        calls += 1
-        return result.valid and result.fraction >= config.confident_fraction
-
-    # 1. Angles between the longest segments, ranked on the coarse sets, S_b on S_a (then,
-    # with both_orders, S_a on S_b); 2. the same with more segments (large maps need it).
-    tries = [(k, c)]
-    wide_k, wide_c = config.wide_hypothesis_segments, config.wide_coarse_segments
-    if (wide_k, wide_c) != (k, c):
-        tries.append((wide_k, wide_c))
-    for hyp_count, coarse_count in tries:
-        hyp_a, hyp_b = longest(map_a, hyp_count), longest(map_b, hyp_count)
-        coarse_a, coarse_b = longest(map_a, coarse_count), longest(map_b, coarse_count)
-        ranking = dataclasses.replace(coarse_config, all_pairs_below=hyp_count)
-        forward = integrate(
-            coarse_a,
-            coarse_b,
-            ranking,
-            heuristics=("all",),
-            ordered=(False, False),
-            hypothesis_sets=(hyp_a, hyp_b),
-        )
-        calls += 1
-        if forward.value > 0.0 and add(forward.T_1_2):
-            return result, calls
-        if not config.both_orders:
-            continue
-        backward = integrate(
-            coarse_b,
-            coarse_a,
-            ranking,
-            heuristics=("all",),
-            ordered=(False, False),
-            hypothesis_sets=(hyp_b, hyp_a),
-        )
-        calls += 1
-        if backward.value > 0.0 and add(_inverse_row(backward.T_1_2)):
-            return result, calls
-    # 3. Corners anywhere in the maps, most voted first, ranked on the judged sets.
-    corner_rows = corner_hypotheses(judge_a, judge_b, config)
-    if len(corner_rows):
-        corners = integrate(
-            judge_a,
-            judge_b,
-            config.link_config(hypotheses=len(corner_rows)),
-            heuristics=(),
-            ordered=(False, False),
-            extra_hypotheses=corner_rows,
-        )
-        calls += 1
-        if corners.value > 0.0:
-            add(corners.T_1_2)
-    return result, calls
-
-
-def corner_pairs(segments: FloatArray, config: MergeConfig) -> tuple[IntArray, IntArray]:
-    """Pairs of segments (both at least ``corner_min_length``) with end points within
-    ``corner_gap``: the corners of the map, wherever they are (their number grows with the
-    map, unlike the pairs of a fixed number of longest segments)."""
-    lengths = lines_of(segments).length
-    usable = np.flatnonzero(lengths >= config.corner_min_length)
-    if usable.size < 2:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    ends = segments[usable].reshape(-1, 2)
-    owner = np.repeat(np.arange(usable.size), 2)
-    gap = ends[:, None, :] - ends[None, :, :]
-    close = np.einsum("ijk,ijk->ij", gap, gap) <= config.corner_gap**2
-    p, q = np.nonzero(close)
-    a, b = owner[p], owner[q]
-    keep = a < b
-    pairs = np.unique(np.column_stack((a[keep], b[keep])), axis=0)
-    return usable[pairs[:, 0]].astype(np.int64), usable[pairs[:, 1]].astype(np.int64)
-
-
-def corner_hypotheses(map_a: FloatArray, map_b: FloatArray, config: MergeConfig) -> FloatArray:
-    """Transformations superimposing a corner of map b on an equal corner of map a (Alg. 2
-    with corner landmarks), voted in cells of ``corner_vote_cell`` and 2 degrees: one
-    hypothesis from each of the ``corner_candidates`` most voted cells, as INTEGRATE rows
-    (theta, tx, ty). The same place seen by two robots shares many corners, which all vote
-    for the one transformation that superimposes it."""
-    ic = config.link_config()
-    first_a, second_a = corner_pairs(map_a, config)
-    first_b, second_b = corner_pairs(map_b, config)
-    if first_a.size == 0 or first_b.size == 0:
-        return np.zeros((0, 3))
-    marks_a = landmarks_from_pairs(map_a, first_a, second_a, ic)
-    marks_b = landmarks_from_pairs(map_b, first_b, second_b, ic)
-    raw = hypotheses(map_a, marks_a, map_b, marks_b, ic)
-    if len(raw) == 0:
-        return raw
-    cell, turn = config.corner_vote_cell, np.radians(2.0)
-    keys = np.column_stack(
-        (
-            np.round(raw[:, 0] / turn) % round(2 * np.pi / turn),
-            np.round(raw[:, 1] / cell),
-            np.round(raw[:, 2] / cell),
-        )
-    ).astype(np.int64)
-    _, first, votes = np.unique(keys, axis=0, return_index=True, return_counts=True)
-    order = np.argsort(-votes, kind="stable")[: config.corner_candidates]
-    return np.asarray(raw[first[order]])
-
-
 def _link(robot_a: str, robot_b: str, match: MapMatch) -> Link:
     x, y, theta = se2.pose_from_matrix(match.matrix)
     result = match.result
@@ -728,6 +707,7 @@ def _link(robot_a: str, robot_b: str, match: MapMatch) -> Link:
         match.valid,
         match.tight_fraction,
         match.seen_through,
+        match.uniqueness,
     )
 
 
@@ -801,6 +781,13 @@ def pair_links(
     signatures = {r: MapSignature.of(maps[r]) for r in robots}
     records: dict[tuple[str, str], PairRecord] = {}
     calls = 0
+    drawings: dict[str, Drawing] = {}
+
+    def drawing(robot: str) -> Drawing:  # once per robot, on first use
+        if robot not in drawings:
+            drawings[robot] = draw_map(maps[robot], view(robot), config)
+        return drawings[robot]
+
     for i, a in enumerate(robots):
         for b in robots[i + 1 :]:
             old = None if previous is None else previous.get((a, b))
@@ -811,7 +798,7 @@ def pair_links(
             ):
                 records[(a, b)] = dataclasses.replace(old, reused=True)
                 continue
-            match = match_maps(maps[a], maps[b], config, view(a), view(b))
+            match = match_maps(maps[a], maps[b], config, view(a), view(b), (drawing(a), drawing(b)))
             calls += match.integrate_calls
             records[(a, b)] = PairRecord(_link(a, b, match), signatures[a], signatures[b], False)
     return records, calls

@@ -68,17 +68,22 @@ def load_config(
     return config_from_flat(cls, flat)
 
 
-PARAMS_FILE_HEADER = (
-    "# robot_mapper parameters (ROS 2 params-file layout; also read by `mrm --config`).\n"
-    "# Units are SI. Generated from the dataclass defaults in multi_robot_mapper/core by\n"
-    "# `make config` (a test keeps them equal). Use: ros2 run multi_robot_mapper robot_mapper\n"
-    "#   --ros-args -r __ns:=/robot1 --params-file config/robot_mapper.yaml\n"
-)
+def params_file_header(node: str) -> str:
+    """The comment heading ``config/<node>.yaml``."""
+    mapper = node == "robot_mapper"
+    namespace = " -r __ns:=/robot1" if mapper else ""
+    option = "--config" if mapper else "replay --merger-config"
+    return (
+        f"# {node} parameters (ROS 2 params-file layout; also read by `mrm {option}`).\n"
+        "# Units are SI. Generated from the dataclass defaults in multi_robot_mapper/core by\n"
+        f"# `make config` (a test keeps them equal). Use: ros2 run multi_robot_mapper {node}\n"
+        f"#   --ros-args{namespace} --params-file config/{node}.yaml\n"
+    )
 
 
-def default_params_file(config_class: type) -> str:
+def default_params_file(config_class: type, node: str = "robot_mapper") -> str:
     """A ROS 2 params file holding every parameter of ``config_class`` at its default, each
-    with its unit and meaning as a comment (``config/robot_mapper.yaml`` is this text)."""
+    with its unit and meaning as a comment (``config/<node>.yaml`` is this text)."""
     from multi_robot_mapper.core.config import field_specs
 
     def scalar(value: Any) -> str:
@@ -102,12 +107,19 @@ def default_params_file(config_class: type) -> str:
         rows.append((f"{indent}{parts[-1]}: {scalar(spec.default)}", f"# {unit}{spec.doc}"))
     width = max(len(text) for text, comment in rows if comment is not None) + 1
     body = [text if comment is None else f"{text.ljust(width)}{comment}" for text, comment in rows]
-    return PARAMS_FILE_HEADER + "/**:\n  ros__parameters:\n" + "\n".join(body) + "\n"
+    return params_file_header(node) + "/**:\n  ros__parameters:\n" + "\n".join(body) + "\n"
 
 
-if __name__ == "__main__":  # `make config`: rewrite config/robot_mapper.yaml from the defaults
+if __name__ == "__main__":  # `make config`: rewrite both nodes' params files in the folder given
     import sys
 
     from multi_robot_mapper.core.mapper_config import RobotMapperConfig
+    from multi_robot_mapper.core.merger_config import MapMergerConfig
 
-    Path(sys.argv[1]).write_text(default_params_file(RobotMapperConfig), encoding="utf-8")
+    folder = Path(sys.argv[1])
+    for node, config_class in (
+        ("robot_mapper", RobotMapperConfig),
+        ("map_merger", MapMergerConfig),
+    ):
+        text = default_params_file(config_class, node)
+        (folder / f"{node}.yaml").write_text(text, encoding="utf-8")

@@ -1,0 +1,262 @@
+"""Map correlation: every translation of one partial map over another at once.
+
+INTEGRATE draws its hypotheses from landmarks, pairs of the longest segments. On large maps of
+self-similar buildings (long corridors, rows of equal rooms) the true transformation is often
+not among them, or a corridor slid along itself overlaps more. Correlation searches every
+translation instead: the rotation comes from the maps' wall-direction histograms (the peaks of
+their circular cross-correlation, as in Carpin's Hough-spectrum map merging) and, for each
+rotation, the translation from the 2-D cross-correlation of the two maps drawn on a grid (one
+FFT product per channel, :func:`scipy.signal.fftconvolve`).
+
+Scores are in metres, like INTEGRATE's values: a wall lying on a wall of the same direction
+counts its length; with the robots' free space (where their lasers saw nothing), a wall
+placed in the other robot's free space counts ``free_space_weight`` times its length against
+(the evidence that tells look-alike places apart, which overlap alone cannot). Walls are drawn
+in three direction channels weighted ``2/3 cos^2(phi - k pi/3)``: the sum of the squared
+weights is 1/2 for every direction, so parallel walls score the same whatever their direction
+and crossing walls score a third of that.
+
+Frames: :class:`Drawing` holds a map in its own frame; a transformation row ``(theta, tx,
+ty)`` places map b in map a (INTEGRATE's convention, ``T_a_b``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import fft as sp_fft
+from scipy import ndimage
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.matching import lines_of, sample_segments
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+_CHANNELS = 3  # wall directions k * pi / 3; the weights' squares sum to 1/2 for any direction
+_HISTOGRAM_BINS = 360  # wall directions over [0, pi): half-degree bins
+
+
+@dataclasses.dataclass(frozen=True)
+class CorrelationConfig:
+    """How maps are drawn and correlated (metres, radians); plain values, not ROS parameters:
+    :class:`multi_robot_mapper.core.merging.MergeConfig` holds the documented ones."""
+
+    cell: float = 0.3  # grid cell (m)
+    blur: float = 1.0  # Gaussian blur of the walls, in cells: tolerance for noise and drift
+    free_space_weight: float = 1.0  # a metre of wall in free space cancels this many matched
+    rotations: int = 4  # direction-histogram peaks tried (each also turned by pi)
+    per_rotation: int = 8  # translation peaks kept per rotation
+    separation: float = 1.0  # m, peaks closer than this are one answer
+
+
+@dataclasses.dataclass(frozen=True)
+class Drawing:
+    """A map's walls as points along its segments (with each one's direction and length) and
+    the points of its free space, in the map's own frame."""
+
+    walls: FloatArray  # (P, 2)
+    direction: FloatArray  # (P,) direction of the segment each point lies on (rad)
+    weight: FloatArray  # (P,) metres of wall each point stands for
+    free: FloatArray  # (F, 2) points where the robot's laser saw nothing
+
+    @staticmethod
+    def of(segments: FloatArray, free: FloatArray, cell: float) -> Drawing:
+        """Draw ``segments`` (sampled every half cell) with the free-space points ``free``."""
+        spacing = 0.5 * cell
+        if len(segments) == 0:
+            empty = np.zeros(0)
+            return Drawing(np.zeros((0, 2)), empty, empty, np.asarray(free).reshape(-1, 2))
+        points, owner = sample_segments(segments, spacing)
+        lines = lines_of(segments)
+        count = np.bincount(owner, minlength=len(segments))
+        weight = (lines.length / np.maximum(count, 1))[owner]
+        direction = np.arctan2(segments[:, 3] - segments[:, 1], segments[:, 2] - segments[:, 0])
+        return Drawing(points, direction[owner], weight, np.asarray(free).reshape(-1, 2))
+
+    def turned(self, theta: float) -> Drawing:
+        """The same drawing rotated by ``theta`` about its frame's origin."""
+        R = se2.matrix_from_pose(0.0, 0.0, theta)
+        return Drawing(
+            se2.transform_points(R, self.walls),
+            self.direction + theta,
+            self.weight,
+            se2.transform_points(R, self.free),
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class _Grid:
+    origin: FloatArray  # (2,) corner of cell (0, 0)
+    shape: tuple[int, int]
+    cell: float
+
+    @staticmethod
+    def around(drawing: Drawing, cell: float) -> _Grid:
+        points = np.vstack((drawing.walls, drawing.free))
+        if len(points) == 0:
+            return _Grid(np.zeros(2), (1, 1), cell)
+        low, high = points.min(axis=0), points.max(axis=0)
+        shape = np.ceil((high - low) / cell).astype(np.int64) + 1
+        return _Grid(low, (int(shape[0]), int(shape[1])), cell)
+
+    def cells(self, points: FloatArray) -> tuple[IntArray, IntArray, NDArray[np.bool_]]:
+        index = np.floor((points - self.origin) / self.cell).astype(np.int64)
+        inside = (
+            (index[:, 0] >= 0)
+            & (index[:, 1] >= 0)
+            & (index[:, 0] < self.shape[0])
+            & (index[:, 1] < self.shape[1])
+        )
+        return index[:, 0], index[:, 1], inside
+
+    def draw(self, points: FloatArray, weights: FloatArray) -> FloatArray:
+        """Sum of ``weights`` per cell."""
+        grid = np.zeros(self.shape)
+        i, j, inside = self.cells(points)
+        np.add.at(grid, (i[inside], j[inside]), weights[inside])
+        return grid
+
+
+def _channel_weights(direction: FloatArray) -> FloatArray:
+    """(C, P) weights of each wall point in each direction channel."""
+    k = np.arange(_CHANNELS)[:, None] * (np.pi / _CHANNELS)
+    return np.asarray((2.0 / _CHANNELS) * np.cos(direction[None, :] - k) ** 2)
+
+
+def _walls(drawing: Drawing, grid: _Grid, blur: float) -> FloatArray:
+    """(C, H, W) metres of wall per cell and direction channel, blurred by ``blur`` cells."""
+    weights = _channel_weights(drawing.direction) * drawing.weight[None, :]
+    drawn = [grid.draw(drawing.walls, w) for w in weights]
+    return np.stack([ndimage.gaussian_filter(d, blur, mode="constant") for d in drawn])
+
+
+def _free(drawing: Drawing, grid: _Grid) -> FloatArray:
+    """(H, W) 1 where the robot saw free space, else 0."""
+    return np.minimum(grid.draw(drawing.free, np.ones(len(drawing.free))), 1.0)
+
+
+def _line_peak(cell: float, blur: float) -> float:
+    """Correlation of two equal blurred walls per metre of wall (for the metre scale): the
+    cross-profile of each is a Gaussian of ``blur`` cells, their product sums to
+    1 / (2 sqrt(pi) blur), times ``cell`` metres per cell, times the channels' 1/2."""
+    return float(0.5 * cell / (2.0 * np.sqrt(np.pi) * max(blur, 1e-9)))
+
+
+def wall_directions(segments: FloatArray) -> FloatArray:
+    """Length-weighted histogram of wall directions over [0, pi), blurred by one bin."""
+    if len(segments) == 0:
+        return np.zeros(_HISTOGRAM_BINS)
+    direction = np.mod(
+        np.arctan2(segments[:, 3] - segments[:, 1], segments[:, 2] - segments[:, 0]), np.pi
+    )
+    bins = np.minimum((direction / np.pi * _HISTOGRAM_BINS).astype(np.int64), _HISTOGRAM_BINS - 1)
+    histogram = np.bincount(bins, weights=lines_of(segments).length, minlength=_HISTOGRAM_BINS)
+    return np.asarray(ndimage.gaussian_filter1d(histogram, 1.0, mode="wrap"))
+
+
+def rotation_candidates(map_a: FloatArray, map_b: FloatArray, count: int) -> FloatArray:
+    """Rotations of map b that line its walls up with map a's: the ``count`` highest peaks
+    (at least a fifth of the highest) of the circular cross-correlation of the two direction
+    histograms, refined by a parabola through each peak, each also turned by pi (walls have no
+    direction)."""
+    ha, hb = wall_directions(map_a), wall_directions(map_b)
+    spectrum = np.real(np.fft.ifft(np.fft.fft(ha) * np.conj(np.fft.fft(hb))))
+    before, after = np.roll(spectrum, 1), np.roll(spectrum, -1)
+    peaks = np.flatnonzero(
+        (spectrum >= before) & (spectrum > after) & (spectrum >= 0.2 * spectrum.max())
+    )
+    peaks = peaks[np.argsort(-spectrum[peaks], kind="stable")][:count]
+    curve = before[peaks] - 2.0 * spectrum[peaks] + after[peaks]
+    safe = np.where(curve < 0.0, curve, -1.0)  # a flat top: no refinement
+    offset = np.where(curve < 0.0, 0.5 * (before[peaks] - after[peaks]) / safe, 0.0)
+    theta = (peaks + offset) * (np.pi / _HISTOGRAM_BINS)
+    return np.asarray(se2.wrap_angle(np.concatenate((theta, theta + np.pi))))
+
+
+def correlation_peaks(
+    a: Drawing, b: Drawing, rotations: FloatArray, config: CorrelationConfig
+) -> tuple[FloatArray, FloatArray]:
+    """The best placements of drawing b on drawing a: ``(N, 3)`` rows ``(theta, tx, ty)`` and
+    their scores (metres: matched wall minus ``free_space_weight`` x wall in the other's free
+    space), best first; ``per_rotation`` peaks per rotation, ``separation`` apart.
+
+    One FFT grid holds every shift of b over a (a's grid plus b's largest extent under any
+    rotation, so the circular correlation never wraps a real overlap): a's five layers (three
+    wall directions, its sharp walls, its free space) are transformed once, b's five per
+    rotation, and the score needs one inverse transform (correlation is linear).
+    """
+    cell, blur = config.cell, config.blur
+    grid_a = _Grid.around(a, cell)
+    points_b = np.vstack((b.walls, b.free))
+    if len(a.walls) == 0 or len(b.walls) == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    reach_b = int(np.ceil(2.0 * float(np.hypot(*points_b.T).max()) / cell)) + 2
+    shape = (
+        sp_fft.next_fast_len(grid_a.shape[0] + reach_b, real=True),
+        sp_fft.next_fast_len(grid_a.shape[1] + reach_b, real=True),
+    )
+
+    def spectrum(layer: FloatArray) -> NDArray[np.complex128]:
+        return np.asarray(sp_fft.rfft2(layer, shape))
+
+    walls_a = [spectrum(layer) for layer in _walls(a, grid_a, blur)]
+    free_a = spectrum(_free(a, grid_a))
+    sharp_a = spectrum(grid_a.draw(a.walls, a.weight))  # free space is sharp: walls too
+    scale = 1.0 / _line_peak(cell, blur)
+    window = 2 * max(1, round(config.separation / cell)) + 1
+    rows: list[FloatArray] = []
+    scores: list[FloatArray] = []
+    for theta in rotations:
+        turned = b.turned(float(theta))
+        grid_b = _Grid.around(turned, cell)
+        walls_b = [spectrum(layer) for layer in _walls(turned, grid_b, blur)]
+        free_b = spectrum(_free(turned, grid_b))
+        sharp_b = spectrum(grid_b.draw(turned.walls, turned.weight))
+        # Circular cross-correlation: entry k puts b's cell (0, 0) on a's cell k (k - shape
+        # past a's grid: a negative shift). ``through`` is metres of wall in free cells.
+        matched = sum(wa * np.conj(wb) for wa, wb in zip(walls_a, walls_b, strict=True))
+        through = free_a * np.conj(sharp_b) + sharp_a * np.conj(free_b)
+        score = sp_fft.irfft2(scale * matched - config.free_space_weight * through, shape)
+        best = score == ndimage.maximum_filter(score, size=window, mode="wrap")
+        peaks = np.argwhere(best & (score > 1e-6))
+        values = score[peaks[:, 0], peaks[:, 1]]
+        keep = np.argsort(-values, kind="stable")[: config.per_rotation]
+        shift = peaks[keep]
+        shift = np.where(shift < np.array(grid_a.shape), shift, shift - np.array(shape))
+        t = grid_a.origin - grid_b.origin + shift * cell
+        rows.append(np.column_stack((np.full(len(keep), theta), t)))
+        scores.append(values[keep])
+    if not rows:
+        return np.zeros((0, 3)), np.zeros(0)
+    all_rows, all_scores = np.vstack(rows), np.concatenate(scores)
+    order = np.argsort(-all_scores, kind="stable")
+    return all_rows[order], all_scores[order]
+
+
+def placement_scores(
+    a: Drawing, b: Drawing, transforms: FloatArray, config: CorrelationConfig
+) -> FloatArray:
+    """The correlation score (metres) of each ``(theta, tx, ty)`` placement of b on a,
+    evaluated directly (b's wall points looked up in a's blurred walls and free space, a's
+    wall points in b's free space): for placements found elsewhere, e.g. refined ones."""
+    cell, blur = config.cell, config.blur
+    grid_a, grid_b = _Grid.around(a, cell), _Grid.around(b, cell)
+    walls_a, free_a, free_b = _walls(a, grid_a, blur), _free(a, grid_a), _free(b, grid_b)
+    # A wall point on a blurred wall of its direction reads 1 / (sqrt(2 pi) blur) of its
+    # cell's metres: that, times the channels' 1/2, is one metre per metre.
+    scale = np.sqrt(2.0 * np.pi) * max(blur, 1e-9) / (0.5 * cell)
+    out = np.zeros(len(transforms))
+    for n, (theta, tx, ty) in enumerate(np.asarray(transforms, dtype=np.float64).reshape(-1, 3)):
+        T_a_b = se2.matrix_from_pose(float(tx), float(ty), float(theta))
+        on_a = se2.transform_points(T_a_b, b.walls)
+        i, j, inside = grid_a.cells(on_a)
+        weights = _channel_weights(b.direction + theta) * b.weight[None, :]
+        matched = float((walls_a[:, i[inside], j[inside]] * weights[:, inside]).sum() * scale)
+        through = float((free_a[i[inside], j[inside]] * b.weight[inside]).sum())
+        i, j, inside = grid_b.cells(se2.transform_points(se2.invert(T_a_b), a.walls))
+        through += float((free_b[i[inside], j[inside]] * a.weight[inside]).sum())
+        out[n] = matched - config.free_space_weight * through
+    return out
