@@ -27,6 +27,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError
+from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.simulation import (
     SIM_START_S,
     LaserModel,
@@ -38,6 +39,7 @@ from multi_robot_mapper.core.simulation import (
     simulate_scan,
 )
 from multi_robot_mapper.io.messages import (
+    partial_map_markers,
     pose_from_msg,
     scan_to_msg,
     seconds_from_stamp,
@@ -336,3 +338,55 @@ def test_main_exits_2_with_one_line_for_ffs(
     assert code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "ffs" in err and "not implemented yet" in err
+
+
+def _partial_map_message(segments: np.ndarray, laser_poses: np.ndarray, name: str) -> MarkerArray:
+    """A partial map as robot_mapper sends it: one keyframe per laser pose (the merger's
+    viewpoints); the first owns every segment (in its own frame), the others none."""
+    keyframes = [
+        Keyframe(k, SIM_START_S + k, np.asarray(pose, dtype=np.float64), np.zeros((0, 4)))
+        for k, pose in enumerate(laser_poses)
+    ]
+    T_map_first = se2.matrix_from_pose(*laser_poses[0])
+    own = se2.transform_segments(se2.invert(T_map_first), segments)
+    keyframes[0] = Keyframe(0, SIM_START_S, np.asarray(laser_poses[0], dtype=np.float64), own)
+    return partial_map_markers(keyframes, stamp_from_seconds(SIM_START_S + 99), f"{name}/map", 0.03)
+
+
+def test_a_merge_in_the_worker_process_is_the_merge_in_the_node(ros_context) -> None:
+    # Two office robots' maps in frames anywhere: merged in the worker process (the default)
+    # and in the node's own thread, the placements are the same and where the truth has them.
+    from test_merging import in_own_frames, poses_in_own_frames, random_frames, world_runs
+
+    runs = world_runs("office", 2)
+    frames = random_frames(2, seed=5)
+    names = ["alpha", "bravo"]
+    maps = in_own_frames(tuple(m for m, _ in runs), frames, names)
+    views = poses_in_own_frames(tuple(p for _, p in runs), frames, names)
+    placements = []
+    for worker in (True, False):
+        node = MapMerger(
+            context=ros_context,
+            node_name=f"merger_{worker}",
+            parameter_overrides=[
+                Parameter("robots", value="alpha,bravo"),
+                Parameter("merge_worker", value=worker),
+            ],
+        )
+        try:
+            for name in names:
+                node._on_partial_map(name, _partial_map_message(maps[name], views[name], name))
+            assert node.merge_now() and node.merge_errors == 0
+            assert node.result is not None and node.result.unmerged == []
+            placements.append(node.result.placements)
+        finally:
+            node.destroy_node()
+    assert placements[0] == placements[1]
+    reference = "alpha" if placements[0]["alpha"] == (0.0, 0.0, 0.0) else "bravo"
+    other = "bravo" if reference == "alpha" else "alpha"
+    T_ref_other = se2.invert(frames[names.index(reference)]) @ frames[names.index(other)]
+    got = placements[0][other]
+    assert got is not None
+    want = se2.pose_from_matrix(T_ref_other)
+    assert math.hypot(got[0] - want[0], got[1] - want[1]) < 0.05
+    assert abs(math.remainder(got[2] - want[2], math.tau)) < math.radians(0.5)

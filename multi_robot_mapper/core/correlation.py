@@ -76,48 +76,64 @@ class Drawing:
         direction = np.arctan2(segments[:, 3] - segments[:, 1], segments[:, 2] - segments[:, 0])
         return Drawing(points, direction[owner], weight, np.asarray(free).reshape(-1, 2))
 
-    def turned(self, theta: float) -> Drawing:
-        """The same drawing rotated by ``theta`` about its frame's origin."""
-        R = se2.matrix_from_pose(0.0, 0.0, theta)
+    def moved(self, T: FloatArray, theta: float) -> Drawing:
+        """The same drawing moved by ``T`` (3x3), which turns it by ``theta``."""
         return Drawing(
-            se2.transform_points(R, self.walls),
+            se2.transform_points(T, self.walls),
             self.direction + theta,
             self.weight,
-            se2.transform_points(R, self.free),
+            se2.transform_points(T, self.free),
         )
+
+    def centre(self) -> FloatArray:
+        """The middle of the drawing's bounding box (walls and free space)."""
+        points = np.vstack((self.walls, self.free))
+        return np.asarray(0.5 * (points.min(axis=0) + points.max(axis=0)))
 
 
 @dataclasses.dataclass(frozen=True)
 class _Grid:
-    origin: FloatArray  # (2,) corner of cell (0, 0)
+    """A raster of cells ``cell`` wide; cell (i, j) is centred at ``origin + (i, j) * cell``."""
+
+    origin: FloatArray  # (2,) centre of cell (0, 0)
     shape: tuple[int, int]
     cell: float
 
     @staticmethod
     def around(drawing: Drawing, cell: float) -> _Grid:
+        """A grid holding the drawing, with one cell to spare on every side."""
         points = np.vstack((drawing.walls, drawing.free))
         if len(points) == 0:
             return _Grid(np.zeros(2), (1, 1), cell)
-        low, high = points.min(axis=0), points.max(axis=0)
+        low, high = points.min(axis=0) - cell, points.max(axis=0) + cell
         shape = np.ceil((high - low) / cell).astype(np.int64) + 1
         return _Grid(low, (int(shape[0]), int(shape[1])), cell)
 
-    def cells(self, points: FloatArray) -> tuple[IntArray, IntArray, NDArray[np.bool_]]:
-        index = np.floor((points - self.origin) / self.cell).astype(np.int64)
-        inside = (
-            (index[:, 0] >= 0)
-            & (index[:, 1] >= 0)
-            & (index[:, 0] < self.shape[0])
-            & (index[:, 1] < self.shape[1])
-        )
-        return index[:, 0], index[:, 1], inside
+    def coordinates(self, points: FloatArray) -> FloatArray:
+        """(2, P) fractional cell indices of points."""
+        return np.asarray(((points - self.origin) / self.cell).T)
 
     def draw(self, points: FloatArray, weights: FloatArray) -> FloatArray:
-        """Sum of ``weights`` per cell."""
+        """Sum of ``weights`` per cell, each point in its nearest cell."""
+        u = np.rint(self.coordinates(points)).astype(np.int64)
+        inside = (u[0] >= 0) & (u[1] >= 0) & (u[0] < self.shape[0]) & (u[1] < self.shape[1])
+        index = u[0, inside] * self.shape[1] + u[1, inside]
+        flat = np.bincount(index, weights[inside], minlength=self.shape[0] * self.shape[1])
+        return np.asarray(flat.reshape(self.shape), dtype=np.float64)
+
+    def mark(self, points: FloatArray) -> FloatArray:
+        """1 in every cell holding a point (the nearest cell), else 0."""
+        u = np.rint(self.coordinates(points)).astype(np.int64)
+        inside = (u[0] >= 0) & (u[1] >= 0) & (u[0] < self.shape[0]) & (u[1] < self.shape[1])
         grid = np.zeros(self.shape)
-        i, j, inside = self.cells(points)
-        np.add.at(grid, (i[inside], j[inside]), weights[inside])
+        grid[u[0, inside], u[1, inside]] = 1.0
         return grid
+
+    def sample(self, raster: FloatArray, points: FloatArray, order: int) -> FloatArray:
+        """``raster`` at the points: bilinear (``order`` 1) or nearest cell (0); 0 outside."""
+        return np.asarray(
+            ndimage.map_coordinates(raster, self.coordinates(points), order=order, cval=0.0)
+        )
 
 
 def _channel_weights(direction: FloatArray) -> FloatArray:
@@ -135,14 +151,22 @@ def _walls(drawing: Drawing, grid: _Grid, blur: float) -> FloatArray:
 
 def _free(drawing: Drawing, grid: _Grid) -> FloatArray:
     """(H, W) 1 where the robot saw free space, else 0."""
-    return np.minimum(grid.draw(drawing.free, np.ones(len(drawing.free))), 1.0)
+    return grid.mark(drawing.free)
+
+
+# Drawing a point in its nearest cell spreads a wall across by a uniform kernel of variance
+# 1/12 cell^2; reading a raster between cells (bilinear) by a triangle of variance 1/6: the
+# blur the metre scales must count.
+_DRAWN = 1.0 / 12.0
+_READ = 1.0 / 6.0
 
 
 def _line_peak(cell: float, blur: float) -> float:
-    """Correlation of two equal blurred walls per metre of wall (for the metre scale): the
-    cross-profile of each is a Gaussian of ``blur`` cells, their product sums to
-    1 / (2 sqrt(pi) blur), times ``cell`` metres per cell, times the channels' 1/2."""
-    return float(0.5 * cell / (2.0 * np.sqrt(np.pi) * max(blur, 1e-9)))
+    """Correlation of two equal drawn walls per metre of wall (for the metre scale): the
+    cross-profile of each is about a Gaussian of variance ``blur^2 + 1/12`` cells^2, their
+    product sums to 1 / (2 sqrt(pi (blur^2 + 1/12))), times ``cell`` metres per cell, times
+    the channels' 1/2."""
+    return float(0.5 * cell / (2.0 * np.sqrt(np.pi * (blur**2 + _DRAWN))))
 
 
 def wall_directions(segments: FloatArray) -> FloatArray:
@@ -189,11 +213,14 @@ def correlation_peaks(
     rotation, and the score needs one inverse transform (correlation is linear).
     """
     cell, blur = config.cell, config.blur
-    grid_a = _Grid.around(a, cell)
-    points_b = np.vstack((b.walls, b.free))
     if len(a.walls) == 0 or len(b.walls) == 0:
         return np.zeros((0, 3)), np.zeros(0)
-    reach_b = int(np.ceil(2.0 * float(np.hypot(*points_b.T).max()) / cell)) + 2
+    grid_a = _Grid.around(a, cell)
+    # b turns about its own middle, so that its extent under any rotation is its diameter.
+    middle = b.centre()
+    b = b.moved(se2.matrix_from_pose(-float(middle[0]), -float(middle[1]), 0.0), 0.0)
+    reach_b = int(np.ceil(2.0 * float(np.hypot(*np.vstack((b.walls, b.free)).T).max()) / cell))
+    reach_b += 2
     shape = (
         sp_fft.next_fast_len(grid_a.shape[0] + reach_b, real=True),
         sp_fft.next_fast_len(grid_a.shape[1] + reach_b, real=True),
@@ -210,7 +237,8 @@ def correlation_peaks(
     rows: list[FloatArray] = []
     scores: list[FloatArray] = []
     for theta in rotations:
-        turned = b.turned(float(theta))
+        R = se2.matrix_from_pose(0.0, 0.0, float(theta))
+        turned = b.moved(R, float(theta))
         grid_b = _Grid.around(turned, cell)
         walls_b = [spectrum(layer) for layer in _walls(turned, grid_b, blur)]
         free_b = spectrum(_free(turned, grid_b))
@@ -226,7 +254,8 @@ def correlation_peaks(
         keep = np.argsort(-values, kind="stable")[: config.per_rotation]
         shift = peaks[keep]
         shift = np.where(shift < np.array(grid_a.shape), shift, shift - np.array(shape))
-        t = grid_a.origin - grid_b.origin + shift * cell
+        # b's point p lands at R (p - middle) + t' = R p + t: t = t' - R middle.
+        t = grid_a.origin - grid_b.origin + shift * cell - R[:2, :2] @ middle
         rows.append(np.column_stack((np.full(len(keep), theta), t)))
         scores.append(values[keep])
     if not rows:
@@ -245,18 +274,19 @@ def placement_scores(
     cell, blur = config.cell, config.blur
     grid_a, grid_b = _Grid.around(a, cell), _Grid.around(b, cell)
     walls_a, free_a, free_b = _walls(a, grid_a, blur), _free(a, grid_a), _free(b, grid_b)
-    # A wall point on a blurred wall of its direction reads 1 / (sqrt(2 pi) blur) of its
-    # cell's metres: that, times the channels' 1/2, is one metre per metre.
-    scale = np.sqrt(2.0 * np.pi) * max(blur, 1e-9) / (0.5 * cell)
+    # A wall point on a drawn wall of its direction reads 1 / sqrt(2 pi (blur^2 + 1/12 +
+    # 1/6)) of the wall's metres per cell (blur, drawing, reading): that, times the channels'
+    # 1/2, is one metre per metre.
+    scale = np.sqrt(2.0 * np.pi * (blur**2 + _DRAWN + _READ)) / (0.5 * cell)
     out = np.zeros(len(transforms))
     for n, (theta, tx, ty) in enumerate(np.asarray(transforms, dtype=np.float64).reshape(-1, 3)):
         T_a_b = se2.matrix_from_pose(float(tx), float(ty), float(theta))
         on_a = se2.transform_points(T_a_b, b.walls)
-        i, j, inside = grid_a.cells(on_a)
         weights = _channel_weights(b.direction + theta) * b.weight[None, :]
-        matched = float((walls_a[:, i[inside], j[inside]] * weights[:, inside]).sum() * scale)
-        through = float((free_a[i[inside], j[inside]] * b.weight[inside]).sum())
-        i, j, inside = grid_b.cells(se2.transform_points(se2.invert(T_a_b), a.walls))
-        through += float((free_b[i[inside], j[inside]] * a.weight[inside]).sum())
+        read = np.stack([grid_a.sample(channel, on_a, 1) for channel in walls_a])
+        matched = float((read * weights).sum() * scale)
+        through = float((grid_a.sample(free_a, on_a, 0) * b.weight).sum())
+        on_b = se2.transform_points(se2.invert(T_a_b), a.walls)
+        through += float((grid_b.sample(free_b, on_b, 0) * a.weight).sum())
         out[n] = matched - config.free_space_weight * through
     return out

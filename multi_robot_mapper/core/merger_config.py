@@ -58,6 +58,13 @@ class MapMergerConfig:
         minimum=0.0,
         exclusive_minimum=True,
     )
+    merge_worker: bool = param(
+        True,
+        unit="",
+        doc="merge in a worker process: a merge is seconds of numpy work, and in this "
+        "process it would take Python's interpreter lock from the subscriptions (and from "
+        "any node spun in the same process, as in tests); false: merge in this process",
+    )
     warning_period: float = param(
         10.0,
         unit="s",

@@ -456,16 +456,27 @@ def match_maps(
     candidates, calls = _candidates(map_a, map_b, drawing_a, drawing_b, config)
     if len(candidates) == 0:
         return empty
-    refined = refine_many(judge_a, judge_b, candidates, config.link_config())
-    scores = placement_scores(drawing_a, drawing_b, refined, config.correlation())
+    # The best few distinct places by their rough score are refined (Cox) and scored again:
+    # the winner and its strongest rivals (refining every candidate costs more than the
+    # correlation).
+    rough = placement_scores(drawing_a, drawing_b, candidates, config.correlation())
     # Long walls crossing each other refuse a placement outright (Alg. 4 l. 6-7).
+    rough[refused(judge_a, judge_b, candidates, config.link_config())] = -np.inf
+    keep: list[int] = []
+    for k in np.argsort(-rough, kind="stable"):
+        if len(keep) == _REFINED or not np.isfinite(rough[k]):
+            break
+        if all(_distinct(candidates[k], candidates[j]) for j in keep):
+            keep.append(int(k))
+    if not keep:
+        return empty
+    refined = refine_many(judge_a, judge_b, candidates[keep], config.link_config())
+    scores = placement_scores(drawing_a, drawing_b, refined, config.correlation())
     scores[refused(judge_a, judge_b, refined, config.link_config())] = -np.inf
     if not np.isfinite(scores).any():
         return empty
     best = int(np.argmax(scores))
-    turn = np.abs(se2.wrap_angle(refined[:, 0] - refined[best, 0]))
-    shift = np.hypot(refined[:, 1] - refined[best, 1], refined[:, 2] - refined[best, 2])
-    distinct = (shift > _DISTINCT_SHIFT) | (turn > _DISTINCT_TURN)
+    distinct = np.array([_distinct(row, refined[best]) for row in refined], dtype=bool)
     rival = float(scores[distinct].max()) if distinct.any() else 0.0
     score = float(scores[best])
     uniqueness = score / rival if rival > 0.0 else (np.inf if score > 0.0 else 0.0)
@@ -473,8 +484,10 @@ def match_maps(
     # fits at several places and every link would be ambiguous. With both robots' free space
     # it is measured, and a smaller overlap is trusted.
     viewed = views_a is not None and views_b is not None
-    # INTEGRATE evaluates the chosen place (Alg. 4): every candidate there, the best refined.
-    same_place = refined[~distinct]
+    # INTEGRATE evaluates the chosen place (Alg. 4): every candidate there (the refined one
+    # and the other starts near it), the best refined.
+    near = [row for row in candidates if not _distinct(row, refined[best])]
+    same_place = np.vstack((refined[~distinct], *near))
     result = integrate(
         judge_a,
         judge_b,
@@ -502,8 +515,16 @@ def match_maps(
     return MapMatch(result, tight, valid, calls, through, score, uniqueness)
 
 
+_REFINED = 4  # distinct places refined per pair of maps: the best and its rivals
 _DISTINCT_SHIFT = 2.0  # m: placements farther apart than this (or turned more) are rivals
 _DISTINCT_TURN = float(np.radians(10.0))
+
+
+def _distinct(row: FloatArray, other: FloatArray) -> bool:
+    """Are two ``(theta, tx, ty)`` placements different answers (rivals)?"""
+    turn = abs(float(se2.wrap_angle(row[0] - other[0])))
+    shift = float(np.hypot(row[1] - other[1], row[2] - other[2]))
+    return shift > _DISTINCT_SHIFT or turn > _DISTINCT_TURN
 
 
 def draw_map(segments: FloatArray, views: MapViews | None, config: MergeConfig) -> Drawing:

@@ -20,18 +20,23 @@ Topics (the merger's own are relative to its namespace):
                               (static broadcaster, stamped from the input)
 
 Merging runs on a timer in its own callback group, so a long merge never blocks the
-subscriptions (spin with a MultiThreadedExecutor, as :func:`main` does); it re-merges only
-when some partial map changed and passes the previous result on (pair results reused, the
-tree and the reference kept). Parameters: the fields of :class:`MapMergerConfig`
-(``config/map_merger.yaml``).
+subscriptions (spin with a MultiThreadedExecutor, as :func:`main` does), and by default in a
+worker process (``merge_worker``): a merge is seconds of numpy work that would otherwise take
+Python's interpreter lock from every other thread of the process (the subscriptions, and any
+node spun in the same process). It re-merges only when some partial map changed and passes
+the previous result on (pair results reused, the tree and the reference kept). Parameters:
+the fields of :class:`MapMergerConfig` (``config/map_merger.yaml``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing
 import sys
 import threading
 import traceback
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import numpy as np
@@ -153,6 +158,7 @@ class MapMerger(Node):
         self.merge_errors = 0
         self.global_maps_published = 0
         self._merged_versions: dict[str, int] = {}  # partial map versions of the last merge
+        self._worker: ProcessPoolExecutor | None = None  # started on the first merge
         self._shown: tuple[object, ...] | None = None  # what the last global_map showed
         self._input_groups = MutuallyExclusiveCallbackGroup()
         self._merge_group = MutuallyExclusiveCallbackGroup()
@@ -261,7 +267,7 @@ class MapMerger(Node):
                 )
                 return False
             try:
-                self.result = merge(maps, config.merge, previous=self.result, viewpoints=viewpoints)
+                self.result = self._merge(maps, viewpoints)
             except Exception:
                 self.merge_errors += 1
                 self.warnings.warn(
@@ -292,6 +298,29 @@ class MapMerger(Node):
                 f"'{result.reference}' yet (nothing published for it)",
             )
         return merged
+
+    def _merge(self, maps: dict[str, FloatArray], viewpoints: dict[str, FloatArray]) -> MergeResult:
+        """:func:`merge` with the previous result, in the worker process when
+        ``merge_worker`` is on (this thread waits without holding the interpreter lock)."""
+        config, previous = self.config, self.result
+        if not config.merge_worker:
+            return merge(maps, config.merge, previous=previous, viewpoints=viewpoints)
+        if self._worker is None:
+            # spawn, not fork: forking a process that runs DDS threads is unsafe.
+            context = multiprocessing.get_context("spawn")
+            self._worker = ProcessPoolExecutor(max_workers=1, mp_context=context)
+        job = self._worker.submit(merge, maps, config.merge, previous, None, viewpoints)
+        try:
+            return job.result()
+        except BrokenProcessPool:
+            self._worker = None  # the worker died (killed, out of memory): a new one next time
+            raise
+
+    def destroy_node(self) -> None:
+        if self._worker is not None:
+            self._worker.shutdown(wait=False, cancel_futures=True)
+            self._worker = None
+        super().destroy_node()
 
     def _publish_global_map(
         self,
