@@ -111,8 +111,31 @@ def split_runs(name: str, robots: int, overlap: int, use_views: bool, config: Me
     print(
         f"{name:6s} {robots} robots: merged {merged}/{robots}, worst error {worst * 100:.1f} cm, "
         f"valid links {result.stats['links_valid']}/{len(result.pairs)} (wrong {wrong}), "
-        f"merge {elapsed:.1f} s, map sizes {min(sizes)}-{max(sizes)} segments"
+        f"merge {elapsed:.1f} s, map sizes {min(sizes)}-{max(sizes)} segments, "
+        f"overlapping {overlapping(frames, maps, MergeConfig().link_min_value)}/{robots}"
     )
+
+
+def overlapping(frames: dict[str, np.ndarray], maps: dict[str, np.ndarray], shared: float) -> int:
+    """The largest group of robots joined by pairs whose maps, placed at the truth, share at
+    least ``shared`` metres of wall (within 10 cm): the most any merger could link."""
+    from scipy.spatial import cKDTree
+
+    from multi_robot_mapper.core.matching import sample_segments
+
+    step = 0.05
+    points = {r: sample_segments(se2.transform_segments(frames[r], maps[r]), step)[0] for r in maps}
+    trees = {r: cKDTree(p) for r, p in points.items()}
+    group = {r: {r} for r in maps}
+    names = sorted(maps)
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            near = trees[b].query(points[a], distance_upper_bound=0.1)[0] < 0.1
+            if near.sum() * step >= shared and group[a] is not group[b]:
+                union = group[a] | group[b]
+                for r in union:
+                    group[r] = union
+    return max(len(g) for g in group.values())
 
 
 def main() -> None:

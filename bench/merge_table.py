@@ -38,7 +38,7 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "carmen"
 ONE_THREAD = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 COLUMNS = (
-    "log | robots | merged | ATE merged (m) | ATE all (m) | map error (m) | coverage | "
+    "log | robots | merged | placed | ATE merged (m) | ATE all (m) | map error (m) | coverage | "
     "precision | merge (s) | replay (s) | pair_success | links tree/valid"
 )
 
@@ -97,11 +97,14 @@ def fmt(value: Any, digits: int = 3) -> str:
 def table_row(row: dict[str, Any]) -> str:
     head = f"| {row['log']} | {row['robots']} | "
     if "error" in row:
-        return head + f"failed: {row['error'][:90]} |" + " |" * 9  # all of it in the JSON
+        return head + f"failed: {row['error'][:90]} |" + " |" * 10  # all of it in the JSON
     m, s = row["metrics"], row["stats"]
     links = f"{len(s.get('merge_links', []))}/{s.get('merge_links_valid', '?')}"
+    # placed: robots the merger put in the map frame (not reported "unmerged"), however well.
+    placed = sum(not r["reported_unmerged"] for r in m["robots"].values())
     cells = [
         f"{m['robots_merged']}/{m['robots_total']}",
+        f"{placed}/{m['robots_total']}",
         fmt(m["ate_rmse_m"], 4),
         fmt(m["ate_all_rmse_m"], 3),
         fmt(m["map_error_m"], 4),

@@ -1,6 +1,6 @@
-"""A real map_merger with real robot_mapper nodes, in-process: simulated scans go out on
-``/robotK/scan``, the merger discovers the robots' ``partial_map`` topics, and the global map
-and the robot frames come back over real topics.
+"""A real map_merger with real robot_mapper nodes, in-process: a simulated bag's scans go out
+on ``/robotK/scan``, the merger discovers the robots' ``partial_map`` topics, and the global
+map and the robot frames come back over real topics.
 
 One drive is simulated and fed once (module fixture): robots 1-3 drive partly overlapping
 stretches of the office world, robot 4 drives through another building that shares nothing
@@ -14,6 +14,7 @@ import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -37,6 +38,13 @@ from multi_robot_mapper.core.simulation import (
     polygon,
     simulate_robots,
     simulate_scan,
+)
+from multi_robot_mapper.io.bags import (
+    RobotRecording,
+    TimedPose,
+    TimedScan,
+    read_recordings,
+    write_recordings,
 )
 from multi_robot_mapper.io.messages import (
     partial_map_markers,
@@ -103,11 +111,34 @@ def _stamp(msg_stamp: object) -> tuple[int, int]:
     return (msg_stamp.sec, msg_stamp.nanosec)  # type: ignore[attr-defined]
 
 
+def simulated_bag(runs: dict[str, SimulatedRobot], folder: Path) -> dict[str, RobotRecording]:
+    """The runs written to an mcap bag (``/<robot>/scan``, ``/<robot>/ground_truth``) and read
+    back: what a user replays."""
+    recordings = {
+        name: RobotRecording(
+            name,
+            [
+                TimedScan(float(t), f"{name}/laser", scan)
+                for t, scan in zip(run.stamps, run.scans, strict=True)
+            ],
+            [
+                TimedPose(float(t), (float(p[0]), float(p[1]), float(p[2])), "world")
+                for t, p in zip(run.stamps, run.T_world_laser, strict=True)
+            ],
+        )
+        for name, run in runs.items()
+    }
+    write_recordings(folder / "bag", recordings)
+    return read_recordings(folder / "bag")
+
+
 @pytest.fixture(scope="module")
-def outcome() -> Iterator[Outcome]:
+def outcome(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Outcome]:
     office = simulate_robots("office", 3, LaserModel(), seed=0, duration=DURATION)
     runs = dict(zip(OFFICE_ROBOTS, office, strict=True))
     runs[STRANGER] = stranger_run(DURATION, seed=0)
+    bag = simulated_bag(runs, tmp_path_factory.mktemp("merger"))
+    assert sorted(bag) == sorted(runs)
     with isolated_context() as context:
         fast_map = [Parameter("partial_map_period", value=0.5)]
         mappers = {
@@ -159,11 +190,10 @@ def outcome() -> Iterator[Outcome]:
             count = len(office[0].scans)
             for i in range(0, count, EVERY):
                 before = {name: m.scans_received for name, m in mappers.items()}
-                for name, run in runs.items():
-                    stamp = stamp_from_seconds(run.stamps[i])
-                    scan_pubs[name].publish(
-                        scan_to_msg(run.scans[i], f"{name}/laser", stamp, 0.025)
-                    )
+                for name in runs:
+                    item = bag[name].scans[i]  # the bag's scans, as a replay publishes them
+                    stamp = stamp_from_seconds(item.stamp)
+                    scan_pubs[name].publish(scan_to_msg(item.scan, item.frame_id, stamp, 0.025))
                 assert spin_until(
                     executor,
                     lambda b=before: all(m.scans_received > b[n] for n, m in mappers.items()),
