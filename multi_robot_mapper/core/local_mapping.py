@@ -26,8 +26,7 @@ from multi_robot_mapper.core.matching import (
     HEURISTICS,
     IntegrateConfig,
     MatchResult,
-    _longest,
-    _prescreen_values,
+    best_prescreened,
     cross_support,
     distinct_hypotheses,
     endpoint_hypotheses,
@@ -374,13 +373,10 @@ class LocalMapper:
             np.abs(se2.wrap_angle(transforms[:, 0])) <= self.config.submap_turn
         )
         transforms = transforms[reach]
-        if len(transforms) > config.candidate_pool:
-            long1 = _longest(reference, config.prescreen_segments)
-            long2 = _longest(new, config.prescreen_segments)
-            rough = _prescreen_values(reference[long1], new[long2], transforms, config)
-            transforms = transforms[np.argpartition(-rough, config.candidate_pool - 1)]
-            transforms = transforms[: config.candidate_pool]
-        return np.asarray(transforms, dtype=np.float64).reshape(-1, 3)
+        best = best_prescreened(
+            reference, new, transforms, config.candidate_pool, config.prescreen_segments, config
+        )
+        return np.asarray(transforms[best], dtype=np.float64).reshape(-1, 3)
 
     def _refined_on_map(
         self, T_robotmap_last: FloatArray, new: FloatArray, result: MatchResult

@@ -1011,6 +1011,24 @@ def _longest(segments: FloatArray, count: int) -> IntArray:
     return np.argsort(-length, kind="stable")[:count].astype(np.int64)
 
 
+def best_prescreened(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    keep: int,
+    segments_used: int,
+    config: IntegrateConfig,
+) -> IntArray:
+    """Indices of the ``keep`` hypotheses (all when fewer) with the best rough value
+    (:func:`_prescreen_values`) on the ``segments_used`` longest segments of each set."""
+    if len(transforms) <= keep:
+        return np.arange(len(transforms), dtype=np.int64)
+    long1 = _longest(segments1, segments_used)
+    long2 = _longest(segments2, segments_used)
+    rough = _prescreen_values(segments1[long1], segments2[long2], transforms, config)
+    return np.asarray(np.argpartition(-rough, keep - 1)[:keep], dtype=np.int64)
+
+
 def _prescreen_values(
     segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
 ) -> FloatArray:
@@ -1077,12 +1095,9 @@ def _pruned_values(
         (max(1, config.prescreen_segments // 2), _ROUGH_CUT * config.candidate_pool),
         (config.prescreen_segments, config.candidate_pool),
     ):
-        if pool.size <= keep:
-            continue
-        long1 = _longest(segments1, segments_used)
-        long2 = _longest(segments2, segments_used)
-        partial = _prescreen_values(segments1[long1], segments2[long2], transforms[pool], config)
-        pool = pool[np.argpartition(-partial, keep - 1)[:keep]]
+        pool = pool[
+            best_prescreened(segments1, segments2, transforms[pool], keep, segments_used, config)
+        ]
     pool = np.concatenate((np.arange(forced), pool))
     values = np.zeros(count)
     values[pool] = transform_values(

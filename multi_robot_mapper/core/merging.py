@@ -425,69 +425,51 @@ def match_maps(
 ) -> MapMatch:
     """How map b lies in map a, and whether to trust it.
 
-    Candidates: INTEGRATE's own hypotheses (Amigoni Alg. 2: equal angles between pairs of the
-    ``hypothesis_segments`` longest segments, ranked on the ``coarse_segments`` longest) and the
-    ``correlation_candidates`` best placements of the map correlation
-    (:mod:`multi_robot_mapper.core.correlation`: every translation, for each rotation the wall
-    directions allow; with the robots' views, walls in the other's free space count against).
-    Partial maps hold hundreds or thousands of segments, too many for INTEGRATE's landmark
-    heuristics, and on self-similar buildings a corridor slid along itself overlaps more than
-    the true placement of a small overlap: the correlation finds it there.
+    1. Candidates: INTEGRATE's own hypotheses (Amigoni Alg. 2: equal angles between pairs of
+       the ``hypothesis_segments`` longest segments, ranked on the ``coarse_segments`` longest)
+       and the ``correlation_candidates`` best placements of the map correlation
+       (:mod:`multi_robot_mapper.core.correlation`: every translation, for each rotation the
+       wall directions allow; with the robots' views, walls in the other's free space count
+       against). On large maps landmarks miss the true placement of a small overlap, and on
+       self-similar buildings a corridor slid along itself overlaps more than it.
+    2. The best ``_REFINED`` distinct places are refined (Cox, on the ``judge_segments``
+       longest segments) and scored by the correlation: the best one and its rivals.
+    3. INTEGRATE evaluates the best place (Alg. 4), and the link is valid when it passes the
+       ``link_*`` thresholds: value, fraction and cross support; the overlap within
+       ``tight_distance`` (one place coincides to centimetres, look-alike places only
+       roughly); free space (with views, neither map may lie in the other's free space beyond
+       ``link_max_seen_through`` or that fraction of the value); and, with both robots' views,
+       uniqueness (a score at least ``link_min_uniqueness`` times the best rival's: a place
+       that fits twice is ambiguous). Uniqueness needs free space: on walls alone a repeated
+       building fits at several places and every link would be ambiguous; with it, a smaller
+       overlap (``viewed_link_*``) is trusted.
 
-    Every candidate is refined (Cox, on the ``judge_segments`` longest segments) and scored by
-    the correlation; the best is evaluated by INTEGRATE (Alg. 4) and is valid when it passes
-    the ``link_*`` thresholds: its value, fraction and cross support; the overlap within
-    ``tight_distance`` (one place coincides to centimetres, look-alike places only roughly);
-    free space (with views, neither map may lie in the other's free space beyond
-    ``link_max_seen_through`` or that fraction of the value); and uniqueness (its score at
-    least ``link_min_uniqueness`` times that of the best distinct placement: a place that fits
-    twice is ambiguous). ``drawings`` are the two maps drawn for the correlation
-    (:func:`draw_map`) when the caller keeps them from one pair to the next.
+    ``drawings`` are the two maps drawn for the correlation (:func:`draw_map`) when the
+    caller keeps them from one pair to the next.
     """
-    empty = MapMatch(MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0), 0.0, False, 0)
     if len(map_a) == 0 or len(map_b) == 0:
-        return empty
+        return _no_match()
     drawing_a, drawing_b = drawings or (
         draw_map(map_a, views_a, config),
         draw_map(map_b, views_b, config),
     )
     judge_a = longest(map_a, config.judge_segments)
     judge_b = longest(map_b, config.judge_segments)
-    candidates, calls = _candidates(map_a, map_b, drawing_a, drawing_b, config)
-    if len(candidates) == 0:
-        return empty
-    # The best few distinct places by their rough score are refined (Cox) and scored again:
-    # the winner and its strongest rivals (refining every candidate costs more than the
-    # correlation).
-    rough = placement_scores(drawing_a, drawing_b, candidates, config.correlation())
-    # Long walls crossing each other refuse a placement outright (Alg. 4 l. 6-7).
-    rough[refused(judge_a, judge_b, candidates, config.link_config())] = -np.inf
-    keep: list[int] = []
-    for k in np.argsort(-rough, kind="stable"):
-        if len(keep) == _REFINED or not np.isfinite(rough[k]):
-            break
-        if all(_distinct(candidates[k], candidates[j]) for j in keep):
-            keep.append(int(k))
-    if not keep:
-        return empty
-    refined = refine_many(judge_a, judge_b, candidates[keep], config.link_config())
-    scores = placement_scores(drawing_a, drawing_b, refined, config.correlation())
-    scores[refused(judge_a, judge_b, refined, config.link_config())] = -np.inf
-    if not np.isfinite(scores).any():
-        return empty
+    candidates = _candidates(map_a, map_b, drawing_a, drawing_b, config)
+    places = _best_places(judge_a, judge_b, drawing_a, drawing_b, candidates, config)
+    if places is None:
+        return _no_match()
+    refined, scores = places
     best = int(np.argmax(scores))
-    distinct = np.array([_distinct(row, refined[best]) for row in refined], dtype=bool)
-    rival = float(scores[distinct].max()) if distinct.any() else 0.0
+    rivals = np.array([_distinct(row, refined[best]) for row in refined], dtype=bool)
+    rival = float(scores[rivals].max()) if rivals.any() else 0.0
     score = float(scores[best])
     uniqueness = score / rival if rival > 0.0 else (np.inf if score > 0.0 else 0.0)
-    # Uniqueness needs free space: on walls alone a repeated building (a row of equal rooms)
-    # fits at several places and every link would be ambiguous. With both robots' free space
-    # it is measured, and a smaller overlap is trusted.
     viewed = views_a is not None and views_b is not None
-    # INTEGRATE evaluates the chosen place (Alg. 4): every candidate there (the refined one
-    # and the other starts near it), the best refined.
+    # INTEGRATE evaluates the chosen place (Alg. 4): every start there (the refined one and
+    # the candidates near it), the best refined.
     near = [row for row in candidates if not _distinct(row, refined[best])]
-    same_place = np.vstack((refined[~distinct], *near))
+    same_place = np.vstack((refined[~rivals], *near))
     result = integrate(
         judge_a,
         judge_b,
@@ -496,7 +478,7 @@ def match_maps(
         ordered=(False, False),
         extra_hypotheses=same_place,
     )
-    calls += 1
+    calls = 2  # INTEGRATE's candidates, and the evaluation
     if result.value <= 0.0:
         return MapMatch(result, 0.0, False, calls, 0.0, score, uniqueness)
     tight = tight_fraction(judge_a, judge_b, result.T_1_2, config)
@@ -515,6 +497,10 @@ def match_maps(
     return MapMatch(result, tight, valid, calls, through, score, uniqueness)
 
 
+def _no_match() -> MapMatch:
+    return MapMatch(MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0), 0.0, False, 0)
+
+
 _REFINED = 4  # distinct places refined per pair of maps: the best and its rivals
 _DISTINCT_SHIFT = 2.0  # m: placements farther apart than this (or turned more) are rivals
 _DISTINCT_TURN = float(np.radians(10.0))
@@ -525,6 +511,37 @@ def _distinct(row: FloatArray, other: FloatArray) -> bool:
     turn = abs(float(se2.wrap_angle(row[0] - other[0])))
     shift = float(np.hypot(row[1] - other[1], row[2] - other[2]))
     return shift > _DISTINCT_SHIFT or turn > _DISTINCT_TURN
+
+
+def _best_places(
+    judge_a: FloatArray,
+    judge_b: FloatArray,
+    drawing_a: Drawing,
+    drawing_b: Drawing,
+    candidates: FloatArray,
+    config: MergeConfig,
+) -> tuple[FloatArray, FloatArray] | None:
+    """The ``_REFINED`` best distinct places among the candidates by their correlation score,
+    refined (Cox) and scored again: ``(K, 3)`` placements and their scores; None when every
+    candidate is refused. Refining only these costs less than the correlation itself."""
+    correlation, link = config.correlation(), config.link_config()
+    rough = placement_scores(drawing_a, drawing_b, candidates, correlation)
+    # Long walls crossing each other refuse a placement outright (Alg. 4 l. 6-7).
+    rough[refused(judge_a, judge_b, candidates, link)] = -np.inf
+    keep: list[int] = []
+    for k in np.argsort(-rough, kind="stable"):
+        if len(keep) == _REFINED or not np.isfinite(rough[k]):
+            break
+        if all(_distinct(candidates[k], candidates[j]) for j in keep):
+            keep.append(int(k))
+    if not keep:
+        return None
+    refined = refine_many(judge_a, judge_b, candidates[keep], link)
+    scores = placement_scores(drawing_a, drawing_b, refined, correlation)
+    scores[refused(judge_a, judge_b, refined, link)] = -np.inf
+    if not np.isfinite(scores).any():
+        return None
+    return refined, scores
 
 
 def draw_map(segments: FloatArray, views: MapViews | None, config: MergeConfig) -> Drawing:
@@ -541,8 +558,8 @@ def _candidates(
     drawing_a: Drawing,
     drawing_b: Drawing,
     config: MergeConfig,
-) -> tuple[FloatArray, int]:
-    """Candidate placements ``(theta, tx, ty)`` of map b in map a and the INTEGRATE calls."""
+) -> FloatArray:
+    """Candidate placements ``(theta, tx, ty)`` of map b in map a."""
     rows: list[FloatArray] = []
     k, c = config.hypothesis_segments, config.coarse_segments
     ranking = dataclasses.replace(config.link_config(), all_pairs_below=k)
@@ -560,7 +577,7 @@ def _candidates(
     rotations = rotation_candidates(map_a, map_b, correlation.rotations)
     peaks, _ = correlation_peaks(drawing_a, drawing_b, rotations, correlation)
     rows.append(peaks[: config.correlation_candidates])
-    return np.vstack(rows), 1
+    return np.vstack(rows)
 
 
 def tight_fraction(

@@ -1,0 +1,111 @@
+"""Where local mapping goes wrong: every accepted scan whose motion from the previous placed
+scan is wrong, and how it was placed.
+
+Each CARMEN log is cut into ``--robots`` consecutive runs (as ``mrm import-carmen`` cuts it);
+one LocalMapper maps each run. For every accepted scan the motion since the previous placed
+scan is compared with the reference poses; a pair is wrong beyond 0.30 m or 5 degrees (the
+evaluation's pair threshold). Each wrong pair is printed with how the scan was placed
+(``track``: the prediction alone; ``search``: INTEGRATE against the last scan; ``submap``:
+against the partial map; ``after gap``: right after scans set aside), its gap in scans, the
+match's overlap (m) and net fraction, the error and the turn the mapper took.
+
+    .venv/bin/python bench/local_errors.py [--logs intel aces fhw csail] [--robots 4]
+        [--set NAME=VALUE ...]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+from collections import Counter  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from multi_robot_mapper.core import se2  # noqa: E402
+from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
+from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
+from multi_robot_mapper.core.local_mapping import LocalMapper, LocalMapperConfig  # noqa: E402
+from multi_robot_mapper.evaluation.metrics import (  # noqa: E402
+    PAIR_ROTATION_RAD,
+    PAIR_TRANSLATION_M,
+)
+from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
+
+
+def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The motion T_a_b of two (x, y, theta) poses."""
+    T = se2.invert(se2.matrix_from_pose(*a)) @ se2.matrix_from_pose(*b)
+    return np.asarray(se2.pose_from_matrix(T))
+
+
+def run_log(name: str, robots: int, config: LocalMapperConfig) -> None:
+    path = DATA / f"{name}.log.gz"
+    if not path.is_file():
+        print(f"{name}: skipped, {path} not found")
+        return
+    scans = list(read_carmen(path))
+    size = len(scans) // robots
+    extraction = ExtractionConfig()
+    placed, wrong = Counter(), []
+    for robot in range(robots):
+        mapper = LocalMapper(config)
+        previous = None  # (pose, reference pose, index) of the previous placed scan
+        for index, scan in enumerate(scans[robot * size : (robot + 1) * size]):
+            data = carmen_scan_data(scan)
+            segments, _ = extract_scan(data, extraction)
+            tracked, on_map = mapper.scans_tracked, mapper.scans_on_submap
+            update = mapper.add_scan(float(scan.timestamp), segments, data)
+            if update.pose is None:
+                continue
+            if update.restarted:
+                previous = None
+            route = (
+                "track"
+                if mapper.scans_tracked > tracked
+                else "submap"
+                if mapper.scans_on_submap > on_map
+                else "search"
+            )
+            reference = np.asarray(scan.reference_pose)
+            if previous is not None:
+                gap = index - previous[2]
+                route = route if gap == 1 else f"{route} after gap"
+                placed[route] += 1
+                truth = relative(previous[1], reference)
+                moved = relative(previous[0], np.asarray(update.pose))
+                error = relative(truth, moved)
+                shift, turn = float(np.hypot(error[0], error[1])), abs(float(error[2]))
+                if shift > PAIR_TRANSLATION_M or turn > PAIR_ROTATION_RAD:
+                    wrong.append(
+                        f"  robot{robot + 1} scan {index}: {route}, gap {gap}, overlap "
+                        f"{update.value:.1f} m, fraction {update.fraction:.2f}, error "
+                        f"{shift:.2f} m {np.degrees(turn):.1f} deg, turned "
+                        f"{np.degrees(abs(moved[2])):.0f} deg"
+                    )
+            previous = (np.asarray(update.pose), reference, index)
+    total = sum(placed.values())
+    counts = ", ".join(f"{route} {count}" for route, count in sorted(placed.items()))
+    print(f"{name}, {robots} robots: {len(wrong)} wrong of {total} placed pairs ({counts})")
+    print("\n".join(wrong))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--logs", nargs="+", default=["intel", "aces", "fhw", "csail"])
+    parser.add_argument("--robots", type=int, default=4)
+    parser.add_argument("--set", dest="overrides", action="append", default=[])
+    args = parser.parse_args()
+    config = config_from_flat(LocalMapperConfig, dict(parse_override(o) for o in args.overrides))
+    for name in args.logs:
+        run_log(name, args.robots, config)
+
+
+if __name__ == "__main__":
+    main()
