@@ -485,3 +485,18 @@ def test_intel_split_into_three_robots_is_merged_as_the_reference_poses_say() ->
     result = merge(maps, CONFIG)
     assert_placed(result, frames, 0.05, np.radians(1.0))
     assert result.stats["cycle_conflicts"] == 0
+
+
+def test_a_robot_with_no_map_yet_is_unmerged_with_or_without_viewpoints() -> None:
+    # A robot whose scans were all set aside so far: an empty map, maybe keyframe poses.
+    names = ["a", "b", "empty"]
+    frames = random_frames(3, seed=6)
+    runs = world_runs("office", 2)
+    maps = in_own_frames(tuple(m for m, _ in runs), frames[:2], names[:2])
+    views = poses_in_own_frames(tuple(p for _, p in runs), frames[:2], names[:2])
+    maps["empty"] = np.zeros((0, 4))
+    for empty_views in (np.zeros((0, 3)), np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.2]])):
+        result = merge(maps, CONFIG, viewpoints={**views, "empty": empty_views})
+        assert result.placements["empty"] is None
+        assert result.unmerged == ["empty"]
+        assert_placed(result, dict(zip(names[:2], frames[:2], strict=True)), 0.05, 0.01)

@@ -25,14 +25,15 @@ def add_config_options(parser: argparse.ArgumentParser, merging: bool = False) -
             type=Path,
             help="YAML merging parameters (config/map_merger.yaml; its merge.* section is used)",
         )
+    merge_example = " or --set merge.link_min_value=20" if merging else ""
     parser.add_argument(
         "--set",
         dest="overrides",
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="override one parameter, e.g. --set extraction.split_tolerance=0.03 or "
-        "--set merge.link_min_value=20 (repeatable)",
+        help="override one parameter, e.g. --set extraction.split_tolerance=0.03"
+        f"{merge_example} (repeatable)",
     )
 
 

@@ -149,11 +149,6 @@ def _walls(drawing: Drawing, grid: _Grid, blur: float) -> FloatArray:
     return np.stack([ndimage.gaussian_filter(d, blur, mode="constant") for d in drawn])
 
 
-def _free(drawing: Drawing, grid: _Grid) -> FloatArray:
-    """(H, W) 1 where the robot saw free space, else 0."""
-    return grid.mark(drawing.free)
-
-
 # Drawing a point in its nearest cell spreads a wall across by a uniform kernel of variance
 # 1/12 cell^2; reading a raster between cells (bilinear) by a triangle of variance 1/6: the
 # blur the metre scales must count.
@@ -232,7 +227,7 @@ def correlation_peaks(
         return np.asarray(sp_fft.rfft2(layer.astype(np.float32), shape))
 
     walls_a = [spectrum(layer) for layer in _walls(a, grid_a, blur)]
-    free_a = spectrum(_free(a, grid_a))
+    free_a = spectrum(grid_a.mark(a.free))
     sharp_a = spectrum(grid_a.draw(a.walls, a.weight))  # free space is sharp: walls too
     scale = 1.0 / _line_peak(cell, blur)
     window = 2 * max(1, round(config.separation / cell)) + 1
@@ -243,7 +238,7 @@ def correlation_peaks(
         turned = b.moved(R, float(theta))
         grid_b = _Grid.around(turned, cell)
         walls_b = [spectrum(layer) for layer in _walls(turned, grid_b, blur)]
-        free_b = spectrum(_free(turned, grid_b))
+        free_b = spectrum(grid_b.mark(turned.free))
         sharp_b = spectrum(grid_b.draw(turned.walls, turned.weight))
         # Circular cross-correlation: entry k puts b's cell (0, 0) on a's cell k (k - shape
         # past a's grid: a negative shift). ``through`` is metres of wall in free cells.
@@ -275,7 +270,7 @@ def placement_scores(
     wall points in b's free space): for placements found elsewhere, e.g. refined ones."""
     cell, blur = config.cell, config.blur
     grid_a, grid_b = _Grid.around(a, cell), _Grid.around(b, cell)
-    walls_a, free_a, free_b = _walls(a, grid_a, blur), _free(a, grid_a), _free(b, grid_b)
+    walls_a, free_a, free_b = _walls(a, grid_a, blur), grid_a.mark(a.free), grid_b.mark(b.free)
     # A wall point on a drawn wall of its direction reads 1 / sqrt(2 pi (blur^2 + 1/12 +
     # 1/6)) of the wall's metres per cell (blur, drawing, reading): that, times the channels'
     # 1/2, is one metre per metre.

@@ -166,7 +166,8 @@ class MergeConfig:
         8,
         unit="",
         doc="the best placements of the map correlation (every translation, for each rotation "
-        "the wall directions allow) refined and judged with INTEGRATE's own hypothesis",
+        "the wall directions allow) that join INTEGRATE's own hypothesis as candidates; the "
+        "best few distinct places among them are refined and judged",
         minimum=1,
     )
     correlation_cell: float = param(
@@ -186,16 +187,17 @@ class MergeConfig:
     link_min_uniqueness: float = param(
         2.0,
         unit="",
-        doc="validity threshold: the link's correlation score (matched wall minus wall in free "
-        "space, m) must be at least this many times that of the best distinct placement "
-        "(> 2 m or 10 degrees away): a place that fits twice is ambiguous (symmetric "
-        "corridors, rows of equal rooms) and is refused",
+        doc="validity threshold when both robots' viewpoints are known: the link's "
+        "correlation score (matched wall minus wall in free space, m) must be at least this "
+        "many times that of the best distinct placement (> 2 m or 10 degrees away): a place "
+        "that fits twice is ambiguous (symmetric corridors, rows of equal rooms) and is "
+        "refused",
         minimum=1.0,
     )
     max_hypotheses: int = param(
         150,
         unit="",
-        doc="at most this many most-voted hypotheses are ranked per pair and order",
+        doc="at most this many most-voted INTEGRATE hypotheses are ranked per pair of maps",
         minimum=1,
     )
     reuse_length_change: float = param(
@@ -407,7 +409,6 @@ class MapMatch:
     # uniqueness
     integrate_calls: int
     seen_through: float = 0.0  # m of either map in the other's free space (0: not checked)
-    score: float = 0.0  # correlation score of the placement (m)
     uniqueness: float = 0.0  # score / score of the best distinct placement
 
     @property
@@ -480,7 +481,7 @@ def match_maps(
     )
     calls = 2  # INTEGRATE's candidates, and the evaluation
     if result.value <= 0.0:
-        return MapMatch(result, 0.0, False, calls, 0.0, score, uniqueness)
+        return MapMatch(result, 0.0, False, calls, 0.0, uniqueness)
     tight = tight_fraction(judge_a, judge_b, result.T_1_2, config)
     valid = result.valid and tight >= (
         config.viewed_link_min_tight_fraction if viewed else config.link_min_tight_fraction
@@ -490,11 +491,8 @@ def match_maps(
     through = 0.0
     if valid and (views_a is not None or views_b is not None):
         through = free_space_conflict(map_a, views_a, map_b, views_b, result.matrix, config)
-        allowed = max(
-            config.link_max_seen_through, config.link_max_seen_through_fraction * result.value
-        )
-        valid = through <= allowed
-    return MapMatch(result, tight, valid, calls, through, score, uniqueness)
+        valid = through <= seen_through_allowance(result.value, config)
+    return MapMatch(result, tight, valid, calls, through, uniqueness)
 
 
 def _no_match() -> MapMatch:
@@ -639,7 +637,9 @@ class MapViews:
     def free_limits(self, spread: int) -> FloatArray:
         """(K, B) how far free space reaches along each bearing: the nearest wall within
         ``spread`` bearings either side (a gap between two segments is not seen through), and
-        nothing (-inf) where some bearing of that window hits no wall."""
+        nothing (-inf) where some bearing of that window hits no wall or lies beyond the edge
+        of the field of view (the field does not wrap round, even at 2 pi: its first and last
+        ``spread`` bearings claim nothing)."""
         limits = np.where(np.isfinite(self.ranges), self.ranges, -np.inf)
         if spread > 0 and limits.shape[1]:
             padded = np.pad(limits, ((0, 0), (spread, spread)), constant_values=-np.inf)
@@ -670,11 +670,13 @@ def seen_through_length(views: MapViews, segments: FloatArray, config: MergeConf
     """Length of the walls among ``segments`` (in the views' map frame; those at least
     ``free_space_min_length`` long) lying in the free space of ``views``: nearer some
     viewpoint than the map's own wall on that bearing by ``free_space_margin``."""
-    spacing = 0.2  # walls are at least free_space_min_length long: 5+ samples each
+    spacing = 0.2  # m between the points tested along each wall
     walls = segments[lines_of(segments).length >= config.free_space_min_length]
     if len(walls) == 0 or len(views.poses) == 0:
         return 0.0
-    points, _ = sample_segments(walls, spacing)
+    points, owner = sample_segments(walls, spacing)
+    # Each point stands for its wall's length over its points (a wall's two ends both count).
+    weight = (lines_of(walls).length / np.bincount(owner, minlength=len(walls)))[owner]
     limits = views.free_limits(config.view_spread)
     # Every point in every viewpoint's frame at once: (K, P) bearings and distances.
     dx = points[None, :, 0] - views.poses[:, 0, None]
@@ -685,7 +687,7 @@ def seen_through_length(views: MapViews, segments: FloatArray, config: MergeConf
     inside = (column >= 0) & (column < limits.shape[1])
     reach = np.take_along_axis(limits, np.where(inside, column, 0), axis=1)
     seen = inside & (distance < reach - config.free_space_margin)
-    return float(seen.any(axis=0).sum()) * spacing
+    return float(weight[seen.any(axis=0)].sum())
 
 
 ViewSource = Callable[[str], "MapViews | None"]
@@ -698,21 +700,24 @@ def _no_views(robot: str) -> MapViews | None:
 def view_source(
     maps: Mapping[str, FloatArray], viewpoints: Mapping[str, FloatArray], config: MergeConfig
 ) -> ViewSource:
-    """Each robot's :class:`MapViews` (None without viewpoints), cast on first use: a re-run
-    whose pairs are all reused casts none."""
+    """Each robot's :class:`MapViews` (None without viewpoints or without a map: no free
+    space known), cast on first use: a re-run whose pairs are all reused casts none."""
     cache: dict[str, MapViews | None] = {}
 
     def views(robot: str) -> MapViews | None:
         if robot not in cache:
-            poses = viewpoints.get(robot)
-            cache[robot] = (
-                None
-                if poses is None
-                else MapViews.of(maps[robot], np.asarray(poses, dtype=np.float64), config)
-            )
+            poses = np.asarray(viewpoints.get(robot, np.zeros((0, 3))), dtype=np.float64)
+            known = len(poses.reshape(-1, 3)) > 0 and len(maps[robot]) > 0
+            cache[robot] = MapViews.of(maps[robot], poses, config) if known else None
         return cache[robot]
 
     return views
+
+
+def seen_through_allowance(value: float, config: MergeConfig) -> float:
+    """How much wall in the other robot's free space a link of ``value`` m tolerates:
+    ``link_max_seen_through``, or that fraction of the value when larger (drifting maps)."""
+    return max(config.link_max_seen_through, config.link_max_seen_through_fraction * value)
 
 
 def free_space_conflict(
@@ -836,7 +841,11 @@ def pair_links(
             ):
                 records[(a, b)] = dataclasses.replace(old, reused=True)
                 continue
-            match = match_maps(maps[a], maps[b], config, view(a), view(b), (drawing(a), drawing(b)))
+            if len(maps[a]) and len(maps[b]):
+                drawn = (drawing(a), drawing(b))
+                match = match_maps(maps[a], maps[b], config, view(a), view(b), drawn)
+            else:
+                match = _no_match()
             calls += match.integrate_calls
             records[(a, b)] = PairRecord(_link(a, b, match), signatures[a], signatures[b], False)
     return records, calls
@@ -920,9 +929,7 @@ def free_space_join(
     ) -> bool:
         if len(group_a) == 1 and len(group_b) == 1:
             return True  # exactly the pair match_maps judged
-        allowed = max(
-            config.link_max_seen_through, config.link_max_seen_through_fraction * link.value
-        )
+        allowed = seen_through_allowance(link.value, config)
         for x, T_ga_x in group_a.items():
             for y, T_gb_y in group_b.items():
                 view_x, view_y = views(x), views(y)

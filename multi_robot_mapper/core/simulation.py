@@ -163,7 +163,9 @@ def raycast_fans(
     """:func:`raycast_fan` from each of the ``(K, 3)`` laser poses at once: ``(K, beams)``."""
     angles = angle_min + angle_increment * np.arange(beams, dtype=np.float64)
     count = len(poses)
-    if beams < 2 or angle_increment == 0.0 or len(walls) == 0:
+    if len(walls) == 0 or count == 0:
+        return np.full((count, beams), np.inf)  # nothing to hit (or nobody to look)
+    if beams < 2 or angle_increment == 0.0:
         return np.array([raycast(walls, (p[0], p[1], p[2]), angles, max_range) for p in poses])
     x, y, theta = (poses[:, i, None] for i in range(3))  # (K, 1) against (N,) walls
     ax, ay = walls[:, 0] - x, walls[:, 1] - y

@@ -267,7 +267,7 @@ class MapMerger(Node):
                 )
                 return False
             try:
-                self.result = self._merge(maps, viewpoints)
+                self.result = self._merge(maps, viewpoints, config)
             except Exception:
                 self.merge_errors += 1
                 self.warnings.warn(
@@ -299,21 +299,28 @@ class MapMerger(Node):
             )
         return merged
 
-    def _merge(self, maps: dict[str, FloatArray], viewpoints: dict[str, FloatArray]) -> MergeResult:
+    def _merge(
+        self,
+        maps: dict[str, FloatArray],
+        viewpoints: dict[str, FloatArray],
+        config: MapMergerConfig,
+    ) -> MergeResult:
         """:func:`merge` with the previous result, in the worker process when
         ``merge_worker`` is on (this thread waits without holding the interpreter lock)."""
-        config, previous = self.config, self.result
+        previous = self.result
         if not config.merge_worker:
             return merge(maps, config.merge, previous=previous, viewpoints=viewpoints)
         if self._worker is None:
             # spawn, not fork: forking a process that runs DDS threads is unsafe.
             context = multiprocessing.get_context("spawn")
             self._worker = ProcessPoolExecutor(max_workers=1, mp_context=context)
-        job = self._worker.submit(merge, maps, config.merge, previous, None, viewpoints)
         try:
+            job = self._worker.submit(merge, maps, config.merge, previous, None, viewpoints)
             return job.result()
         except BrokenProcessPool:
-            self._worker = None  # the worker died (killed, out of memory): a new one next time
+            # The worker died (killed, out of memory): a new one next time.
+            self._worker.shutdown(wait=False, cancel_futures=True)
+            self._worker = None
             raise
 
     def destroy_node(self) -> None:
