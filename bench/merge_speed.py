@@ -121,7 +121,7 @@ def overlapping(frames: dict[str, np.ndarray], maps: dict[str, np.ndarray], shar
     least ``shared`` metres of wall (within 10 cm): the most any merger could link."""
     from scipy.spatial import cKDTree
 
-    from multi_robot_mapper.core.matching import sample_segments
+    from multi_robot_mapper.core.geometry import sample_segments
 
     step = 0.05
     points = {r: sample_segments(se2.transform_segments(frames[r], maps[r]), step)[0] for r in maps}

@@ -1,4 +1,5 @@
-"""Map correlation (core/correlation.py): known answers in metres, and the rigid-motion property.
+"""Map correlation (core/merging/correlation.py): known answers in metres, and the rigid-motion
+property.
 
 The correlation proposes placements of one map on another for the merger; its score is
 metres of wall on wall of the same direction minus ``free_space_weight`` x metres of wall in
@@ -13,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.correlation import (
+from multi_robot_mapper.core.merging.correlation import (
     CorrelationConfig,
     Drawing,
     correlation_peaks,

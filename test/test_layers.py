@@ -28,7 +28,9 @@ FORBIDDEN = (
 
 def test_importing_every_core_module_never_loads_rclpy() -> None:
     modules = [
-        f"multi_robot_mapper.core.{p.stem}" for p in CORE.glob("*.py") if p.stem != "__init__"
+        "multi_robot_mapper.core."
+        + ".".join(p.relative_to(CORE).with_suffix("").parts).removesuffix(".__init__")
+        for p in CORE.rglob("*.py")
     ]
     code = (
         "import importlib, sys\n"
@@ -42,7 +44,7 @@ def test_importing_every_core_module_never_loads_rclpy() -> None:
 
 
 def test_core_sources_import_only_core_numpy_scipy_and_stdlib() -> None:
-    for path in CORE.glob("*.py"):
+    for path in CORE.rglob("*.py"):
         tree = ast.parse(path.read_text())
         for node in ast.walk(tree):
             names = []

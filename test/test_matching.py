@@ -14,13 +14,13 @@ from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
 from multi_robot_mapper.core.matching import (
     HEURISTICS,
     IntegrateConfig,
-    _distinct_candidates,
     distinct_hypotheses,
     integrate,
     refine,
     refine_many,
     seen_through,
 )
+from multi_robot_mapper.core.matching.integrate import _distinct_candidates
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import ROUTES, WORLDS, LaserModel, simulate_scan
 

@@ -14,7 +14,8 @@ from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from multi_robot_mapper.core.matching import IntegrateConfig, lines_of, score_pairs
+from multi_robot_mapper.core.geometry import lines_of
+from multi_robot_mapper.core.matching import IntegrateConfig, score_pairs
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

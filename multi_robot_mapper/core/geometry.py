@@ -7,6 +7,7 @@ the cost model in ``extraction``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -121,3 +122,32 @@ __all__ = [
     "stamp_seconds",
     "yaw_from_quaternion",
 ]
+
+
+@dataclasses.dataclass(frozen=True)
+class Lines:
+    """Per-segment geometry used everywhere below."""
+
+    direction: FloatArray  # (N, 2) unit vectors
+    angle: FloatArray  # (N,) direction angle in [-pi, pi)
+    length: FloatArray  # (N,)
+    normal_offset: FloatArray  # (N,) c in n . p = c, with n = (-uy, ux)
+
+
+def lines_of(segments: FloatArray) -> Lines:
+    d = segments[:, 2:] - segments[:, :2]
+    length = np.hypot(d[:, 0], d[:, 1])
+    direction = d / np.maximum(length, 1e-12)[:, None]
+    normal_offset = -direction[:, 1] * segments[:, 0] + direction[:, 0] * segments[:, 1]
+    return Lines(direction, np.arctan2(direction[:, 1], direction[:, 0]), length, normal_offset)
+
+
+def sample_segments(segments: FloatArray, spacing: float) -> tuple[FloatArray, IntArray]:
+    """Points every ``spacing`` metres along each segment (ends included) and their segment."""
+    length = lines_of(segments).length
+    count = np.maximum(2, np.ceil(length / spacing).astype(np.int64) + 1)
+    owner = np.repeat(np.arange(len(segments)), count)
+    start = np.repeat(np.cumsum(count) - count, count)
+    t = (np.arange(owner.size) - start) / (count[owner] - 1)
+    pts = segments[owner, :2] + t[:, None] * (segments[owner, 2:] - segments[owner, :2])
+    return pts, owner.astype(np.int64)

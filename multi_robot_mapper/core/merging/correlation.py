@@ -30,10 +30,10 @@ from scipy import fft as sp_fft
 from scipy import ndimage
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.matching import lines_of, sample_segments
+from multi_robot_mapper.core.geometry import lines_of, sample_segments
 
 FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
+
 
 _CHANNELS = 3  # wall directions k * pi / 3; the weights' squares sum to 1/2 for any direction
 _HISTOGRAM_BINS = 360  # wall directions over [0, pi): half-degree bins

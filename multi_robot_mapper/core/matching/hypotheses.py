@@ -1,0 +1,243 @@
+"""Landmarks (angles between segment pairs) and the hypotheses they give (Amigoni Alg. 2,
+the heuristics of III-A, end-point hypotheses for corridors)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.geometry import lines_of
+from multi_robot_mapper.core.matching.config import IntegrateConfig
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+HEURISTICS = ("consecutive", "random", "histogram", "all", "endpoints")
+
+
+@dataclasses.dataclass(frozen=True)
+class Landmarks:
+    """Ordered segment pairs (i, j): the angle from line i to line j (mod pi) and their vertex."""
+
+    first: IntArray
+    second: IntArray
+    angle: FloatArray  # (A,) in [0, pi)
+    vertex: FloatArray  # (A, 2) intersection of the two supporting lines
+
+
+def landmarks_from_pairs(
+    segments: FloatArray, first: IntArray, second: IntArray, config: IntegrateConfig
+) -> Landmarks:
+    """Landmarks of the given (i, j) pairs, both orders, dropping near-parallel pairs."""
+    i = np.concatenate((first, second)).astype(np.int64)
+    j = np.concatenate((second, first)).astype(np.int64)
+    keep = i != j
+    i, j = i[keep], j[keep]
+    lines = lines_of(segments)
+    ui, uj = lines.direction[i], lines.direction[j]
+    sine = ui[:, 0] * uj[:, 1] - ui[:, 1] * uj[:, 0]
+    ok = np.abs(sine) >= np.sin(config.min_landmark_angle)
+    i, j, ui, uj, sine = i[ok], j[ok], ui[ok], uj[ok], sine[ok]
+    # Intersection of p_i + s u_i and p_j + r u_j.
+    pi, pj = segments[i, :2], segments[j, :2]
+    delta = pj - pi
+    s = (delta[:, 0] * uj[:, 1] - delta[:, 1] * uj[:, 0]) / sine
+    vertex = pi + s[:, None] * ui
+    angle = np.mod(lines.angle[j] - lines.angle[i], np.pi)
+    pairs = np.unique(np.column_stack((i, j)), axis=0, return_index=True)[1]
+    return Landmarks(i[pairs], j[pairs], angle[pairs], vertex[pairs])
+
+
+def consecutive_pairs(
+    segments: FloatArray, ordered: bool, config: IntegrateConfig
+) -> tuple[IntArray, IntArray]:
+    """Heuristic 1: consecutive segments of an ordered scan, both long enough (III-A-1)."""
+    n = len(segments)
+    if not ordered or n < 2:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    length = lines_of(segments).length
+    long_enough = length >= max(
+        config.min_segment_length, config.segment_length_percentage / 100.0 * length.max()
+    )
+    idx = np.flatnonzero(long_enough)
+    # Consecutive among the long ones, even without a shared end point (the paper's improvement).
+    return idx[:-1], idx[1:]
+
+
+def random_pairs(
+    segments: FloatArray, config: IntegrateConfig, rng: np.random.Generator
+) -> tuple[IntArray, IntArray]:
+    """Heuristic 2 (Alg. 3): N_k = 20 * 2^k random pairs of segments longer than f^k x longest."""
+    length = lines_of(segments).length
+    firsts, seconds = [], []
+    for k in range(1, config.random_rounds + 1):
+        pool = np.flatnonzero(
+            length
+            >= max(config.min_segment_length, config.segment_division_factor**k * length.max())
+        )
+        if pool.size < 2:
+            continue
+        count = 20 * 2**k
+        a = rng.integers(0, pool.size, count)
+        b = rng.integers(0, pool.size - 1, count)
+        b = b + (b >= a)  # two distinct segments
+        firsts.append(pool[a])
+        seconds.append(pool[b])
+    if not firsts:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    return np.concatenate(firsts), np.concatenate(seconds)
+
+
+def histogram_pairs(segments: FloatArray, config: IntegrateConfig) -> tuple[IntArray, IntArray]:
+    """Heuristic 3: principal-direction segments x normal-direction segments (III-A-3)."""
+    lines = lines_of(segments)
+    usable = lines.length >= config.min_segment_length
+    slots = config.histogram_slots
+    bucket = (np.mod(lines.angle, np.pi) / np.pi * slots).astype(np.int64) % slots
+    weight = np.bincount(bucket[usable], weights=lines.length[usable], minlength=slots)
+    principal = int(np.argmax(weight))
+    normal = (principal + slots // 2) % slots
+    # Neighbouring buckets too: a direction near a bucket edge must not be lost.
+    near_p = np.abs((bucket - principal + slots // 2) % slots - slots // 2) <= 1
+    near_n = np.abs((bucket - normal + slots // 2) % slots - slots // 2) <= 1
+    p = np.flatnonzero(near_p & usable)
+    q = np.flatnonzero(near_n & usable)
+    if p.size == 0 or q.size == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    grid_p, grid_q = np.meshgrid(p, q, indexing="ij")
+    return grid_p.ravel(), grid_q.ravel()
+
+
+def all_pairs(segments: FloatArray, config: IntegrateConfig) -> tuple[IntArray, IntArray]:
+    """Every pair of usable segments (Alg. 2 as written), for small sets."""
+    idx = np.flatnonzero(lines_of(segments).length >= config.min_segment_length)
+    a, b = np.triu_indices(idx.size, k=1)
+    return idx[a], idx[b]
+
+
+def landmarks(
+    segments: FloatArray,
+    heuristics: tuple[str, ...],
+    config: IntegrateConfig,
+    ordered: bool,
+    rng: np.random.Generator,
+) -> Landmarks:
+    """The landmarks of one segment set under the chosen heuristics (their union)."""
+    firsts: list[IntArray] = []
+    seconds: list[IntArray] = []
+    for name in heuristics:
+        if name == "consecutive":
+            a, b = consecutive_pairs(segments, ordered, config)
+        elif name == "random":
+            a, b = random_pairs(segments, config, rng)
+        elif name == "histogram":
+            a, b = histogram_pairs(segments, config)
+        elif name == "all":
+            if len(segments) > config.all_pairs_below:
+                continue
+            a, b = all_pairs(segments, config)
+        elif name == "endpoints":
+            continue  # pairs of segments across the two sets, see endpoint_hypotheses
+        else:
+            raise ValueError(f"unknown heuristic {name!r}; choose from {', '.join(HEURISTICS)}")
+        firsts.append(a)
+        seconds.append(b)
+    first = np.concatenate(firsts) if firsts else np.zeros(0, dtype=np.int64)
+    second = np.concatenate(seconds) if seconds else np.zeros(0, dtype=np.int64)
+    return landmarks_from_pairs(segments, first, second, config)
+
+
+def hypotheses(
+    segments1: FloatArray,
+    marks1: Landmarks,
+    segments2: FloatArray,
+    marks2: Landmarks,
+    config: IntegrateConfig,
+) -> FloatArray:
+    """Every (theta, tx, ty) superimposing an angle of S2 on an equal angle of S1.
+
+    Lines have no sense, so each correspondence gives two rotations, theta and theta + pi;
+    the translation maps the S2 vertex onto the S1 vertex.
+    """
+    if len(marks1.angle) == 0 or len(marks2.angle) == 0:
+        return np.zeros((0, 3))
+    diff = np.abs(marks1.angle[:, None] - marks2.angle[None, :])
+    diff = np.minimum(diff, np.pi - diff)
+    a1, a2 = np.nonzero(diff <= config.angle_difference_tolerance)
+    if a1.size == 0:
+        return np.zeros((0, 3))
+    phi1 = lines_of(segments1).angle
+    phi2 = lines_of(segments2).angle
+    # Rotation that aligns the first lines; average in the second lines' disagreement (mod pi).
+    base = phi1[marks1.first[a1]] - phi2[marks2.first[a2]]
+    other = phi1[marks1.second[a1]] - phi2[marks2.second[a2]]
+    disagreement = se2.wrap_angle(2.0 * (other - base)) / 2.0  # other - base, mod pi
+    theta0 = base + 0.5 * disagreement
+    theta = np.concatenate((theta0, theta0 + np.pi))
+    v1 = np.concatenate((marks1.vertex[a1], marks1.vertex[a1]))
+    v2 = np.concatenate((marks2.vertex[a2], marks2.vertex[a2]))
+    c, s = np.cos(theta), np.sin(theta)
+    tx = v1[:, 0] - (c * v2[:, 0] - s * v2[:, 1])
+    ty = v1[:, 1] - (s * v2[:, 0] + c * v2[:, 1])
+    return np.column_stack((se2.wrap_angle(theta), tx, ty))
+
+
+def endpoint_hypotheses(
+    segments1: FloatArray, segments2: FloatArray, config: IntegrateConfig
+) -> FloatArray:
+    """Hypotheses that lay a long S2 segment on a long S1 segment, end points superimposed.
+
+    Angles need two non-parallel segments; in a corridor every long segment is parallel and
+    the angle heuristics find nothing. Aligning one wall with another fixes the rotation (two
+    senses) and the offset across the wall; superimposing their ends (a door frame, a wall's
+    end) proposes the offset along it, and the evaluation decides which offset is right.
+    """
+    l1, l2 = lines_of(segments1), lines_of(segments2)
+    long1 = np.flatnonzero(
+        l1.length >= max(config.min_segment_length, 0.3 * l1.length.max(initial=0.0))
+    )
+    long2 = np.flatnonzero(
+        l2.length >= max(config.min_segment_length, 0.3 * l2.length.max(initial=0.0))
+    )
+    if long1.size == 0 or long2.size == 0:
+        return np.zeros((0, 3))
+    grid_a, grid_b = np.meshgrid(long1, long2, indexing="ij")
+    a, b = grid_a.ravel(), grid_b.ravel()
+    theta = l1.angle[a] - l2.angle[b]
+    # Same sense: start on start, end on end. Opposite sense (theta + pi): start on end.
+    rotations = np.concatenate((theta, theta, theta + np.pi, theta + np.pi))
+    target = np.concatenate(
+        (segments1[a, :2], segments1[a, 2:], segments1[a, 2:], segments1[a, :2])
+    )
+    source = np.concatenate(
+        (segments2[b, :2], segments2[b, 2:], segments2[b, :2], segments2[b, 2:])
+    )
+    c, s = np.cos(rotations), np.sin(rotations)
+    tx = target[:, 0] - (c * source[:, 0] - s * source[:, 1])
+    ty = target[:, 1] - (s * source[:, 0] + c * source[:, 1])
+    return np.column_stack((se2.wrap_angle(rotations), tx, ty))
+
+
+def distinct_hypotheses(
+    transforms: FloatArray, angle_step: float, distance_step: float, limit: int
+) -> tuple[FloatArray, IntArray]:
+    """Merge hypotheses in the same (angle, x, y) cell; most-voted first, at most ``limit``."""
+    if len(transforms) == 0:
+        return transforms, np.zeros(0, dtype=np.int64)
+    keys = np.column_stack(
+        (
+            np.round(transforms[:, 0] / angle_step),
+            np.round(transforms[:, 1] / distance_step),
+            np.round(transforms[:, 2] / distance_step),
+        )
+    ).astype(np.int64)
+    keys[:, 0] %= round(2 * np.pi / angle_step)
+    # One int64 per cell (1-D unique is several times faster than unique rows).
+    span = 1 << 24
+    code = (keys[:, 0] * span + (keys[:, 1] % span)) * span + (keys[:, 2] % span)
+    _, first, votes = np.unique(code, return_index=True, return_counts=True)
+    order = np.argsort(-votes, kind="stable")[:limit]
+    return transforms[first[order]], votes[order]

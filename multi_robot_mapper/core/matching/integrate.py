@@ -1,0 +1,267 @@
+"""INTEGRATE (Amigoni Alg. 1): hypotheses, pruned evaluation, refinement, validity."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.geometry import lines_of
+from multi_robot_mapper.core.matching.beams import seen_through_many
+from multi_robot_mapper.core.matching.config import IntegrateConfig
+from multi_robot_mapper.core.matching.hypotheses import (
+    HEURISTICS,
+    distinct_hypotheses,
+    endpoint_hypotheses,
+    hypotheses,
+    landmarks,
+)
+from multi_robot_mapper.core.matching.refine import refine_many
+from multi_robot_mapper.core.matching.scoring import (
+    cross_support,
+    information,
+    pruned_values,
+    refused,
+    score_pairs,
+    transform_values,
+)
+from multi_robot_mapper.core.scan import LaserScanData
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+# the slide grid is coarse, the refinement is the precise answer.
+_POLISH_TOLERANCE = 0.25
+
+
+@dataclasses.dataclass(frozen=True)
+class MatchResult:
+    """The best transformation of S2 onto S1 and how much to trust it."""
+
+    T_1_2: FloatArray  # (3,) theta, tx, ty
+    value: float  # overlap length of matching segments under T_1_2 (m)
+    fraction: float  # net value (overlap minus length seen through) / shorter set's length
+    valid: bool  # passes min_match_value and min_match_fraction
+    hypotheses: int  # distinct hypotheses generated
+    evaluated: int  # hypotheses fully evaluated after pruning
+
+    @property
+    def matrix(self) -> FloatArray:
+        return se2.matrix_from_pose(
+            float(self.T_1_2[1]), float(self.T_1_2[2]), float(self.T_1_2[0])
+        )
+
+
+def integrate(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    config: IntegrateConfig,
+    heuristics: tuple[str, ...] = HEURISTICS,
+    ordered: tuple[bool, bool] = (True, True),
+    extra_hypotheses: FloatArray | None = None,
+    views: tuple[LaserScanData | None, LaserScanData | None] = (None, None),
+    hypothesis_sets: tuple[FloatArray, FloatArray] | None = None,
+) -> MatchResult:
+    """Find how S2 lies in S1's frame with no initial guess (INTEGRATE steps 1-2).
+
+    ``hypothesis_sets`` (same frames as S1 and S2) are the sets whose landmarks generate the
+    hypotheses when they differ from the sets evaluated: a local mapper draws hypotheses from
+    the last keyframe's scan (few segments, few landmarks) and evaluates them on the partial
+    map around it (every wall seen nearby).
+
+    ``views`` are the scans each set was seen in, in its own frame, when known. Overlap length
+    cannot tell a corridor's true motion from standing still (the visible stretch of wall moves
+    with the robot); the beams can: under a wrong hypothesis one scan's walls lie where the
+    other scan's beams passed (seen through), and few of its returns lie where the other's
+    beams ended (confirmed). The ``refine_candidates`` best distinct hypotheses are refined
+    and ranked by overlap - ``free_space_weight`` x seen through + ``confirmed_weight`` x
+    confirmed + ``cross_support_weight`` x cross support (without views: overlap and cross
+    support). Validity uses overlap minus seen through only.
+
+    Steps: hypotheses (Alg. 2 and the heuristics of III-A); values (Alg. 4 l. 5-19, after a
+    prescreen when there are many); the best distinct ones, refused ones dropped (Alg. 4
+    l. 6-7, 20-23); refinement; slides along corridors; the best net score wins.
+    """
+    rng = np.random.default_rng(config.seed)
+    total1 = float(lines_of(segments1).length.sum()) if len(segments1) else 0.0
+    total2 = float(lines_of(segments2).length.sum()) if len(segments2) else 0.0
+    shorter = max(min(total1, total2), 1e-9)
+    source1, source2 = (segments1, segments2) if hypothesis_sets is None else hypothesis_sets
+    marks1 = landmarks(source1, heuristics, config, ordered[0], rng) if len(source1) > 1 else None
+    marks2 = landmarks(source2, heuristics, config, ordered[1], rng) if len(source2) > 1 else None
+    raw = (
+        hypotheses(source1, marks1, source2, marks2, config)
+        if marks1 is not None and marks2 is not None
+        else np.zeros((0, 3))
+    )
+    if "endpoints" in heuristics and len(source1) and len(source2):
+        raw = np.vstack((raw, endpoint_hypotheses(source1, source2, config)))
+    transforms, _ = distinct_hypotheses(
+        raw, config.hypothesis_angle_cell, config.hypothesis_distance_cell, config.max_hypotheses
+    )
+    # Extra hypotheses (predictions) come first and are always evaluated in full.
+    extra = (
+        np.zeros((0, 3))
+        if extra_hypotheses is None
+        else np.asarray(extra_hypotheses, dtype=np.float64).reshape(-1, 3)
+    )
+    transforms = np.vstack((extra, transforms))
+    if len(transforms) == 0:
+        return MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0)
+    values, evaluated = pruned_values(segments1, segments2, transforms, config, len(extra))
+    # Alg. 4 l. 20-23 (keep the best), widened: the best few DISTINCT hypotheses are refused
+    # (l. 6-7) or refined, then ranked by their net score (overlap and the scans' beams).
+    candidates = _distinct_candidates(segments1, segments2, transforms, values, config)
+    if candidates.size == 0:
+        return MatchResult(np.zeros(3), 0.0, 0.0, False, len(transforms), evaluated)
+    refined = refine_many(segments1, segments2, transforms[candidates], config)
+    refined_values, scores, support, slide = _net_scores(
+        segments1, segments2, refined, views, config
+    )
+    if config.refine_iterations > 0:
+        # A refinement that slid into a crossing (or lost its overlap) falls back to the
+        # unrefined hypothesis, which passed the refusal test.
+        bad = refused(segments1, segments2, refined, config) | (refined_values <= 0.0)
+        if bad.any():
+            refined[bad] = transforms[candidates[bad]]
+            refined_values[bad], scores[bad], support[bad], slide[bad] = _net_scores(
+                segments1, segments2, refined[bad], views, config
+            )
+    slid, slid_values, slid_scores = _slide(
+        segments1, segments2, refined, scores, support, slide, views, config
+    )
+    refined = np.vstack((refined, slid))
+    refined_values = np.concatenate((refined_values, slid_values))
+    scores = np.concatenate((scores, slid_scores))
+    pick = int(np.argmax(scores))
+    if pick >= len(candidates) and config.refine_iterations > 0:
+        # A slid hypothesis sits on a grid along the corridor: refine it too (the damped
+        # steps leave it where it is along a bare corridor).
+        polished = refine_many(segments1, segments2, refined[pick : pick + 1], config)
+        polished_value, polished_score, _, _ = _net_scores(
+            segments1, segments2, polished, views, config
+        )
+        if (
+            polished_score[0] >= scores[pick] - _POLISH_TOLERANCE
+            and not refused(segments1, segments2, polished, config)[0]
+        ):
+            refined[pick], refined_values[pick] = polished[0], polished_value[0]
+    best_T, best_value = refined[pick], float(refined_values[pick])
+    # Validity on the net value: overlap that the other scan's free space contradicts counts
+    # against it (two unrelated rectilinear places easily overlap by a third).
+    through, _ = seen_through_many(segments1, segments2, best_T[None, :], views, config)
+    best_score = best_value - config.free_space_weight * float(through[0])
+    fraction = best_score / shorter
+    valid = (
+        best_score >= config.min_match_value
+        and fraction >= config.min_match_fraction
+        and cross_support(segments1, segments2, best_T, config) >= config.min_cross_support
+    )
+    return MatchResult(best_T.copy(), best_value, fraction, bool(valid), len(transforms), evaluated)
+
+
+def _slide(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    scores: FloatArray,
+    support: FloatArray,
+    direction: FloatArray,
+    views: tuple[LaserScanData | None, LaserScanData | None],
+    config: IntegrateConfig,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Hypotheses slid along the direction their matched walls leave free, with their values
+    and net scores.
+
+    In a corridor every wall is parallel: no angle fixes the offset along it and end points
+    rarely do, so the true offset may be missing from the hypotheses. The best
+    ``slide_candidates`` candidates whose cross support is below ``slide_below_support`` are
+    tried at every ``slide_step`` within ``slide_range`` along that direction; free space
+    (what each scan saw down the corridor) tells the offsets apart. Refused ones are dropped.
+    """
+    top = np.argsort(-scores, kind="stable")[: config.slide_candidates]
+    top = top[support[top] < config.slide_below_support]
+    if top.size == 0 or config.slide_range <= 0.0:
+        return np.zeros((0, 3)), np.zeros(0), np.zeros(0)
+    offsets = np.arange(-config.slide_range, config.slide_range + 1e-9, config.slide_step)
+    offsets = offsets[np.abs(offsets) > 1e-9]
+    shifted = np.repeat(transforms[top], offsets.size, axis=0)
+    step = np.tile(offsets, top.size)
+    shifted[:, 1] += step * np.repeat(direction[top, 0], offsets.size)
+    shifted[:, 2] += step * np.repeat(direction[top, 1], offsets.size)
+    keep = ~refused(segments1, segments2, shifted, config)
+    shifted = shifted[keep]
+    values, net, _, _ = _net_scores(segments1, segments2, shifted, views, config)
+    return shifted, values, net
+
+
+def _net_scores(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    views: tuple[LaserScanData | None, LaserScanData | None],
+    config: IntegrateConfig,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Value, net score, cross support and least constrained direction of each transform.
+
+    The net score is the overlap (Alg. 4 l. 18) minus the length seen through in the other
+    scan's free space plus ``cross_support_weight`` x the cross support: in a corridor the
+    overlap of the long walls barely changes with the offset along them (standing still even
+    wins, the visible stretch of wall moving with the robot), and what tells the offsets
+    apart is the little that crosses the corridor (door jambs, its end).
+    """
+    scores = score_pairs(segments1, segments2, transforms, config)
+    count = len(transforms)
+    values = transform_values(scores, count)
+    support, direction = information(segments1, scores, count)
+    through, confirmed = seen_through_many(segments1, segments2, transforms, views, config)
+    net = (
+        values
+        - config.free_space_weight * through
+        + config.confirmed_weight * confirmed
+        + config.cross_support_weight * support
+    )
+    return values, net, support, direction
+
+
+def _distinct_candidates(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    values: FloatArray,
+    config: IntegrateConfig,
+    limit: int | None = None,
+) -> IntArray:
+    """Indices of the best ``limit`` (``refine_candidates``) hypotheses, near-duplicates
+    suppressed.
+
+    Hypotheses are taken best first (Alg. 4 l. 20-23); one within ``candidate_separation``
+    (and ``candidate_angle_separation``) of a hypothesis already taken is the same answer
+    and is skipped; a refused one (long walls crossing, Alg. 4 l. 6-7) is skipped too.
+    """
+    order = np.argsort(-values, kind="stable")
+    order = order[values[order] > 0.0][: config.candidate_pool]
+    if order.size == 0:
+        return order
+    pool = transforms[order]
+    free = np.ones(len(order), dtype=bool)
+    allowed = np.zeros(len(order), dtype=bool)
+    checked, chunk = 0, 8  # the refusal test runs on the pool best first, in growing chunks
+    taken: list[int] = []
+    limit = config.refine_candidates if limit is None else limit
+    while len(taken) < limit and free.any():
+        k = int(np.argmax(free))  # best remaining, the pool being sorted
+        if k >= checked:
+            end = min(len(order), k + chunk)
+            allowed[k:end] = ~refused(segments1, segments2, pool[k:end], config)
+            checked, chunk = end, 2 * chunk
+        if not allowed[k]:
+            free[k] = False
+            continue
+        taken.append(int(order[k]))
+        turn = np.abs(se2.wrap_angle(pool[:, 0] - pool[k, 0]))
+        shift = np.hypot(pool[:, 1] - pool[k, 1], pool[:, 2] - pool[k, 2])
+        free &= (turn > config.candidate_angle_separation) | (shift > config.candidate_separation)
+    return np.asarray(taken, dtype=np.int64)

@@ -1,0 +1,341 @@
+"""Evaluation of hypotheses (Amigoni Alg. 4): matching values of segment pairs, refusal of
+crossings, the cheap prescreen, and the support of a match across its weakest direction."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core.geometry import Lines, lines_of
+from multi_robot_mapper.core.matching.config import IntegrateConfig
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+# The prescreen's rough cut (half the segments) keeps this many times candidate_pool.
+_ROUGH_CUT = 10
+
+
+@dataclasses.dataclass(frozen=True)
+class PairScores:
+    """Matching values of candidate (hypothesis, s1, s2) triples with a positive value."""
+
+    hypothesis: IntArray
+    first: IntArray  # index into S1
+    second: IntArray  # index into S2
+    value: FloatArray  # matching value mv (m)
+    crossing: BoolArray  # the two segments intersect under the hypothesis
+
+
+def _candidate_triples(
+    lines1: Lines, lines2: Lines, theta: FloatArray, second_subset: IntArray, max_angle: float
+) -> tuple[IntArray, IntArray, IntArray]:
+    """(h, a, b) whose directions agree within ``max_angle`` (mod pi) under hypothesis h.
+
+    For each segment pair the hypotheses that make it parallel form an interval of theta
+    (mod pi): hypotheses sorted by theta mod pi are cut by searchsorted, so the work is
+    proportional to the candidates, not to hypotheses x pairs.
+    """
+    key = np.mod(theta, np.pi)
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    ext_key = np.concatenate((sorted_key - np.pi, sorted_key, sorted_key + np.pi))
+    ext_idx = np.concatenate((order, order, order))
+    grid_a, grid_b = np.meshgrid(np.arange(len(lines1.angle)), second_subset, indexing="ij")
+    a, b = grid_a.ravel(), grid_b.ravel()
+    centre = np.mod(lines1.angle[a] - lines2.angle[b], np.pi)
+    lo = np.searchsorted(ext_key, centre - max_angle, side="left")
+    hi = np.searchsorted(ext_key, centre + max_angle, side="right")
+    count = hi - lo
+    pair = np.repeat(np.arange(a.size), count)
+    start = np.repeat(np.cumsum(count) - count, count)
+    position = lo[pair] + np.arange(pair.size) - start
+    return ext_idx[position].astype(np.int64), a[pair].astype(np.int64), b[pair].astype(np.int64)
+
+
+def score_pairs(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    config: IntegrateConfig,
+    second_subset: IntArray | None = None,
+) -> PairScores:
+    """Matching value of every candidate triple (Alg. 4 l. 5-19), all hypotheses at once.
+
+    mv = (l1 + l2) / 2 where l1 is the overlap of s2 projected on s1's line with s1 and l2 the
+    converse; pairs whose distance d (Amigoni's, after Lu & Milios: the min over the two
+    segments of the max distance of the other's end points to its line) exceeds
+    ``match_distance`` score 0; pairs that do not intersect are penalised by 0.95^(d/tol).
+    """
+    lines1, lines2 = lines_of(segments1), lines_of(segments2)
+    subset = np.arange(len(segments2)) if second_subset is None else second_subset
+    empty = PairScores(*(np.zeros(0, dtype=np.int64),) * 3, np.zeros(0), np.zeros(0, dtype=bool))
+    if len(transforms) == 0 or len(segments1) == 0 or len(subset) == 0:
+        return empty
+    h, a, b = _candidate_triples(lines1, lines2, transforms[:, 0], subset, config.max_match_angle)
+    if h.size == 0:
+        return empty
+    cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
+    c, s = cos_h[h], sin_h[h]
+    tx, ty = transforms[h, 1], transforms[h, 2]
+    # S2 end points under the hypothesis, and their distances to s1's line (Alg. 4 l. 9).
+    q1x = c * segments2[b, 0] - s * segments2[b, 1] + tx
+    q1y = s * segments2[b, 0] + c * segments2[b, 1] + ty
+    q2x = c * segments2[b, 2] - s * segments2[b, 3] + tx
+    q2y = s * segments2[b, 2] + c * segments2[b, 3] + ty
+    ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
+    ca = lines1.normal_offset[a]
+    dq = np.maximum(np.abs(-uy * q1x + ux * q1y - ca), np.abs(-uy * q2x + ux * q2y - ca))
+    vx = c * lines2.direction[b, 0] - s * lines2.direction[b, 1]
+    vy = s * lines2.direction[b, 0] + c * lines2.direction[b, 1]
+    e1x, e1y, e2x, e2y = segments1[a, 0], segments1[a, 1], segments1[a, 2], segments1[a, 3]
+    cb = -vy * q1x + vx * q1y
+    de = np.maximum(np.abs(-vy * e1x + vx * e1y - cb), np.abs(-vy * e2x + vx * e2y - cb))
+    d = np.minimum(dq, de)
+    # Most candidate triples are far apart: drop them before the overlap arithmetic.
+    near = np.flatnonzero(d <= config.match_distance)
+    h, a, b, d = h[near], a[near], b[near], d[near]
+    q1x, q1y, q2x, q2y = q1x[near], q1y[near], q2x[near], q2y[near]
+    ux, uy, vx, vy = ux[near], uy[near], vx[near], vy[near]
+    e1x, e1y, e2x, e2y = e1x[near], e1y[near], e2x[near], e2y[near]
+    # Overlaps along each line (s1 runs from e1 to e2 along u; s2 from q1 to q2 along v).
+    sa1 = ux * e1x + uy * e1y
+    sq1 = ux * q1x + uy * q1y
+    sq2 = ux * q2x + uy * q2y
+    l1 = np.clip(
+        np.minimum(sa1 + lines1.length[a], np.maximum(sq1, sq2))
+        - np.maximum(sa1, np.minimum(sq1, sq2)),
+        0.0,
+        None,
+    )
+    sb1 = vx * q1x + vy * q1y
+    se1 = vx * e1x + vy * e1y
+    se2_ = vx * e2x + vy * e2y
+    l2 = np.clip(
+        np.minimum(sb1 + lines2.length[b], np.maximum(se1, se2_))
+        - np.maximum(sb1, np.minimum(se1, se2_)),
+        0.0,
+        None,
+    )
+    crossing = _segments_cross(e1x, e1y, e2x, e2y, q1x, q1y, q2x, q2y)
+    penalty = np.where(crossing, 1.0, 0.95 ** (d / config.point_distance_tolerance))
+    value = 0.5 * (l1 + l2) * penalty
+    keep = value > 0.0
+    return PairScores(h[keep], a[keep], b[keep], value[keep], crossing[keep])
+
+
+def _segments_cross(
+    ax: FloatArray,
+    ay: FloatArray,
+    bx: FloatArray,
+    by: FloatArray,
+    cx: FloatArray,
+    cy: FloatArray,
+    dx: FloatArray,
+    dy: FloatArray,
+) -> BoolArray:
+    """Element-wise: do segments a-b and c-d intersect (proper crossing or touching)?"""
+
+    def orient(
+        px: FloatArray,
+        py: FloatArray,
+        qx: FloatArray,
+        qy: FloatArray,
+        rx: FloatArray,
+        ry: FloatArray,
+    ) -> FloatArray:
+        return np.asarray((qx - px) * (ry - py) - (qy - py) * (rx - px))
+
+    o1 = orient(ax, ay, bx, by, cx, cy)
+    o2 = orient(ax, ay, bx, by, dx, dy)
+    o3 = orient(cx, cy, dx, dy, ax, ay)
+    o4 = orient(cx, cy, dx, dy, bx, by)
+    return np.asarray((o1 * o2 <= 0.0) & (o3 * o4 <= 0.0))
+
+
+def refused(
+    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+) -> BoolArray:
+    """Hypotheses that make a long S1 segment cross a long S2 segment (Alg. 4 l. 6-7).
+
+    Only a proper crossing counts: the crossing point must lie at least ``crossing_margin``
+    inside both segments, since walls that meet at a corner or a T-junction touch without
+    contradicting each other, and two walls crossing at a shallow angle are one wall slightly
+    misaligned.
+    """
+    lines1, lines2 = lines_of(segments1), lines_of(segments2)
+    long1 = np.flatnonzero(lines1.length > config.segment_length_refuse)
+    long2 = np.flatnonzero(lines2.length > config.segment_length_refuse)
+    out = np.zeros(len(transforms), dtype=bool)
+    if long1.size == 0 or long2.size == 0 or len(transforms) == 0:
+        return out
+    grid_h, grid_a, grid_b = np.meshgrid(np.arange(len(transforms)), long1, long2, indexing="ij")
+    h, a, b = grid_h.ravel(), grid_a.ravel(), grid_b.ravel()
+    c, s = np.cos(transforms[h, 0]), np.sin(transforms[h, 0])
+    p = segments2[b]
+    qx = c * p[:, 0] - s * p[:, 1] + transforms[h, 1]
+    qy = s * p[:, 0] + c * p[:, 1] + transforms[h, 2]
+    vx = c * lines2.direction[b, 0] - s * lines2.direction[b, 1]
+    vy = s * lines2.direction[b, 0] + c * lines2.direction[b, 1]
+    ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
+    sine = ux * vy - uy * vx
+    steep = np.abs(sine) > np.sin(config.min_landmark_angle)
+    safe = np.where(steep, sine, 1.0)
+    dx, dy = qx - segments1[a, 0], qy - segments1[a, 1]
+    along_a = (dx * vy - dy * vx) / safe  # distance from s1's start to the crossing
+    along_b = (dx * uy - dy * ux) / safe  # distance from s2's start to the crossing
+    margin = config.crossing_margin
+    inside = (
+        (along_a > margin)
+        & (along_a < lines1.length[a] - margin)
+        & (along_b > margin)
+        & (along_b < lines2.length[b] - margin)
+    )
+    # The grid is hypothesis-major: each hypothesis owns one contiguous block of pairs.
+    return np.asarray((steep & inside).reshape(len(transforms), -1).any(axis=1))
+
+
+def transform_values(scores: PairScores, count: int) -> FloatArray:
+    """The value of each hypothesis: the sum of its pairs' matching values (Alg. 4 l. 18)."""
+    return np.bincount(scores.hypothesis, weights=scores.value, minlength=count).astype(np.float64)
+
+
+def information(
+    segments1: FloatArray, scores: PairScores, count: int
+) -> tuple[FloatArray, FloatArray]:
+    """Per hypothesis: smallest eigenvalue of sum(value n n^T) and its eigenvector (the
+    direction matched walls constrain least, along a corridor)."""
+    if scores.first.size == 0:
+        return np.zeros(count), np.tile([1.0, 0.0], (count, 1))
+    u = lines_of(segments1).direction[scores.first]
+    nx, ny, w, h = -u[:, 1], u[:, 0], scores.value, scores.hypothesis
+    sxx = np.bincount(h, weights=w * nx * nx, minlength=count)
+    sxy = np.bincount(h, weights=w * nx * ny, minlength=count)
+    syy = np.bincount(h, weights=w * ny * ny, minlength=count)
+    half_trace = 0.5 * (sxx + syy)
+    radius = np.hypot(0.5 * (sxx - syy), sxy)
+    major = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)  # the dominant normal
+    direction = np.column_stack((-np.sin(major), np.cos(major)))
+    return np.asarray(np.maximum(half_trace - radius, 0.0), dtype=np.float64), direction
+
+
+def cross_support(
+    segments1: FloatArray, segments2: FloatArray, T_1_2: FloatArray, config: IntegrateConfig
+) -> float:
+    """Matched length in the least constrained direction: the smallest eigenvalue of the sum
+    of matching value x n n^T over matched pairs (n the S1 line's normal). Zero when every
+    matched wall is parallel, so the offset along them rests on where walls happen to end."""
+    T = np.asarray(T_1_2, dtype=np.float64).reshape(1, 3)
+    return float(_cross_support_many(segments1, segments2, T, config)[0])
+
+
+def _cross_support_many(
+    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+) -> FloatArray:
+    """:func:`cross_support` of each transform (closed-form 2x2 eigenvalue, no loop)."""
+    scores = score_pairs(segments1, segments2, transforms, config)
+    return information(segments1, scores, len(transforms))[0]
+
+
+def _longest(segments: FloatArray, count: int) -> IntArray:
+    """Indices of the ``count`` longest segments."""
+    length = lines_of(segments).length
+    return np.argsort(-length, kind="stable")[:count].astype(np.int64)
+
+
+def best_prescreened(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    keep: int,
+    segments_used: int,
+    config: IntegrateConfig,
+) -> IntArray:
+    """Indices of the ``keep`` hypotheses (all when fewer) with the best rough value
+    (:func:`_prescreen_values`) on the ``segments_used`` longest segments of each set."""
+    if len(transforms) <= keep:
+        return np.arange(len(transforms), dtype=np.int64)
+    long1 = _longest(segments1, segments_used)
+    long2 = _longest(segments2, segments_used)
+    rough = _prescreen_values(segments1[long1], segments2[long2], transforms, config)
+    return np.asarray(np.argpartition(-rough, keep - 1)[:keep], dtype=np.int64)
+
+
+def _prescreen_values(
+    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+) -> FloatArray:
+    """A cheap lower-fidelity value of every hypothesis, for ranking only.
+
+    Alg. 4's matching value with half the arithmetic: the S2 segment's end points' distance
+    to the S1 line (not the symmetric distance), the overlap along the S1 line only, and no
+    crossing test; directions must agree within ``prescreen_match_angle``.
+    """
+    count = len(transforms)
+    if count == 0 or len(segments1) == 0 or len(segments2) == 0:
+        return np.zeros(count)
+    lines1, lines2 = lines_of(segments1), lines_of(segments2)
+    h, a, b = _candidate_triples(
+        lines1, lines2, transforms[:, 0], np.arange(len(segments2)), config.prescreen_match_angle
+    )
+    if h.size == 0:
+        return np.zeros(count)
+    cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
+    c, s = cos_h[h], sin_h[h]
+    tx, ty = transforms[h, 1], transforms[h, 2]
+    q1x = c * segments2[b, 0] - s * segments2[b, 1] + tx
+    q1y = s * segments2[b, 0] + c * segments2[b, 1] + ty
+    q2x = c * segments2[b, 2] - s * segments2[b, 3] + tx
+    q2y = s * segments2[b, 2] + c * segments2[b, 3] + ty
+    ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
+    ca = lines1.normal_offset[a]
+    d = np.maximum(np.abs(-uy * q1x + ux * q1y - ca), np.abs(-uy * q2x + ux * q2y - ca))
+    near = np.flatnonzero(d <= config.match_distance)
+    h, a, d = h[near], a[near], d[near]
+    ux, uy = ux[near], uy[near]
+    sa1 = ux * segments1[a, 0] + uy * segments1[a, 1]
+    sq1 = ux * q1x[near] + uy * q1y[near]
+    sq2 = ux * q2x[near] + uy * q2y[near]
+    overlap = np.clip(
+        np.minimum(sa1 + lines1.length[a], np.maximum(sq1, sq2))
+        - np.maximum(sa1, np.minimum(sq1, sq2)),
+        0.0,
+        None,
+    )
+    value = overlap * 0.95 ** (d / config.point_distance_tolerance)
+    return np.bincount(h, weights=value, minlength=count).astype(np.float64)
+
+
+def pruned_values(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    config: IntegrateConfig,
+    forced: int = 0,
+) -> tuple[FloatArray, int]:
+    """Values of the hypotheses worth a full evaluation, 0 for the others (Amigoni III-B).
+
+    Long segments carry most of a good transformation's value, and the work of Alg. 4 grows
+    with hypotheses x segments x segments. When there are more than ``candidate_pool``
+    hypotheses, each is first valued roughly (:func:`_prescreen_values`) on the longest
+    segments of both sets: half of ``prescreen_segments`` for a rough cut to
+    10 x ``candidate_pool``, then ``prescreen_segments``; the ``candidate_pool`` best are
+    evaluated in full (Alg. 4 l. 5-19), and so are the first ``forced`` hypotheses.
+    """
+    count = len(transforms)
+    pool = np.arange(forced, count)
+    for segments_used, keep in (
+        (max(1, config.prescreen_segments // 2), _ROUGH_CUT * config.candidate_pool),
+        (config.prescreen_segments, config.candidate_pool),
+    ):
+        pool = pool[
+            best_prescreened(segments1, segments2, transforms[pool], keep, segments_used, config)
+        ]
+    pool = np.concatenate((np.arange(forced), pool))
+    values = np.zeros(count)
+    values[pool] = transform_values(
+        score_pairs(segments1, segments2, transforms[pool], config), pool.size
+    )
+    return values, int(pool.size)

@@ -1,0 +1,270 @@
+"""Map merging's parameters, one typed config."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from multi_robot_mapper.core.config import param, validate
+from multi_robot_mapper.core.matching import IntegrateConfig
+from multi_robot_mapper.core.merging.correlation import CorrelationConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class MergeConfig:
+    """Map merging. Lengths in metres, angles in radians.
+
+    ``integrate`` holds INTEGRATE's matching tolerances; for links between maps its validity
+    thresholds (``min_match_value``, ``min_match_fraction``, ``min_cross_support``) and its
+    hypothesis budget (``max_hypotheses``, ``all_pairs_below``, ``refine_candidates``) are
+    replaced by the ``link_*`` and hypothesis parameters below: partial maps are larger than
+    scans and overlap by a smaller fraction.
+    """
+
+    reference: str = param(
+        "",
+        unit="",
+        doc="robot whose map frame is 'map'; empty: the robot with the largest map (total "
+        "segment length) among the largest group of linked robots",
+    )
+    link_min_value: float = param(
+        15.0,
+        unit="m",
+        doc="validity threshold: a link's best transformation must overlap at least this "
+        "length of matching segments (more than the walls of one room: a single room or "
+        "corner looks alike in many places)",
+        minimum=0.0,
+    )
+    link_min_fraction: float = param(
+        0.3,
+        unit="",
+        doc="validity threshold on segments alone (a robot without viewpoints): overlap at "
+        "least this fraction of the shorter map's total segment length",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    viewed_link_min_fraction: float = param(
+        0.1,
+        unit="",
+        doc="link_min_fraction when both robots' viewpoints are known: free space and "
+        "uniqueness (link_min_uniqueness) then tell look-alike places apart, and robots that "
+        "share a small part of their maps can be linked",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    link_min_cross_support: float = param(
+        1.5,
+        unit="m",
+        doc="validity threshold: matched length across the least constrained direction "
+        "(parallel walls alone cannot fix the offset along them)",
+        minimum=0.0,
+    )
+    link_min_tight_fraction: float = param(
+        0.15,
+        unit="",
+        doc="validity threshold on segments alone: segments matched within tight_distance must "
+        "overlap at least this fraction of the shorter map (the same walls coincide to "
+        "centimetres, look-alike walls of other places only roughly)",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    viewed_link_min_tight_fraction: float = param(
+        0.05,
+        unit="",
+        doc="link_min_tight_fraction when both robots' viewpoints are known",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    tight_distance: float = param(
+        0.05,
+        unit="m",
+        doc="matching distance of the tight overlap (link_min_tight_fraction)",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    hypothesis_segments: int = param(
+        12,
+        unit="segments",
+        doc="the angles between every pair of this many longest segments of each map "
+        "propose the transformations",
+        minimum=2,
+    )
+    coarse_segments: int = param(
+        40,
+        unit="segments",
+        doc="hypotheses are ranked on this many longest segments of each map; the best are "
+        "then refined and judged on the whole maps",
+        minimum=2,
+    )
+    judge_segments: int = param(
+        250,
+        unit="segments",
+        doc="the best hypotheses are refined and judged on this many longest segments of each "
+        "map (short pieces add cost, not evidence)",
+        minimum=2,
+    )
+    correlation_candidates: int = param(
+        8,
+        unit="",
+        doc="the best placements of the map correlation (every translation, for each rotation "
+        "the wall directions allow) that join INTEGRATE's own hypothesis as candidates; the "
+        "best few distinct places among them are refined and judged",
+        minimum=1,
+    )
+    correlation_cell: float = param(
+        0.3,
+        unit="m",
+        doc="grid cell of the map correlation (its walls are blurred by one cell)",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    free_space_weight: float = param(
+        2.0,
+        unit="",
+        doc="in the correlation score, a metre of wall lying in the other robot's free space "
+        "counts against as this many metres of matched wall",
+        minimum=0.0,
+    )
+    link_min_uniqueness: float = param(
+        2.0,
+        unit="",
+        doc="validity threshold when both robots' viewpoints are known: the link's "
+        "correlation score (matched wall minus wall in free space, m) must be at least this "
+        "many times that of the best distinct placement (> 2 m or 10 degrees away): a place "
+        "that fits twice is ambiguous (symmetric corridors, rows of equal rooms) and is "
+        "refused",
+        minimum=1.0,
+    )
+    max_hypotheses: int = param(
+        150,
+        unit="",
+        doc="at most this many most-voted INTEGRATE hypotheses are ranked per pair of maps",
+        minimum=1,
+    )
+    reuse_length_change: float = param(
+        5.0,
+        unit="%",
+        doc="a pair's result is reused while each map's total segment length stays within "
+        "this of the length it was computed on (and its segment count within "
+        "reuse_count_change)",
+        minimum=0.0,
+    )
+    reuse_count_change: float = param(
+        10.0,
+        unit="%",
+        doc="a pair's result is reused while each map's segment count stays within this (or "
+        "2 segments) of the count it was computed on",
+        minimum=0.0,
+    )
+    stability_margin: float = param(
+        0.25,
+        unit="",
+        doc="a link of the previous tree stays in the tree unless another link's value "
+        "exceeds it by this fraction (placements do not flip between similar links)",
+        minimum=0.0,
+    )
+    link_max_seen_through: float = param(
+        1.0,
+        unit="m",
+        doc="validity threshold: a link is refused when more than this length of either map "
+        "(and more than link_max_seen_through_fraction of its value) lies in free space the "
+        "other robot saw from its keyframes (only when keyframe poses are given)",
+        minimum=0.0,
+    )
+    link_max_seen_through_fraction: float = param(
+        0.1,
+        unit="",
+        doc="see link_max_seen_through: the allowance as a fraction of the link's value (large "
+        "overlaps of drifting maps tolerate a little more)",
+        minimum=0.0,
+    )
+    free_space_margin: float = param(
+        0.5,
+        unit="m",
+        doc="a wall of the other map is in a robot's free space when it lies at least this much "
+        "nearer a viewpoint than the robot's own map along the same bearing",
+        minimum=0.0,
+    )
+    free_space_min_length: float = param(
+        1.0,
+        unit="m",
+        doc="only segments at least this long are tested against the other robot's free space "
+        "(walls; short pieces are furniture, exhibits and people, which move or are seen from "
+        "one side only)",
+        minimum=0.0,
+    )
+    view_spacing: float = param(
+        1.0,
+        unit="m",
+        doc="viewpoints (keyframe poses) closer than this to one already kept add no evidence",
+        minimum=0.0,
+    )
+    max_views: int = param(
+        60,
+        unit="",
+        doc="at most this many viewpoints per map, evenly spread over the kept ones",
+        minimum=1,
+    )
+    view_range: float = param(
+        8.0,
+        unit="m",
+        doc="free space reaches at most this far from a viewpoint (a wall must be seen in the "
+        "robot's own map within it)",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    view_spread: int = param(
+        6,
+        unit="bearings",
+        doc="free space along a bearing reaches only the nearest wall within this many "
+        "bearings either side (gaps between a map's segments are not seen through)",
+        minimum=0,
+    )
+    view_field: float = param(
+        float(np.pi),
+        unit="rad",
+        doc="field of view claimed around each keyframe's heading (the laser's forward "
+        "direction; 180 degrees is the narrowest common laser: wider ones claim less than they "
+        "saw, never more)",
+        minimum=0.0,
+        exclusive_minimum=True,
+        maximum=2.0 * np.pi,
+    )
+    view_beams: int = param(
+        360,
+        unit="",
+        doc="bearings per full turn at which the robot's own map is ray cast",
+        minimum=8,
+    )
+    fusion_tolerance: float = param(
+        0.05,
+        unit="m",
+        doc="FUSIONTOLERANCE of the global map: a fused polyline stays this close to every "
+        "segment it replaces",
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
+    integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    def correlation(self) -> CorrelationConfig:
+        """The map correlation's settings from this config."""
+        return CorrelationConfig(
+            cell=self.correlation_cell, free_space_weight=self.free_space_weight
+        )
+
+    def link_config(self, hypotheses: int | None = None, viewed: bool = False) -> IntegrateConfig:
+        """``integrate`` with this config's validity thresholds (``viewed``: those for two
+        robots whose viewpoints are known) and hypothesis budget."""
+        return dataclasses.replace(
+            self.integrate,
+            min_match_value=self.link_min_value,
+            min_match_fraction=self.viewed_link_min_fraction if viewed else self.link_min_fraction,
+            min_cross_support=self.link_min_cross_support,
+            max_hypotheses=self.max_hypotheses if hypotheses is None else hypotheses,
+            all_pairs_below=self.hypothesis_segments,
+            refine_candidates=min(self.integrate.refine_candidates, 3),
+        )

@@ -1,0 +1,158 @@
+"""Free space: what a robot saw from its keyframes, and links that contradict it."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.geometry import lines_of, sample_segments
+from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.simulation import raycast_fans
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclasses.dataclass(frozen=True)
+class MapViews:
+    """Free space a robot saw: its own map ray cast from its viewpoints (``view_field``
+    around each keyframe's heading).
+
+    A partial map carries no scans, but its keyframe poses say where the laser stood; the
+    robot's own walls seen from there bound the space its beams crossed (a door the map does
+    not close leaves no wall on that bearing, and nothing is claimed there). Another robot's
+    wall placed inside that space contradicts the placement: the two buildings only look alike
+    (the look-alike rooms and corridors segment overlap cannot tell apart).
+    """
+
+    poses: FloatArray  # (K, 3) viewpoints (laser poses) in the robot's map frame
+    ranges: FloatArray  # (K, B) the map's range at each bearing of each view (inf: no wall)
+    angle_min: float  # bearing of column 0 in each viewpoint's frame (rad)
+    angle_increment: float  # rad between columns
+
+    @staticmethod
+    def of(segments: FloatArray, keyframe_poses: FloatArray, config: MergeConfig) -> MapViews:
+        """The views of a map from its keyframe poses, at least ``view_spacing`` apart and at
+        most ``max_views`` of them, ``view_field`` wide around each heading."""
+        poses = np.asarray(keyframe_poses, dtype=np.float64).reshape(-1, 3)
+        kept: list[int] = []
+        for index in range(len(poses)):  # greedy thinning over keyframes (a few hundred)
+            if (
+                not kept
+                or np.min(np.hypot(*(poses[kept, :2] - poses[index, :2]).T)) >= config.view_spacing
+            ):
+                kept.append(index)
+        if len(kept) > config.max_views:
+            kept = [kept[i] for i in np.linspace(0, len(kept) - 1, config.max_views).astype(int)]
+        chosen = poses[kept]
+        step = 2.0 * np.pi / config.view_beams
+        beams = max(2, round(config.view_field / step) + 1)
+        first = -0.5 * step * (beams - 1)
+        ranges = raycast_fans(segments, chosen, first, step, beams, config.view_range)
+        return MapViews(chosen, ranges, first, step)
+
+    def free_limits(self, spread: int) -> FloatArray:
+        """(K, B) how far free space reaches along each bearing: the nearest wall within
+        ``spread`` bearings either side (a gap between two segments is not seen through), and
+        nothing (-inf) where some bearing of that window hits no wall or lies beyond the edge
+        of the field of view (the field does not wrap round, even at 2 pi: its first and last
+        ``spread`` bearings claim nothing)."""
+        limits = np.where(np.isfinite(self.ranges), self.ranges, -np.inf)
+        if spread > 0 and limits.shape[1]:
+            padded = np.pad(limits, ((0, 0), (spread, spread)), constant_values=-np.inf)
+            windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * spread + 1, axis=1)
+            limits = windows.min(axis=2)
+        return np.asarray(limits)
+
+    def free_points(self, config: MergeConfig, spacing: float) -> FloatArray:
+        """Points every ``spacing`` metres along every bearing of every view, out to
+        ``free_space_margin`` before the wall that ends it (:meth:`free_limits`): where the
+        robot's laser saw nothing."""
+        reach = self.free_limits(config.view_spread) - config.free_space_margin
+        steps = np.arange(spacing, config.view_range, spacing)
+        view, bearing, step = np.nonzero(reach[:, :, None] > steps[None, None, :])
+        if view.size == 0:
+            return np.zeros((0, 2))
+        heading = self.poses[view, 2] + self.angle_min + self.angle_increment * bearing
+        distance = steps[step]
+        return np.column_stack(
+            (
+                self.poses[view, 0] + distance * np.cos(heading),
+                self.poses[view, 1] + distance * np.sin(heading),
+            )
+        )
+
+
+def seen_through_length(views: MapViews, segments: FloatArray, config: MergeConfig) -> float:
+    """Length of the walls among ``segments`` (in the views' map frame; those at least
+    ``free_space_min_length`` long) lying in the free space of ``views``: nearer some
+    viewpoint than the map's own wall on that bearing by ``free_space_margin``."""
+    spacing = 0.2  # m between the points tested along each wall
+    walls = segments[lines_of(segments).length >= config.free_space_min_length]
+    if len(walls) == 0 or len(views.poses) == 0:
+        return 0.0
+    points, owner = sample_segments(walls, spacing)
+    # Each point stands for its wall's length over its points (a wall's two ends both count).
+    weight = (lines_of(walls).length / np.bincount(owner, minlength=len(walls)))[owner]
+    limits = views.free_limits(config.view_spread)
+    # Every point in every viewpoint's frame at once: (K, P) bearings and distances.
+    dx = points[None, :, 0] - views.poses[:, 0, None]
+    dy = points[None, :, 1] - views.poses[:, 1, None]
+    bearing = se2.wrap_angle(np.arctan2(dy, dx) - views.poses[:, 2, None])
+    distance = np.hypot(dx, dy)
+    column = np.rint((bearing - views.angle_min) / views.angle_increment).astype(np.int64)
+    inside = (column >= 0) & (column < limits.shape[1])
+    reach = np.take_along_axis(limits, np.where(inside, column, 0), axis=1)
+    seen = inside & (distance < reach - config.free_space_margin)
+    return float(weight[seen.any(axis=0)].sum())
+
+
+ViewSource = Callable[[str], "MapViews | None"]
+
+
+def no_views(robot: str) -> MapViews | None:
+    return None
+
+
+def view_source(
+    maps: Mapping[str, FloatArray], viewpoints: Mapping[str, FloatArray], config: MergeConfig
+) -> ViewSource:
+    """Each robot's :class:`MapViews` (None without viewpoints or without a map: no free
+    space known), cast on first use: a re-run whose pairs are all reused casts none."""
+    cache: dict[str, MapViews | None] = {}
+
+    def views(robot: str) -> MapViews | None:
+        if robot not in cache:
+            poses = np.asarray(viewpoints.get(robot, np.zeros((0, 3))), dtype=np.float64)
+            known = len(poses.reshape(-1, 3)) > 0 and len(maps[robot]) > 0
+            cache[robot] = MapViews.of(maps[robot], poses, config) if known else None
+        return cache[robot]
+
+    return views
+
+
+def seen_through_allowance(value: float, config: MergeConfig) -> float:
+    """How much wall in the other robot's free space a link of ``value`` m tolerates:
+    ``link_max_seen_through``, or that fraction of the value when larger (drifting maps)."""
+    return max(config.link_max_seen_through, config.link_max_seen_through_fraction * value)
+
+
+def free_space_conflict(
+    map_a: FloatArray,
+    views_a: MapViews | None,
+    map_b: FloatArray,
+    views_b: MapViews | None,
+    T_a_b: FloatArray,
+    config: MergeConfig,
+) -> float:
+    """The larger of: map b (moved by ``T_a_b``) in a's free space, map a in b's (metres)."""
+    through = 0.0
+    if views_a is not None:
+        through = seen_through_length(views_a, se2.transform_segments(T_a_b, map_b), config)
+    if views_b is not None:
+        back = se2.transform_segments(se2.invert(T_a_b), map_a)
+        through = max(through, seen_through_length(views_b, back, config))
+    return through
