@@ -32,6 +32,7 @@ from multi_robot_mapper.core.scan import LaserScanData
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
+# A refined slid hypothesis replaces the slid one unless its net score is this much lower (m):
 # the slide grid is coarse, the refinement is the precise answer.
 _POLISH_TOLERANCE = 0.25
 
