@@ -5,18 +5,24 @@ Two steps, each its own command:
     .venv/bin/python bench/fit_confidence.py collect [--logs intel aces ...] [--jobs 2]
     .venv/bin/python bench/fit_confidence.py fit [--write] [--out bench_output/confidence]
 
-``collect`` matches scan pairs of every shared log with INTEGRATE (no guess, both scans'
-views) and stores each pair's evidence features, its kind and whether the match is right
-(within 0.30 m / 5 deg of the reference) in ``OUT/<log>.npz``. Pair kinds, so that the model
-sees what the mappers ask of it:
+``collect`` matches pairs of every shared log with INTEGRATE (no guess, both sides' views)
+and stores each pair's raw evidence (:meth:`MatchEvidence.as_array`), its kind and whether the
+match is right (within 0.30 m / 5 deg of the reference) in ``OUT/<log>.npz``. Pair kinds, so
+that the model sees what the mappers ask of it:
 
 - ``consecutive``: scan k and k+1 (the pair bench; on the dense freiburg-079, every 3rd k);
 - ``gap2``, ``gap3``: k and k+2, k+3 (a scan set aside in between; larger motions). On the
-  dense freiburg-079 the gaps are 5, 10 and 20 scans (0.5, 1 and 2 m: keyframe spacing);
+  dense freiburg-079 the gaps are 5 and 10 scans (0.5 and 1 m: keyframe spacing);
 - ``revisit``: scans far apart in time whose reference poses are within 1.5 m and 60 deg
   (what a loop closure matches);
 - ``unrelated``: scans whose reference poses are more than 15 m apart (no overlap: any
-  answer is wrong; an unrelated room must get a low confidence).
+  answer is wrong; an unrelated room must get a low confidence);
+- ``predicted``: consecutive scans refined from a prediction alone (the true motion off by
+  10 cm and 3 deg), no search: what a tracker asks;
+- ``window_adjacent``, ``window_revisit``, ``window_unrelated``: windows of three scans
+  (keyframe-spaced on freiburg-079), each fused in its first scan's frame with all three
+  scans' beams: the end of a stretch against the start of the next (a join after the robot
+  was lost), revisits, unrelated places (what a join of pieces and a merger match).
 
 ``fit`` fits the model (L2-regularised logistic regression, scipy) on all logs but one and
 checks it on the one left out, in turn: log loss, Brier score, and precision / recall of
@@ -48,7 +54,9 @@ from scipy.optimize import minimize  # noqa: E402
 
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
+from multi_robot_mapper.core.fusion import fuse  # noqa: E402
 from multi_robot_mapper.core.matching import IntegrateConfig, integrate  # noqa: E402
+from multi_robot_mapper.core.matching.beams import Viewpoint, Views  # noqa: E402
 from multi_robot_mapper.core.matching.confidence import (  # noqa: E402
     FEATURES,
     LogisticModel,
@@ -63,35 +71,72 @@ DATA = REPO.parent / "shared" / "data" / "carmen"
 LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079", "edmonton")
 DENSE = ("freiburg-079",)
 MODEL_FILE = REPO / "multi_robot_mapper" / "core" / "matching" / "confidence_model.py"
-KINDS = ("consecutive", "gap2", "gap3", "revisit", "unrelated")
+KINDS = (
+    "consecutive",
+    "gap2",
+    "gap3",
+    "revisit",
+    "unrelated",
+    "predicted",
+    "window_adjacent",
+    "window_revisit",
+    "window_unrelated",
+)
+WINDOW = 3  # scans per window
+WINDOW_SAMPLES = 150  # revisit and unrelated window pairs per log
 RAW = 14  # numbers of MatchEvidence.as_array
 SAMPLES = 300  # revisit and unrelated pairs per log
 L2 = 1e-2  # regularisation of the logistic fit (per pair, on standardised features)
 
 
-def pairs_of(name: str, poses: np.ndarray, stamps: np.ndarray) -> list[tuple[str, int, int]]:
-    """Every (kind, i, j) pair of one log (deterministic)."""
+Pair = tuple[str, tuple[int, ...], tuple[int, ...]]  # kind, scans of A (anchor first), of B
+
+
+def pairs_of(name: str, poses: np.ndarray) -> list[Pair]:
+    """Every (kind, A, B) pair of one log (deterministic): A and B are windows of scans, the
+    first of each its anchor (single scans for the scan kinds)."""
     n = len(poses)
     rng = np.random.default_rng(7)
-    out: list[tuple[str, int, int]] = []
-    if name in DENSE:
+    out: list[Pair] = []
+    dense = name in DENSE
+    if dense:
         steps = {"consecutive": (1, 3), "gap2": (5, 3), "gap3": (10, 3)}
         for kind, (gap, every) in steps.items():
-            out += [(kind, k, k + gap) for k in range(0, n - gap, every)]
+            out += [(kind, (k,), (k + gap,)) for k in range(0, n - gap, every)]
     else:
         for kind, gap in (("consecutive", 1), ("gap2", 2), ("gap3", 3)):
-            out += [(kind, k, k + gap) for k in range(n - gap)]
+            out += [(kind, (k,), (k + gap,)) for k in range(n - gap)]
+    # What a tracker asks: the motion refined from a prediction (the true motion, off by a
+    # constant-velocity error), no search.
+    consecutive = [(a, b) for kind, a, b in out if kind == "consecutive"]
+    out += [("predicted", a, b) for a, b in consecutive[:: 2 if dense else 1]]
     xy = poses[:, :2]
     distance = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
     turn = np.abs(se2.wrap_angle(poses[:, None, 2] - poses[None, :, 2]))
     i, j = np.triu_indices(n, k=1)
-    apart = j - i > (100 if name in DENSE else 20)
+    apart = j - i > (100 if dense else 20)
     revisit = np.flatnonzero(apart & (distance[i, j] < 1.5) & (turn[i, j] < np.radians(60)))
     unrelated = np.flatnonzero(distance[i, j] > 15.0)
     for kind, chosen in (("revisit", revisit), ("unrelated", unrelated)):
         if chosen.size > SAMPLES:
             chosen = rng.choice(chosen, SAMPLES, replace=False)
-        out += [(kind, int(i[c]), int(j[c])) for c in np.sort(chosen)]
+        out += [(kind, (int(i[c]),), (int(j[c]),)) for c in np.sort(chosen)]
+    # Windows of WINDOW scans (keyframe-spaced on the dense log): the end of one stretch
+    # against the start of the next (a join after the robot was lost), revisits, unrelated.
+    step = 5 if dense else 1
+    span = step * (WINDOW - 1)
+
+    def around(k: int) -> tuple[int, ...]:
+        return tuple(int(v) for v in np.clip(k + step * np.arange(WINDOW) - span // 2, 0, n - 1))
+
+    for k in range(span, n - span - step, 15 if dense else 2):
+        a = tuple(range(k, k - span - 1, -step))  # anchor k, then the scans before it
+        b = tuple(range(k + step, k + step + span + 1, step))
+        out.append(("window_adjacent", a, b))
+    for kind, chosen in (("window_revisit", revisit), ("window_unrelated", unrelated)):
+        if chosen.size > WINDOW_SAMPLES:
+            chosen = rng.choice(chosen, WINDOW_SAMPLES, replace=False)
+        out += [(kind, around(int(i[c])), around(int(j[c]))) for c in np.sort(chosen)]
     return out
 
 
@@ -104,25 +149,59 @@ def collect_log(name: str, out_dir: Path) -> str:
     views = [carmen_scan_data(s) for s in scans]
     segments = [extract_scan(v, ExtractionConfig())[0].segments for v in views]
     poses = np.array([s.reference_pose for s in scans])
-    stamps = np.array([s.timestamp for s in scans])
     config = IntegrateConfig()
     rows, at_truth, kinds, right, times, errors = [], [], [], [], [], []
     nothing = MatchEvidence.from_array(np.zeros(RAW))
-    for kind, i, j in pairs_of(name, poses, stamps):
+    rng = np.random.default_rng(11)
+
+    def window(scans_: tuple[int, ...]) -> tuple[np.ndarray, list[Viewpoint]]:
+        """The window's segments fused in its anchor's frame, and its viewpoints."""
+        anchor = se2.invert(se2.matrix_from_pose(*poses[scans_[0]]))
+        fused, owner = np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
+        viewpoints = []
+        for k in scans_:
+            T = anchor @ se2.matrix_from_pose(*poses[k])
+            placed = se2.transform_segments(T, segments[k])
+            fused, owner = fuse(fused, owner, placed, np.full(len(placed), k), config, 0.02)
+            viewpoints.append(Viewpoint(views[k], T))
+        return fused, viewpoints
+
+    for kind, a, b in pairs_of(name, poses):
+        T_truth = se2.invert(se2.matrix_from_pose(*poses[a[0]])) @ se2.matrix_from_pose(
+            *poses[b[0]]
+        )
+        x, y, theta = se2.pose_from_matrix(T_truth)
+        if len(a) == 1:
+            seg_a, seg_b = segments[a[0]], segments[b[0]]
+            view_a: Views = views[a[0]]
+            view_b: Views = views[b[0]]
+        else:
+            seg_a, view_a = window(a)
+            seg_b, view_b = window(b)
         t0 = time.perf_counter()
-        result = integrate(segments[i], segments[j], config, views=(views[i], views[j]))
+        if kind == "predicted":
+            # A constant-velocity prediction is off by about a tenth of the motion, and turns.
+            off = np.array([theta, x, y]) + rng.normal(0.0, [0.05, 0.1, 0.1])
+            result = integrate(
+                seg_a,
+                seg_b,
+                config,
+                heuristics=(),
+                extra_hypotheses=off[None],
+                views=(view_a, view_b),
+            )
+        else:
+            result = integrate(seg_a, seg_b, config, views=(view_a, view_b))
         times.append(time.perf_counter() - t0)
-        T_truth = se2.invert(se2.matrix_from_pose(*poses[i])) @ se2.matrix_from_pose(*poses[j])
-        ok = kind != "unrelated" and is_right(result.matrix, T_truth)
+        ok = "unrelated" not in kind and is_right(result.matrix, T_truth)
         rows.append((result.evidence or nothing).as_array())
         # The beams at the reference placement: where they contradict it far more than the
         # match, the reference itself is wrong (reported, never used to relabel).
-        x, y, theta = se2.pose_from_matrix(T_truth)
         truth = match_evidence(
-            segments[i],
-            segments[j],
+            seg_a,
+            seg_b,
             np.array([theta, x, y]),
-            (views[i], views[j]),
+            (view_a, view_b),
             config,
             score=0.0,
             rival_score=0.0,

@@ -167,7 +167,8 @@ def _run_local(
     config: LocalMapperConfig,
     progress: Progress | None,
 ) -> OfflineMap:
-    """One :class:`LocalMapper` per robot, exactly as ``robot_mapper`` runs it."""
+    """One :class:`LocalMapper` per robot, exactly as ``robot_mapper`` runs it (with the back
+    end in line, so that a replay is deterministic)."""
     robots = sorted(recordings)
     front_end = _FrontEnd(extraction, progress, sum(len(recordings[r]) for r in robots))
     started = time.perf_counter()
@@ -178,50 +179,70 @@ def _run_local(
     keyframe_poses: dict[str, FloatArray] = {}
     per_robot: dict[str, dict[str, object]] = {}
     scan_times: list[float] = []
+    backend_times: list[float] = []
+    optimise_times: list[float] = []
     mapping_errors = 0
     for index, robot in enumerate(robots):
         mapper = LocalMapper(config)
-        stamps: list[float] = []
-        poses: list[Pose] = []
         for item, segments in front_end.scans(robot, recordings[robot]):
             t1 = time.perf_counter()
-            saved = mapper.snapshot()
             try:
-                update = mapper.add_scan(item.stamp, segments, item.scan)
-            except Exception:  # as the node does: count it, undo the scan, keep the map
-                mapper.restore(saved)
+                mapper.add_scan(item.stamp, segments, item.scan)
+            except Exception:  # as the node does: count it, keep the map built so far
                 mapping_errors += 1
                 continue
             finally:
                 elapsed = time.perf_counter() - t1
             mapping_s += elapsed
             scan_times.append(elapsed)
-            if update.restarted:  # the scans placed before are no longer in this map
-                stamps.clear()
-                poses.clear()
-            if update.pose is not None:
-                stamps.append(item.stamp)
-                poses.append(update.pose)
-        map_segments = mapper.map_segments
-        keyframes = mapper.keyframes()
+        backend_times += mapper.backend_seconds
+        optimise_times += mapper.optimise_seconds
+        main = mapper.main_piece()
+        map_segments = mapper.map.map_segments(piece=main)
+        keyframes = [kf for kf in mapper.keyframes() if kf.piece == main]
         keyframe_poses[robot] = np.array(
             [kf.T_robotmap_keyframe for kf in keyframes], dtype=np.float64
         ).reshape(-1, 3)
         segment_sets.append(map_segments)
         owners.append(np.full(len(map_segments), index, dtype=np.int64))
-        trajectories[robot] = (
-            np.asarray(stamps, dtype=np.float64),
-            np.asarray(poses, dtype=np.float64).reshape(-1, 3),
-        )
+        trajectories[robot] = mapper.trajectory(main)
+        scans = mapper.map.scans
         per_robot[robot] = {
             "scans_accepted": mapper.scans_accepted,
             "scans_set_aside": mapper.scans_set_aside,
             "scans_tracked": mapper.scans_tracked,
+            "scans_in_main_piece": len(trajectories[robot][0]),
             "set_aside_reasons": dict(mapper.set_aside_reasons),
+            "pieces_started": mapper.pieces_started,
+            "pieces_left": len(set(mapper.map.pieces.tolist())),
             "keyframes": len(keyframes),
+            "keyframes_all_pieces": len(scans),
             "map_segments": len(map_segments),
+            "local_edges": mapper.closer.local_edges,
+            "closures_accepted": len(mapper.closures),
+            "closures_refused": dict(mapper.closer.refused),
+            "closures": [
+                {
+                    "kind": c.kind,
+                    "first_stamp": scans[c.first].stamp,
+                    "second_stamp": scans[c.second].stamp,
+                    "T_first_second": [round(v, 6) for v in c.T_first_second],
+                    "confidence": round(c.confidence, 4),
+                }
+                for c in mapper.closures
+            ],
+            "front_end_stage_s": {k: round(v, 4) for k, v in mapper.stage_seconds.items()},
         }
-    times = np.asarray(scan_times) if scan_times else np.zeros(1)
+
+    def summary(values: list[float]) -> dict[str, float]:
+        array = np.asarray(values) if values else np.zeros(1)
+        return {
+            "median_ms": round(float(np.median(array)) * 1e3, 3),
+            "p95_ms": round(float(np.percentile(array, 95)) * 1e3, 3),
+            "max_ms": round(float(array.max()) * 1e3, 3),
+        }
+
+    times = summary(scan_times)
     stats: dict[str, object] = {
         "method": "local",
         "scans_total": front_end.total,
@@ -231,8 +252,11 @@ def _run_local(
         "front_end_s": round(front_end.seconds, 4),
         "local_mapping_s": round(mapping_s, 4),
         "mapping_errors": mapping_errors,
-        "local_mapping_median_ms": round(float(np.median(times)) * 1e3, 3),
-        "local_mapping_p95_ms": round(float(np.percentile(times, 95)) * 1e3, 3),
+        "local_mapping_median_ms": times["median_ms"],
+        "local_mapping_p95_ms": times["p95_ms"],
+        "backend_per_keyframe": summary(backend_times),
+        "optimisation_per_keyframe": summary(optimise_times),
+        "closures_accepted": sum(int(str(r["closures_accepted"])) for r in per_robot.values()),
         "robots": per_robot,
         "total_s": round(time.perf_counter() - started, 4),
     }

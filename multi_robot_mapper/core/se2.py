@@ -47,3 +47,38 @@ def transform_segments(T: FloatArray, segments: FloatArray) -> FloatArray:
     """Map an (N, 4) segment set ``[x1, y1, x2, y2]`` from frame b to frame a with T_a_b."""
     ends = transform_points(T, segments.reshape(-1, 2))
     return ends.reshape(-1, 4)
+
+
+def transform_segments_each(poses: FloatArray, segments: FloatArray) -> FloatArray:
+    """Row i of ``segments`` (M, 4) moved by pose i of ``poses`` (M, 3): each segment from its
+    own frame b_i into frame a, with ``T_a_bi`` given as ``(x, y, theta)``."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    out = np.empty_like(segments)
+    for k in (0, 2):
+        x, y = segments[:, k], segments[:, k + 1]
+        out[:, k] = c * x - s * y + poses[:, 0]
+        out[:, k + 1] = s * x + c * y + poses[:, 1]
+    return out
+
+
+def inverse_transform_segments_each(poses: FloatArray, segments: FloatArray) -> FloatArray:
+    """Inverse of :func:`transform_segments_each`: row i from frame a into frame b_i."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    out = np.empty_like(segments)
+    for k in (0, 2):
+        x, y = segments[:, k] - poses[:, 0], segments[:, k + 1] - poses[:, 1]
+        out[:, k] = c * x + s * y
+        out[:, k + 1] = -s * x + c * y
+    return out
+
+
+def compose(T_a_b: ArrayLike, T_b_c: ArrayLike) -> tuple[float, float, float]:
+    """``T_a_c`` of two ``(x, y, theta)`` poses."""
+    ab, bc = np.asarray(T_a_b, dtype=np.float64), np.asarray(T_b_c, dtype=np.float64)
+    return pose_from_matrix(matrix_from_pose(*ab) @ matrix_from_pose(*bc))
+
+
+def between(T_a_b: ArrayLike, T_a_c: ArrayLike) -> tuple[float, float, float]:
+    """``T_b_c`` of two ``(x, y, theta)`` poses in the same frame a."""
+    ab, ac = np.asarray(T_a_b, dtype=np.float64), np.asarray(T_a_c, dtype=np.float64)
+    return pose_from_matrix(invert(matrix_from_pose(*ab)) @ matrix_from_pose(*ac))

@@ -160,17 +160,31 @@ def partial_map_markers(
     return array
 
 
-def keyframe_from_marker(marker: Marker) -> Keyframe:
-    """The keyframe a :func:`keyframe_marker` carries (the stamp from ``text``, else the header)."""
+def piece_frame(map_frame: str, piece: int) -> str:
+    """The frame of a piece of a robot's map: the robot's map frame for piece 0 (the first
+    scan's), ``<map frame>_<piece>`` for a piece started when the robot was lost (``piece``:
+    its first keyframe's index)."""
+    return map_frame if piece == 0 else f"{map_frame}_{piece}"
+
+
+def keyframe_from_marker(marker: Marker, map_frame: str | None = None) -> Keyframe:
+    """The keyframe a :func:`keyframe_marker` carries (the stamp from ``text``, else the
+    header); its piece from its frame (:func:`piece_frame`) when ``map_frame`` is known."""
     try:
         stamp = float(marker.text)
     except ValueError:
         stamp = seconds_from_stamp(marker.header.stamp)
+    frame = marker.header.frame_id
+    piece = 0
+    if map_frame is not None and frame != map_frame and frame.startswith(map_frame + "_"):
+        suffix = frame[len(map_frame) + 1 :]
+        piece = int(suffix) if suffix.isdigit() else -1
     return Keyframe(
         index=int(marker.id),
         stamp=stamp,
         T_robotmap_keyframe=pose_from_msg(marker.pose),
         segments=segments_from_marker(marker),
+        piece=piece,
     )
 
 
@@ -178,10 +192,15 @@ def keyframes_from_markers(array: MarkerArray) -> list[Keyframe]:
     """The keyframes of a ``partial_map`` MarkerArray (inverse of :func:`partial_map_markers`).
 
     Only ``ADD`` line lists of the ``partial_map`` namespace count; sorted by keyframe index.
+    Keyframe 0's frame is the robot's map frame; a keyframe in ``<map frame>_<k>`` is in piece
+    k (:func:`piece_frame`).
     """
-    keyframes = [
-        keyframe_from_marker(m)
+    markers = [
+        m
         for m in array.markers
         if m.ns == PARTIAL_MAP_NAMESPACE and m.type == Marker.LINE_LIST and m.action == Marker.ADD
     ]
+    first = [m.header.frame_id for m in markers if int(m.id) == 0]
+    map_frame = first[0] if first else None
+    keyframes = [keyframe_from_marker(m, map_frame) for m in markers]
     return sorted(keyframes, key=lambda kf: kf.index)

@@ -116,8 +116,10 @@ def newest(stamps: list[Time]) -> Time:
 def partial_map_contents(msg: MarkerArray) -> tuple[FloatArray, FloatArray]:
     """A ``partial_map`` MarkerArray as ``(N, 4)`` segments in the robot's map frame (each
     keyframe's segments moved by the keyframe's pose) and the ``(K, 3)`` keyframe poses: where
-    the robot's laser stood, the viewpoints of its free space."""
-    keyframes = keyframes_from_markers(msg)
+    the robot's laser stood, the viewpoints of its free space. Only the robot's main piece
+    (its map frame) is merged: keyframes of a piece started when the robot was lost lie in
+    frames of their own until the robot's mapper joins them."""
+    keyframes = [kf for kf in keyframes_from_markers(msg) if kf.piece == 0]
     pieces = [
         se2.transform_segments(se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments)
         for kf in keyframes

@@ -39,6 +39,7 @@ from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import ScanError
 from multi_robot_mapper.io.messages import (
     keyframe_marker,
+    piece_frame,
     pose_stamped,
     scan_from_msg,
     seconds_from_stamp,
@@ -140,11 +141,11 @@ class RobotMapper(Node):
                 width=self.config.segment_marker_width,
             )
         )
-        saved = self.mapper.snapshot()
         try:
+            # A scan changes the mapper only once it is placed: a failure leaves the map as
+            # it was.
             update = self.mapper.add_scan(stamp, segments, view)
         except Exception:  # the map built so far stays; the next scan is tried as usual
-            self.mapper.restore(saved)  # undo whatever the failed scan half-changed
             self.mapping_errors += 1
             self.last_update = None
             self.warnings.warn(
@@ -157,7 +158,8 @@ class RobotMapper(Node):
         if update.keyframe_added:
             self._keyframe_stamps[stamp] = msg.header.stamp
         if update.accepted and update.pose is not None:
-            self._pose_pub.publish(pose_stamped(update.pose, msg.header.stamp, self.map_frame))
+            frame = piece_frame(self.map_frame, update.piece)
+            self._pose_pub.publish(pose_stamped(update.pose, msg.header.stamp, frame))
 
     def publish_map(self) -> bool:
         """Publish the whole partial map if it changed since the last publication."""
@@ -171,8 +173,12 @@ class RobotMapper(Node):
             if stamp is None:
                 stamp = stamp_from_seconds(newest)
             array = MarkerArray()
-            header = Header(frame_id=self.map_frame, stamp=stamp)
-            array.markers = [self._marker(kf, header) for kf in keyframes]
+            array.markers = [
+                self._marker(
+                    kf, Header(frame_id=piece_frame(self.map_frame, kf.piece), stamp=stamp)
+                )
+                for kf in keyframes
+            ]
         except Exception:
             self.warnings.warn(
                 "partial_map_error",
@@ -188,6 +194,7 @@ class RobotMapper(Node):
         """The keyframe's marker, reused (with the new header) when the keyframe is unchanged."""
         key = (
             np.float64(keyframe.stamp).tobytes()
+            + np.int64(keyframe.piece).tobytes()
             + np.ascontiguousarray(keyframe.T_robotmap_keyframe, dtype=np.float64).tobytes()
             + np.ascontiguousarray(keyframe.segments, dtype=np.float64).tobytes()
         )

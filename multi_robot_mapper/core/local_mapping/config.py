@@ -10,85 +10,126 @@ from multi_robot_mapper.core.matching import IntegrateConfig
 
 @dataclasses.dataclass(frozen=True)
 class LocalMapperConfig:
-    """Local mapping. Lengths in metres, angles in radians."""
+    """Local mapping (front end, keyframe graph, loop closing). Lengths in metres, angles in
+    radians. The three confidence thresholds are probabilities that a match is right (within
+    0.30 m / 5 deg), chosen from the precision/recall curve of the fitted confidence (README,
+    "Match confidence")."""
 
     keyframe_distance: float = param(
         0.5,
         unit="m",
         doc="a scan this far from the last keyframe becomes a keyframe",
         minimum=0.0,
+        maximum=100.0,
     )
     keyframe_angle: float = param(
         0.35,
         unit="rad",
         doc="a scan turned this much from the last keyframe becomes a keyframe",
         minimum=0.0,
+        maximum=3.2,
     )
-    submap_radius: float = param(
-        12.0,
-        unit="m",
-        doc="partial-map segments within this distance of the last pose are matched",
+    integrate_confidence: float = param(
+        0.8,
+        unit="",
+        doc="a scan is integrated when its match is right with at least this probability; "
+        "otherwise the robot is lost and maps on in a new piece of map",
         minimum=0.0,
-        exclusive_minimum=True,
+        maximum=1.0,
+    )
+    loop_confidence: float = param(
+        0.9,
+        unit="",
+        doc="a loop closure (or a join of two pieces of map) needs a match right with at "
+        "least this probability, before the consistency checks",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    recent_keyframes: int = param(
+        3,
+        unit="keyframes",
+        doc="a scan the last scan cannot place is matched against this many keyframes before "
+        "it (nearest first) before the robot counts as lost",
+        minimum=0,
+        maximum=50,
+    )
+    local_edges: int = param(
+        3,
+        unit="keyframes",
+        doc="a new keyframe is also matched to this many earlier keyframes of its neighbourhood "
+        "(its own window excepted): more edges, a stiffer graph, less drift",
+        minimum=0,
+        maximum=50,
+    )
+    loop_window: int = param(
+        10,
+        unit="keyframes",
+        doc="keyframes fewer than this many keyframes apart are neighbours, matched by the "
+        "front end; only older ones are loop-closure candidates",
+        minimum=1,
+        maximum=10000,
+    )
+    loop_radius: float = param(
+        2.0,
+        unit="m",
+        doc="loop-closure candidates lie within this of the new keyframe's estimate, plus "
+        "loop_radius_growth per metre driven since the last closure",
+        minimum=0.0,
+        maximum=1000.0,
+    )
+    loop_radius_growth: float = param(
+        0.1,
+        unit="m/m",
+        doc="how fast the loop-closure search region grows with the path since the last "
+        "closure (the drift the front end may have accumulated)",
+        minimum=0.0,
+        maximum=10.0,
+    )
+    loop_candidates: int = param(
+        3,
+        unit="keyframes",
+        doc="at most this many loop-closure candidates (nearest first) are matched per new "
+        "keyframe; also the keyframes of every other piece matched for a join",
+        minimum=0,
+        maximum=100,
+    )
+    wall_sigma: float = param(
+        0.05,
+        unit="m",
+        doc="each metre of matched wall counts as one measurement of its line with this "
+        "standard deviation: the information of a match's edge",
+        minimum=1e-4,
+        maximum=10.0,
+    )
+    edge_sigma_floor: float = param(
+        0.02,
+        unit="m",
+        doc="no edge is trusted to better than this (and edge_angle_floor): errors of "
+        "successive scan matches are not independent",
+        minimum=1e-4,
+        maximum=10.0,
+    )
+    edge_angle_floor: float = param(
+        0.005,
+        unit="rad",
+        doc="see edge_sigma_floor, for the rotation",
+        minimum=1e-5,
+        maximum=1.0,
     )
     fusion_tolerance: float = param(
         0.02,
         unit="m",
         doc="FUSIONTOLERANCE: a fused polyline stays this close to every segment it replaces",
-        minimum=0.0,
-        exclusive_minimum=True,
-    )
-    min_match_fraction: float = param(
-        0.15,
-        unit="",
-        doc="a scan is integrated when its match with the last scan overlaps at least "
-        "integrate.min_match_value and its net value (overlap minus length seen through the "
-        "other scan's free space) is at least this fraction of the shorter scan's length. Far "
-        "below integrate.min_match_fraction (which judges unrelated maps): on the sparse logs "
-        "right scan matches go down to 0.1, and an unrelated simulated room reaches 0.10",
-        minimum=-1.0,
+        minimum=1e-4,
         maximum=1.0,
     )
-    min_cross_support: float = param(
-        0.0,
+    fusion_radius: float = param(
+        12.0,
         unit="m",
-        doc="matched length across the weakest direction a scan match needs. Most wrong scan "
-        "matches on the logs have < 0.1 m, but so do many corridor scans, and every scan set "
-        "aside makes the next match harder (bench/scan_gate.py); with a value > 0 a scan set "
-        "aside for this alone is bridged when the next scan matches it validly",
-        minimum=0.0,
-    )
-    map_refine_limit: float = param(
-        0.1,
-        unit="m or rad",
-        doc="refinement on the partial map may move a scan at most this far (metres, and "
-        "radians) from where its match with the last scan put it",
-        minimum=0.0,
-    )
-    tracking_fraction: float = param(
-        0.7,
-        unit="",
-        doc="a refined prediction explaining this fraction of the scan is accepted without a "
-        "global search",
-        minimum=0.0,
-        maximum=1.0,
-    )
-    submap_reach: float = param(
-        1.5,
-        unit="m",
-        doc="a scan set aside by its match with the last scan is matched against the partial "
-        "map around the last pose, and placed there only within this distance of the last "
-        "scan: wrong map matches on the logs jump >= 2 m (right ones <= 1.3 m; the sparse "
-        "logs step <= 1.8 m, a fast laser a few cm); 0 turns map matching off",
-        minimum=0.0,
-    )
-    submap_turn: float = param(
-        1.2,
-        unit="rad",
-        doc="a scan placed by its match against the partial map (see submap_reach) is turned "
-        "at most this much from the last scan: wrong map matches on the logs turn >= 1.5 rad, "
-        "mostly half round in a symmetric corridor; right ones <= 0.9 rad",
-        minimum=0.0,
+        doc="a new keyframe is fused with the map segments within this of its pose (and of "
+        "its own segments)",
+        minimum=0.1,
+        maximum=1000.0,
     )
     integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
 

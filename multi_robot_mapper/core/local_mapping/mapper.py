@@ -1,474 +1,504 @@
-"""Odometry-free local mapping: one robot's scans in, its segment partial map out.
+"""Odometry-free local mapping: one robot's scans in, its keyframe graph and partial map out.
 
-Frames: ``robotmap`` is the robot's own map frame (the laser frame of its first accepted
-scan); ``T_robotmap_laser`` places a scan in it. Each new scan is matched by INTEGRATE against
-the partial map near the robot's last pose, with the constant-velocity prediction as one more
-hypothesis (never a requirement). A scan the last scan cannot place is searched on the partial
-map around the last pose, within reach of it. A scan whose best transformation fails the
-validity threshold is set aside and counted: a wrong integration is worse than a missing one.
-Scans that moved more than ``keyframe_distance`` or turned more than ``keyframe_angle`` since the
-last keyframe become keyframes and are fused into the partial map (Amigoni Alg. 5).
+Frames: a robot's map is made of *pieces*; each piece's frame is the laser frame of its first
+keyframe, and piece 0 (the first scan's) is the robot's map frame ``robotmap``.
+``T_piece_laser`` places a scan in its piece. Every scan takes one path (:meth:`LocalMapper.
+add_scan`):
+
+1. **match**: the scan is matched against the last keyframe from the constant-velocity
+   prediction alone (every scan of a fast laser is placed this way, in milliseconds); if that
+   is not confident, INTEGRATE searches with no guess against the last scan, then against up
+   to ``recent_keyframes`` keyframes before it (the predictions stay hypotheses);
+2. **confidence**: the best match's probability of being right
+   (:mod:`core.matching.confidence`);
+3. **integrate** when it reaches ``integrate_confidence``: the scan is placed; a scan that
+   moved ``keyframe_distance`` or turned ``keyframe_angle`` from the last keyframe becomes a
+   keyframe, with an edge (its information from the match) to the keyframe it was matched
+   against; **otherwise the robot is lost** and maps on in a new piece, from this scan.
+
+The back end (:class:`LoopCloser`) takes each new keyframe: local edges, loop closures, joins
+between pieces, optimisation of the pose graph (:class:`PoseGraph`), fusion into the partial
+map (:class:`KeyframeMap`). Replay calls it in line (:meth:`LocalMapper.add_scan` returns
+once the keyframe is in the graph); a node can hand keyframes to it on another thread
+(``backend=False`` and :meth:`LocalMapper.run_backend`), so a scan never waits for it. A
+pose can jump when a closure moves the keyframes: that is expected.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import threading
+import time
+from collections import deque
 
 import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import SegmentScan
-from multi_robot_mapper.core.fusion import fuse
-from multi_robot_mapper.core.geometry import point_segment_distance
+from multi_robot_mapper.core.geometry import lines_of
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
-from multi_robot_mapper.core.matching import (
-    HEURISTICS,
-    MatchResult,
-    best_prescreened,
-    cross_support,
-    distinct_hypotheses,
-    endpoint_hypotheses,
-    hypotheses,
-    integrate,
-    landmarks,
-    lines_of,
-    refine,
+from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeMap, KeyframeScan
+from multi_robot_mapper.core.local_mapping.loop_closer import (
+    BackendUpdate,
+    Closure,
+    LoopCloser,
+    LostFrom,
 )
+from multi_robot_mapper.core.local_mapping.pose_graph import Edge
+from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
+from multi_robot_mapper.core.matching.confidence import (
+    LIKELY,
+    RIGHT_ANGLE,
+    RIGHT_DISTANCE,
+    TRACK_TURNS,
+)
+from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
-BoolArray = NDArray[np.bool_]
 Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass(frozen=True)
-class Keyframe:
-    """One keyframe of the partial map: its pose and the map segments it owns (own frame)."""
+class LocalUpdate:
+    """What one scan did."""
 
-    index: int
-    stamp: float
-    T_robotmap_keyframe: FloatArray  # (3,) x, y, theta
-    segments: FloatArray  # (N, 4) in the keyframe's frame
+    accepted: bool  # placed (in its piece; a scan starting a new piece is placed too)
+    pose: Pose | None  # T_piece_laser of this scan when accepted
+    keyframe_added: bool
+    confidence: float  # of the match that placed it (1 for a piece's first scan)
+    reason: str  # why a scan was set aside, or why a new piece started ("" otherwise)
+    piece: int = 0  # the piece the scan is in
+    new_piece: bool = False  # the robot was lost: this scan starts a new piece
 
 
 @dataclasses.dataclass(frozen=True)
-class LocalUpdate:
-    """What one scan did to the partial map."""
+class _Anchor:
+    """Where a scan is: relative to a keyframe, so that its pose follows the graph."""
 
-    accepted: bool
-    pose: Pose | None  # T_robotmap_laser of this scan when accepted
-    keyframe_added: bool
-    value: float  # overlap length of the accepted match (m); 0 for the first scan
-    fraction: float  # net value / shorter set's length
-    reason: str  # why a scan was set aside ("" when accepted)
-    restarted: bool = False  # the map started again at this scan: earlier poses are void
+    keyframe: int
+    T_keyframe_scan: Pose
+
+
+@dataclasses.dataclass(frozen=True)
+class _Attempt:
+    """One match of the new scan against one reference scan."""
+
+    result: MatchResult
+    anchor: _Anchor  # where the reference scan is (its keyframe, and the offset from it)
+    reference: FloatArray  # the reference scan's segments
+    pose: Pose  # the new scan's pose in the piece, by this match
+    piece: int  # the reference's piece
+    stage: str  # "track", "search" or "recent"
+
+
+def _corroborated(attempts: list[_Attempt]) -> _Attempt | None:
+    """The more confident of two attempts against different reference scans, each more likely
+    right than wrong, that place the scan within the correctness tolerance of each other:
+    wrong matches rarely agree on one placement from two scans (when they do, it is the
+    same structure misleading both, and their confidence is low)."""
+    likely = [a for a in attempts if a.result.confidence >= LIKELY]
+    for i, a in enumerate(likely):
+        for b in likely[i + 1 :]:
+            if a.anchor == b.anchor or a.piece != b.piece:
+                continue  # the same reference scan (not independent), or unrelated frames
+            dx, dy, dtheta = se2.between(a.pose, b.pose)
+            if np.hypot(dx, dy) < RIGHT_DISTANCE and abs(dtheta) < RIGHT_ANGLE:
+                return a if a.result.confidence >= b.result.confidence else b
+    return None
+
+
+@dataclasses.dataclass
+class _Last:
+    """The newest accepted scan."""
+
+    stamp: float
+    segments: FloatArray
+    view: LaserScanData
+    anchor: _Anchor
 
 
 class LocalMapper:
-    """One robot's partial map, built scan by scan with no odometry.
+    """One robot's keyframe graph and partial map, built scan by scan with no odometry."""
 
-    ``add_scan`` is the whole method (the node, ``mrm replay`` and the benches call it):
-    predict, track, search when tracking fails, accept or set aside, fuse keyframes.
-    """
-
-    def __init__(self, config: LocalMapperConfig | None = None) -> None:
+    def __init__(self, config: LocalMapperConfig | None = None, backend: bool = True) -> None:
         self.config = config if config is not None else LocalMapperConfig()
-        self.pose: Pose | None = None  # T_robotmap_laser of the newest accepted scan
-        self.stamp: float | None = None
+        self.map = KeyframeMap(
+            self.config.integrate, self.config.fusion_tolerance, self.config.fusion_radius
+        )
+        self.closer = LoopCloser(self.config, self.map)
+        self.inline_backend = backend  # run the back end inside add_scan
         self.version = 0  # bumped whenever the partial map changes
         self.scans_accepted = 0
         self.scans_set_aside = 0
-        self.scans_tracked = 0  # accepted from the prediction alone, without a global search
-        self.scans_on_submap = 0  # placed by a match against the partial map, not the last scan
+        self.scans_tracked = 0  # placed from the prediction alone, without a search
         self.set_aside_reasons: dict[str, int] = {}
-        self._map_segments = np.zeros((0, 4))  # fused partial map, robotmap frame
-        self._map_owner = np.zeros(0, dtype=np.int64)  # keyframe index owning each segment
-        self._keyframe_poses: list[FloatArray] = []
-        self._keyframe_stamps: list[float] = []
-        self._last_segments = np.zeros((0, 4))  # newest accepted scan, its own frame
-        self._last_view: LaserScanData | None = None
-        self._velocity: FloatArray | None = None  # T_prev_last per second (x, y, theta)
-        # The newest set-aside scan and its best (invalid) T_last_pending, while no scan since
-        # was accepted: the next scan's motion through it is one more hypothesis.
-        self._pending: tuple[FloatArray, LaserScanData, FloatArray, bool] | None = None
-        self._cross_memo: tuple[MatchResult, FloatArray, FloatArray, float] | None = None
+        self.pieces_started = 0  # new pieces after the first (the robot was lost)
+        self.stage_seconds: dict[str, float] = {}  # front-end time per stage, summed
+        self.backend_seconds: list[float] = []  # per keyframe
+        self.backend_errors = 0  # back-end steps that failed and were skipped (bugs)
+        self.last_backend_error: str | None = None  # the newest one's traceback
+        self.optimise_seconds: list[float] = []  # per keyframe
+        self._last: _Last | None = None
+        self._velocity: FloatArray | None = None  # (x, y, theta) per second, last scan frame
+        self._piece_of_last = 0
+        # The scans placed so far: (stamp, anchor), for the trajectory.
+        self._placed: list[tuple[float, _Anchor]] = []
+        # Keyframes the front end made and the back end has not taken yet.
+        self._queue: deque[tuple[KeyframeScan, Pose, int, Edge | None, LostFrom | None]] = deque()
+        # Front-end copy of every keyframe's pose and piece (the back end updates it).
+        self._poses: dict[int, Pose] = {}
+        self._pieces: dict[int, int] = {}
+        self._scans: dict[int, KeyframeScan] = {}
+        self._lock = threading.Lock()  # front end vs. a back end on another thread
+        self._keyframes: list[Keyframe] = []  # the back end's last published state
 
     # --- the method -------------------------------------------------------------------------
+
+    @property
+    def pose(self) -> Pose | None:
+        """T_piece_laser of the newest accepted scan (its piece: :attr:`piece`)."""
+        if self._last is None:
+            return None
+        with self._lock:
+            return self._placed_pose(self._last.anchor)
+
+    @property
+    def piece(self) -> int:
+        """The piece the newest accepted scan is in."""
+        if self._last is None:
+            return 0
+        with self._lock:
+            return self._pieces[self._last.anchor.keyframe]
+
+    @property
+    def stamp(self) -> float | None:
+        return None if self._last is None else self._last.stamp
 
     def add_scan(self, stamp: float, segments: SegmentScan, view: LaserScanData) -> LocalUpdate:
         """Place one scan (its segments and the scan they came from) and extend the map."""
         new = np.asarray(segments.segments, dtype=np.float64).reshape(-1, 4)
-        new = new[np.isfinite(new).all(axis=1)]  # a NaN would never fuse nor leave the map
-        integrate_config = self.config.integrate
-        if float(lines_of(new).length.sum()) < integrate_config.min_match_value:
+        new = new[np.isfinite(new).all(axis=1)]
+        if float(lines_of(new).length.sum()) < self.config.integrate.min_match_value:
             return self._set_aside("too little structure in the scan")
-        if self.pose is None:  # the first scan defines the robot's map frame
-            return self._start(stamp, new, view)
-        assert self.stamp is not None
-        T_robotmap_last = np.asarray(self.pose, dtype=np.float64)
-        dt = max(stamp - self.stamp, 0.0)
-        predictions = [np.zeros(3)]  # "did not move" is always worth a look
-        if self._velocity is not None:
-            predictions.insert(0, _scaled_motion(self._velocity, dt))
-        last = self._last_segments
-        views = (self._last_view, view)
-        # Tracking: the predictions alone, refined and judged against the last scan; accepted
-        # without a search when they explain most of the scan (every scan of a fast laser).
-        result = integrate(
-            last,
-            new,
-            integrate_config,
-            heuristics=(),
-            extra_hypotheses=_as_hypotheses(predictions),
-            views=views,
-        )
-        if self._passes(last, new, result) and result.fraction >= self.config.tracking_fraction:
-            self.scans_tracked += 1
-        else:
-            # INTEGRATE with no guess between the last scan and the new one (both scans' free
-            # space known); the predictions stay candidates.
-            searched = integrate(
-                last,
-                new,
-                integrate_config,
-                extra_hypotheses=_as_hypotheses(predictions),
-                views=views,
-            )
-            if searched.fraction > result.fraction or not self._passes(last, new, result):
-                result = searched
-        accepted = self._passes(last, new, result)
-        if not accepted and self._pending is not None:
-            result, accepted = self._through_pending(last, new, view, result)
-        if not accepted and self.config.submap_reach > 0.0:
-            result, accepted = self._on_submap(T_robotmap_last, new, view, result)
-        if accepted:
-            # Hold drift down: pull the scan onto the partial map around it (Cox least
-            # squares), unless that moves it far from what the scans agreed on.
-            result = self._refined_on_map(T_robotmap_last, new, result)
-        else:
-            if self.scans_accepted == 1:
-                # A start that no second scan confirms is not a map (a poor first scan would
-                # otherwise hold the robot forever): start again from this scan.
-                self.scans_accepted = 0
-                self.set_aside_reasons["start not confirmed"] = (
-                    self.set_aside_reasons.get("start not confirmed", 0) + 1
-                )
-                self.scans_set_aside += 1
-                return self._start(stamp, new, view)
-            # Only a match that failed on cross support alone (a corridor) may be bridged.
-            plausible = self._passes(last, new, result, cross=0.0)
-            self._pending = (new, view, _pose_triple(result.T_1_2), plausible)
-            return self._set_aside("no valid match", result.value, result.fraction)
-        T_last_new = _pose_triple(result.T_1_2)
-        T_robotmap_new = se2.pose_from_matrix(
-            se2.matrix_from_pose(*T_robotmap_last) @ se2.matrix_from_pose(*T_last_new)
-        )
-        motion = T_last_new / dt if dt > 0.0 else None
-        keyframe = self._accept(stamp, new, view, np.asarray(T_robotmap_new), motion)
+        last = self._last
+        if last is None:
+            return self._start_piece(stamp, new, view, "")
+        dt = max(stamp - last.stamp, 0.0)
+        chosen, integrated = self._match(last, new, view, dt)
+        result, anchor, reference = chosen.result, chosen.anchor, chosen.reference
+        T_keyframe_new = se2.compose(anchor.T_keyframe_scan, _pose(result.T_1_2))
+        if not integrated:
+            # The best match, right or not, is the guess of where the new piece lies: the back
+            # end joins the pieces when later keyframes confirm it (or find better).
+            lost_from = (anchor.keyframe, T_keyframe_new)
+            return self._start_piece(stamp, new, view, "lost: no confident match", lost_from)
+        pose = chosen.pose
+        motion = se2.between(self._placed_pose_unlocked(last.anchor), pose)
+        if dt > 0.0:
+            self._velocity = np.asarray(motion) / dt
+        placed = _Anchor(anchor.keyframe, T_keyframe_new)
+        keyframe_added = False
+        T_keyframe_new_arr = np.asarray(T_keyframe_new)
+        if (
+            float(np.hypot(*T_keyframe_new_arr[:2])) > self.config.keyframe_distance
+            or abs(float(T_keyframe_new_arr[2])) > self.config.keyframe_angle
+        ):
+            started = time.perf_counter()
+            placed = self._new_keyframe(stamp, new, view, anchor, result, reference)
+            keyframe_added = True
+            self._count("keyframe", time.perf_counter() - started)
+        self._last = _Last(stamp, new, view, placed)
+        self._placed.append((stamp, placed))
+        self.scans_accepted += 1
         return LocalUpdate(
-            True,
-            (float(T_robotmap_new[0]), float(T_robotmap_new[1]), float(T_robotmap_new[2])),
-            keyframe,
-            result.value,
-            result.fraction,
-            "",
+            True, self.pose, keyframe_added, result.confidence, "", self.piece, False
         )
 
-    def _start(self, stamp: float, new: FloatArray, view: LaserScanData) -> LocalUpdate:
-        """(Re)start the map at this scan: it becomes keyframe 0 and the map frame."""
-        restart = self.pose is not None
-        self._map_segments = np.zeros((0, 4))
-        self._map_owner = np.zeros(0, dtype=np.int64)
-        self._keyframe_poses, self._keyframe_stamps = [], []
-        self._velocity = None
-        self.pose = None
-        self._accept(stamp, new, view, np.zeros(3), None)
-        return LocalUpdate(True, (0.0, 0.0, 0.0), True, 0.0, 1.0, "", restarted=restart)
+    def _match(
+        self, last: _Last, new: FloatArray, view: LaserScanData, dt: float
+    ) -> tuple[_Attempt, bool]:
+        """The placement of the new scan, and whether to integrate it: against the last
+        keyframe from the predictions, else searched against the last scan, until one match
+        reaches ``integrate_confidence``; else against up to ``recent_keyframes`` older
+        keyframes, until two matches against different scans corroborate each other
+        (:func:`_corroborated`). When none does, the most confident attempt is returned (the
+        guess a new piece starts from)."""
+        config = self.config
+        threshold = config.integrate_confidence
+        keyframe = last.anchor.keyframe
+        # The constant-velocity prediction and "did not move", from the last scan.
+        motions: list[Pose] = [(0.0, 0.0, 0.0)]
+        if self._velocity is not None:
+            vx, vy, vtheta = (float(v) for v in self._velocity * dt)
+            motions.insert(0, (vx, vy, vtheta))
+        # Refining one prediction finds the nearest minimum, right or not, and no rival to
+        # doubt it: the prediction turned either way is refined too (a turn that starts
+        # between two scans is the usual miss), so a wrong minimum has rivals.
+        turned = [(m[0], m[1], m[2] + d) for m in motions[:1] for d in TRACK_TURNS if d]
+        with self._lock:
+            here = self._placed_pose_unlocked(last.anchor)
+            piece = self._pieces[keyframe]
+            newest_first = sorted(self._poses, reverse=True)
+            older = [k for k in newest_first if k != keyframe and self._pieces[k] == piece]
+            older = older[: config.recent_keyframes]
+            # Also the newest keyframes of the other pieces: a robot lost for a few scans (a
+            # person in front of the laser) sees its old surroundings again.
+            others = [k for k in newest_first if self._pieces[k] != piece]
+            older += others[: config.recent_keyframes]
+            poses = {k: self._poses[k] for k in (keyframe, *older)}
+            pieces = {k: self._pieces[k] for k in (keyframe, *older)}
+        attempts: list[_Attempt] = []
 
-    def _through_pending(
-        self, last: FloatArray, new: FloatArray, view: LaserScanData, result: MatchResult
-    ) -> tuple[MatchResult, bool]:
-        """After a set-aside scan P: the motion last -> P -> new, and whether it is accepted.
-
-        Accepted when the new scan validly matches P and P's own match with the last scan
-        failed on cross support alone (a corridor, where the offset along the walls rests on
-        free space): one weak link is bridged by a strong one, instead of losing the robot
-        for good as it drives out of the last scan's view. Otherwise the composed motion is
-        only one more candidate, judged against the last scan like any other.
-        """
-        assert self._pending is not None
-        segments_p, view_p, T_last_pending, plausible = self._pending
-        via = integrate(segments_p, new, self.config.integrate, views=(view_p, view))
-        if not self._passes(segments_p, new, via):
-            return result, False
-        composed = _compose(T_last_pending, _pose_triple(via.T_1_2))
-        if plausible:
-            return dataclasses.replace(via, T_1_2=_as_hypotheses([composed])[0]), True
-        judged = integrate(
-            last,
-            new,
-            self.config.integrate,
-            heuristics=(),
-            extra_hypotheses=_as_hypotheses([composed]),
-            views=(self._last_view, view),
-        )
-        best = judged if judged.fraction > result.fraction else result
-        return best, self._passes(last, new, best)
-
-    def _on_submap(
-        self, T_robotmap_last: FloatArray, new: FloatArray, view: LaserScanData, result: MatchResult
-    ) -> tuple[MatchResult, bool]:
-        """INTEGRATE of a scan the last scan could not place against the partial map around
-        the last pose; returns the result to use and whether the scan is accepted.
-
-        A scan that overlaps the last one little (a turn, a door, a set-aside scan before it)
-        is where the mapper loses the robot, although the map behind it holds the walls it
-        sees: on aces 9 scans in a row were set aside whose true pose explains 25-36 % of
-        them on the map, and each set-aside scan makes the next match harder. The map lies
-        in the last scan's frame, so both scans' free space applies; the scan-to-scan result
-        stays a hypothesis. The map has far more walls to overlap by chance than one scan,
-        and every wrong map match on the logs jumped metres or turned half round (a symmetric
-        corridor): the result must stay within ``submap_reach`` / ``submap_turn`` of the last
-        scan.
-        """
-        reference = self._submap(T_robotmap_last)
-        if len(reference) < 2:
-            return result, False
-        candidates = np.vstack(
-            (
-                _as_hypotheses([_pose_triple(result.T_1_2)]),
-                self._hypotheses_in_reach(reference, new),
+        def attempt(
+            stage: str,
+            reference: FloatArray,
+            ref_view: LaserScanData,
+            anchor: _Anchor,
+            search: bool,
+            more: list[Pose] = [],  # noqa: B006 - read only
+        ) -> _Attempt:
+            started = time.perf_counter()
+            # The predictions, from the reference's frame.
+            T_ref_last = se2.between(
+                se2.compose(poses[anchor.keyframe], anchor.T_keyframe_scan), here
             )
-        )
-        on_map = integrate(
-            reference,
-            new,
-            self.config.integrate,
-            heuristics=(),
-            extra_hypotheses=candidates,
-            views=(self._last_view, view),
-        )
-        theta, tx, ty = (float(v) for v in on_map.T_1_2)
-        if (
-            float(np.hypot(tx, ty)) > self.config.submap_reach
-            or abs(float(se2.wrap_angle(theta))) > self.config.submap_turn
-            or not self._passes(reference, new, on_map)
-        ):
-            return result, False
-        self.scans_on_submap += 1
-        return on_map, True
-
-    def _hypotheses_in_reach(self, reference: FloatArray, new: FloatArray) -> FloatArray:
-        """INTEGRATE's hypotheses (Alg. 2 and the heuristics) of the scan on the map, only
-        those within ``submap_reach`` / ``submap_turn`` of the last scan, the
-        ``candidate_pool`` best by the prescreen value: the search of :func:`integrate`
-        restricted to where the robot can be, so that a far, wrong match that happens to
-        overlap more cannot hide a right one nearby."""
-        config = self.config.integrate
-        rng = np.random.default_rng(config.seed)
-        # The map's segments are in no scan order: no consecutive pairs on that side.
-        marks1 = landmarks(reference, HEURISTICS, config, False, rng)
-        marks2 = landmarks(new, HEURISTICS, config, True, rng) if len(new) > 1 else None
-        raw = [endpoint_hypotheses(reference, new, config)]
-        if marks2 is not None:
-            raw.append(hypotheses(reference, marks1, new, marks2, config))
-        transforms, _ = distinct_hypotheses(
-            np.vstack(raw),
-            config.hypothesis_angle_cell,
-            config.hypothesis_distance_cell,
-            config.max_hypotheses,
-        )
-        reach = (np.hypot(transforms[:, 1], transforms[:, 2]) <= self.config.submap_reach) & (
-            np.abs(se2.wrap_angle(transforms[:, 0])) <= self.config.submap_turn
-        )
-        transforms = transforms[reach]
-        best = best_prescreened(
-            reference, new, transforms, config.candidate_pool, config.prescreen_segments, config
-        )
-        return np.asarray(transforms[best], dtype=np.float64).reshape(-1, 3)
-
-    def _refined_on_map(
-        self, T_robotmap_last: FloatArray, new: FloatArray, result: MatchResult
-    ) -> MatchResult:
-        """``result`` refined on the submap around the last pose (no free space: the map holds
-        walls the last scan never saw), kept only within ``map_refine_limit``."""
-        reference = self._submap(T_robotmap_last)
-        if len(reference) < 2:
-            return result
-        refined = refine(reference, new, result.T_1_2, self.config.integrate)
-        shift = refined - result.T_1_2
-        if (
-            float(np.hypot(shift[1], shift[2])) > self.config.map_refine_limit
-            or abs(float(se2.wrap_angle(shift[0]))) > self.config.map_refine_limit
-        ):
-            return result
-        return dataclasses.replace(result, T_1_2=refined)
-
-    def snapshot(self) -> dict[str, object]:
-        """The mapper's state (containers and arrays copied one level deep, cheap: a few
-        arrays and lists), so a caller can undo a scan that failed half-way."""
-        return {
-            name: value.copy() if isinstance(value, (list, dict, set, np.ndarray)) else value
-            for name, value in vars(self).items()
-        }
-
-    def restore(self, saved: dict[str, object]) -> None:
-        """Put back a :meth:`snapshot`."""
-        vars(self).clear()
-        vars(self).update(saved)
-
-    # --- the partial map --------------------------------------------------------------------
-
-    @property
-    def map_segments(self) -> FloatArray:
-        """The fused partial map, (M, 4) in the robot's map frame."""
-        return self._map_segments.copy()
-
-    def keyframes(self) -> list[Keyframe]:
-        """Every keyframe with the map segments it owns, in its own frame."""
-        frames = []
-        order = np.argsort(self._map_owner, kind="stable")
-        bounds = np.searchsorted(
-            self._map_owner[order], np.arange(len(self._keyframe_poses) + 1), side="left"
-        )
-        for index, T_robotmap_keyframe in enumerate(self._keyframe_poses):
-            owned = self._map_segments[order[bounds[index] : bounds[index + 1]]]
-            T_keyframe_robotmap = se2.invert(se2.matrix_from_pose(*T_robotmap_keyframe))
-            frames.append(
-                Keyframe(
-                    index,
-                    self._keyframe_stamps[index],
-                    T_robotmap_keyframe.copy(),
-                    se2.transform_segments(T_keyframe_robotmap, owned),
-                )
+            guesses = [se2.compose(T_ref_last, m) for m in motions + more]
+            result = integrate(
+                reference,
+                new,
+                config.integrate,
+                heuristics=HEURISTICS if search else (),
+                extra_hypotheses=_hypotheses(guesses),
+                views=(ref_view, view),
             )
-        return frames
+            T_keyframe_new = se2.compose(anchor.T_keyframe_scan, _pose(result.T_1_2))
+            done = _Attempt(
+                result,
+                anchor,
+                reference,
+                se2.compose(poses[anchor.keyframe], T_keyframe_new),
+                pieces[anchor.keyframe],
+                stage,
+            )
+            attempts.append(done)
+            self._count(stage, time.perf_counter() - started)
+            return done
 
-    # --- steps ------------------------------------------------------------------------------
+        def settled() -> _Attempt | None:
+            # A match against the last keyframe or the last scan settles it alone; one against
+            # an older keyframe (tried because those failed: the best of several tries) only
+            # with another match that corroborates it.
+            recent = [a for a in attempts if a.stage != "recent"]
+            best = max(recent, key=lambda a: a.result.confidence, default=None)
+            if best is not None and best.result.confidence >= threshold:
+                return best
+            return _corroborated(attempts)
 
-    def _near(self, T_robotmap_laser: FloatArray, radius: float | None = None) -> BoolArray:
-        """Which map segments pass within ``radius`` (default ``submap_radius``) of the laser."""
-        segments = self._map_segments
-        x, y = float(T_robotmap_laser[0]), float(T_robotmap_laser[1])
-        distance = point_segment_distance(
-            np.full(len(segments), x),
-            np.full(len(segments), y),
-            segments[:, 0],
-            segments[:, 1],
-            segments[:, 2],
-            segments[:, 3],
-        )
-        limit = self.config.submap_radius if radius is None else radius
-        return np.asarray(distance <= limit)
+        if self._velocity is not None:
+            # Tracking needs a prediction: after a new piece starts nothing is known of the
+            # motion, and "did not move" refined in a corridor stays where it started.
+            start = self._scans[keyframe]
+            anchor = _Anchor(keyframe, (0.0, 0.0, 0.0))
+            attempt("track", start.segments, start.view, anchor, False, turned)
+            if (done := settled()) is not None:
+                self.scans_tracked += 1
+                return done, True
+        attempt("search", last.segments, last.view, last.anchor, True)
+        if (done := settled()) is not None:
+            return done, True
+        for k in older:
+            candidate = self._scans[k]
+            attempt("recent", candidate.segments, candidate.view, _Anchor(k, (0.0, 0.0, 0.0)), True)
+            if (done := settled()) is not None:
+                return done, True
+        return max(attempts, key=lambda a: a.result.confidence), False
 
-    def _submap(self, T_robotmap_last: FloatArray) -> FloatArray:
-        """Map segments within ``submap_radius`` of the last pose, in the last scan's frame."""
-        near = self._map_segments[self._near(T_robotmap_last)]
-        T_last_robotmap = se2.invert(se2.matrix_from_pose(*T_robotmap_last))
-        return se2.transform_segments(T_last_robotmap, near)
-
-    def _accept(
+    def _new_keyframe(
         self,
         stamp: float,
         segments: FloatArray,
         view: LaserScanData,
-        T_robotmap_new: FloatArray,
-        motion: FloatArray | None,
-    ) -> bool:
-        """Record an accepted scan; fuse it into the map when it is a keyframe."""
-        self.scans_accepted += 1
-        self.pose = (float(T_robotmap_new[0]), float(T_robotmap_new[1]), float(T_robotmap_new[2]))
-        self.stamp = stamp
-        self._last_segments, self._last_view = segments, view
-        self._pending = None
-        if motion is not None:
-            self._velocity = motion
-        if self._keyframe_poses:
-            last = self._keyframe_poses[-1]
-            moved = float(np.hypot(*(T_robotmap_new[:2] - last[:2])))
-            turned = abs(float(se2.wrap_angle(T_robotmap_new[2] - last[2])))
-            if moved <= self.config.keyframe_distance and turned <= self.config.keyframe_angle:
-                return False
-        index = len(self._keyframe_poses)
-        self._keyframe_poses.append(T_robotmap_new.copy())
-        self._keyframe_stamps.append(stamp)
-        placed = se2.transform_segments(se2.matrix_from_pose(*T_robotmap_new), segments)
-        self._fuse(placed, index, T_robotmap_new)
-        self.version += 1
-        return True
-
-    def _fuse(self, placed: FloatArray, index: int, T_robotmap_new: FloatArray) -> None:
-        """Alg. 5 between the map near the new keyframe and the keyframe's segments."""
-        segments, owner = self._map_segments, self._map_owner
-        # Candidates: map segments near any placed one (the laser sees beyond submap_radius).
-        reach = float(
-            np.hypot(placed[:, 0::2] - T_robotmap_new[0], placed[:, 1::2] - T_robotmap_new[1]).max(
-                initial=0.0
-            )
-        )
-        near = self._near(T_robotmap_new, max(self.config.submap_radius, reach) + 0.5)
-        fused, fused_owner = fuse(
-            segments[near],
-            owner[near],
-            placed,
-            np.full(len(placed), index, dtype=np.int64),
-            self.config.integrate,
-            self.config.fusion_tolerance,
-        )
-        self._map_segments = np.vstack((segments[~near], fused))
-        self._map_owner = np.concatenate((owner[~near], fused_owner))
-
-    def _passes(
-        self,
-        reference: FloatArray,
-        new: FloatArray,
+        anchor: _Anchor,
         result: MatchResult,
-        cross: float | None = None,
-    ) -> bool:
-        """The validity threshold of a scan against a reference (``min_match_fraction``,
-        ``min_cross_support`` unless ``cross`` replaces it)."""
-        needed = self.config.min_cross_support if cross is None else cross
-        return (
-            result.value >= self.config.integrate.min_match_value
-            and result.fraction >= self.config.min_match_fraction
-            and self._cross_support(reference, new, result) >= needed
+        reference: FloatArray,
+    ) -> _Anchor:
+        """Make the scan a keyframe, with an edge to the keyframe its match started from. The
+        edge's information is the match's (against ``reference``, the segments it was matched
+        with: a later scan's are composed onto its keyframe with the same information, the
+        scans in between being close)."""
+        config = self.config
+        information = match_information(
+            reference,
+            segments,
+            result.T_1_2,
+            config.integrate,
+            config.wall_sigma,
+            (config.edge_sigma_floor, config.edge_angle_floor),
+            (10.0, 1.0),
         )
+        T_keyframe_new = se2.compose(anchor.T_keyframe_scan, _pose(result.T_1_2))
+        index = len(self._scans)
+        with self._lock:
+            piece = self._pieces[anchor.keyframe]
+            pose = se2.compose(self._poses[anchor.keyframe], T_keyframe_new)
+        edge = Edge(anchor.keyframe, index, T_keyframe_new, information, robust=False)
+        self._add_keyframe(KeyframeScan(index, stamp, segments, view), pose, piece, edge)
+        return _Anchor(index, (0.0, 0.0, 0.0))
 
-    def _cross_support(self, reference: FloatArray, new: FloatArray, result: MatchResult) -> float:
-        """``cross_support`` of a result, computed once: one scan asks it of the same result
-        up to four times (tracking, search, gate, bridge)."""
-        memo = self._cross_memo
-        if memo is not None and memo[0] is result and memo[1] is reference and memo[2] is new:
-            return memo[3]
-        support = cross_support(reference, new, result.T_1_2, self.config.integrate)
-        self._cross_memo = (result, reference, new, support)
-        return support
+    def _start_piece(
+        self,
+        stamp: float,
+        segments: FloatArray,
+        view: LaserScanData,
+        reason: str,
+        lost_from: LostFrom | None = None,
+    ) -> LocalUpdate:
+        """This scan starts a new piece of map (the first scan: the robot's map frame).
+        ``lost_from``: the keyframe the robot was lost near and the guess of this scan's pose
+        in its frame (the best match, not confident enough)."""
+        index = len(self._scans)
+        scan = KeyframeScan(index, stamp, segments, view)
+        self._add_keyframe(scan, (0.0, 0.0, 0.0), index, None, lost_from)
+        anchor = _Anchor(index, (0.0, 0.0, 0.0))
+        self._last = _Last(stamp, segments, view, anchor)
+        self._placed.append((stamp, anchor))
+        self._velocity = None
+        self.scans_accepted += 1
+        if index > 0:
+            self.pieces_started += 1
+            self.set_aside_reasons[reason] = self.set_aside_reasons.get(reason, 0) + 1
+        return LocalUpdate(True, (0.0, 0.0, 0.0), True, 1.0, reason, index, index > 0)
 
-    def _set_aside(self, reason: str, value: float = 0.0, fraction: float = 0.0) -> LocalUpdate:
+    def _add_keyframe(
+        self,
+        scan: KeyframeScan,
+        pose: Pose,
+        piece: int,
+        edge: Edge | None,
+        lost_from: LostFrom | None = None,
+    ) -> None:
+        with self._lock:
+            self._scans[scan.index] = scan
+            self._poses[scan.index] = pose
+            self._pieces[scan.index] = piece
+            self._queue.append((scan, pose, piece, edge, lost_from))
+        if self.inline_backend:
+            self.run_backend()
+
+    # --- the back end -----------------------------------------------------------------------
+
+    def run_backend(self, limit: int | None = None) -> list[BackendUpdate]:
+        """Give the queued keyframes to the back end (at most ``limit``); apply what it
+        changed. A node calls this on its own thread; it never holds the front end's lock
+        while matching."""
+        updates: list[BackendUpdate] = []
+        while limit is None or len(updates) < limit:
+            with self._lock:
+                if not self._queue:
+                    break
+                scan, pose, piece, edge, lost_from = self._queue.popleft()
+                # The front end may have moved the keyframe since (earlier closures).
+                pose, piece = self._poses[scan.index], self._pieces[scan.index]
+            update = self.closer.add_keyframe(scan, pose, piece, edge, lost_from)
+            # What readers see, whole and consistent: the changed keyframes rebuilt.
+            fresh = self.map.keyframes(self.map.take_changed())
+            with self._lock:
+                for keyframe in fresh:
+                    if keyframe.index == len(self._keyframes):
+                        self._keyframes.append(keyframe)
+                    else:
+                        self._keyframes[keyframe.index] = keyframe
+                for moved, kept, _ in update.joins:
+                    for key, of in self._pieces.items():
+                        if of == moved:
+                            self._pieces[key] = kept
+                for key, moved_pose in update.moved.items():
+                    self._poses[key] = moved_pose
+                # Keyframes made after this one moved with their anchors.
+                self._follow(update, scan.index)
+                self.version += 1
+            self.backend_seconds.append(update.seconds)
+            self.optimise_seconds.append(update.optimise_seconds)
+            self.backend_errors += len(update.errors)
+            if update.errors:
+                self.last_backend_error = update.errors[-1]
+            updates.append(update)
+        return updates
+
+    def _follow(self, update: BackendUpdate, done: int) -> None:
+        """Keyframes the back end has not taken yet follow their reference's move."""
+        for scan, _, _, edge, _ in self._queue:
+            if edge is None or edge.first > done:
+                continue
+            self._poses[scan.index] = se2.compose(self._poses[edge.first], edge.T_first_second)
+            self._pieces[scan.index] = self._pieces[edge.first]
+
+    # --- reading ----------------------------------------------------------------------------
+
+    @property
+    def map_segments(self) -> FloatArray:
+        """The fused partial map of the main piece (:meth:`main_piece`), in its frame."""
+        main = self.main_piece()
+        pieces = [
+            se2.transform_segments(se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments)
+            for kf in self.keyframes()
+            if kf.piece == main
+        ]
+        return np.vstack(pieces) if pieces else np.zeros((0, 4))
+
+    def main_piece(self) -> int:
+        """The piece holding the most placed scans (ties: the oldest)."""
+        counts: dict[int, int] = {}
+        with self._lock:
+            for _, anchor in self._placed:
+                piece = self._pieces[anchor.keyframe]
+                counts[piece] = counts.get(piece, 0) + 1
+        return min(counts, key=lambda p: (-counts[p], p)) if counts else 0
+
+    def keyframes(self) -> list[Keyframe]:
+        """Every keyframe the back end has taken, with the map segments it owns, as of its
+        last update (safe to call from any thread while the back end works)."""
+        with self._lock:
+            return list(self._keyframes)
+
+    def trajectory(self, piece: int | None = None) -> tuple[FloatArray, FloatArray]:
+        """Stamps (N,) and poses (N, 3) of the placed scans of ``piece`` (default: the main
+        piece), at the keyframes' current poses."""
+        chosen = self.main_piece() if piece is None else piece
+        stamps, poses = [], []
+        with self._lock:
+            for stamp, anchor in self._placed:
+                if self._pieces[anchor.keyframe] == chosen:
+                    stamps.append(stamp)
+                    poses.append(self._placed_pose_unlocked(anchor))
+        return np.asarray(stamps, dtype=np.float64), np.asarray(poses).reshape(-1, 3)
+
+    @property
+    def closures(self) -> list[Closure]:
+        return list(self.closer.accepted.values())
+
+    def _placed_pose(self, anchor: _Anchor) -> Pose:
+        return se2.compose(self._poses[anchor.keyframe], anchor.T_keyframe_scan)
+
+    _placed_pose_unlocked = _placed_pose
+
+    def _count(self, stage: str, seconds: float) -> None:
+        self.stage_seconds[stage] = self.stage_seconds.get(stage, 0.0) + seconds
+
+    def _set_aside(self, reason: str) -> LocalUpdate:
         self.scans_set_aside += 1
         self.set_aside_reasons[reason] = self.set_aside_reasons.get(reason, 0) + 1
-        return LocalUpdate(False, None, False, value, fraction, reason)
+        return LocalUpdate(False, None, False, 0.0, reason, self.piece)
 
 
-def _scaled_motion(velocity: FloatArray, dt: float) -> FloatArray:
-    """The constant-velocity prediction of the motion since the last scan."""
-    return np.asarray(velocity * dt, dtype=np.float64)
-
-
-def _compose(T_a_b: FloatArray, T_b_c: FloatArray) -> FloatArray:
-    """T_a_c of two (x, y, theta) motions."""
-    composed = se2.pose_from_matrix(se2.matrix_from_pose(*T_a_b) @ se2.matrix_from_pose(*T_b_c))
-    return np.asarray(composed, dtype=np.float64)
-
-
-def _as_hypotheses(motions: list[FloatArray]) -> FloatArray:
-    """(x, y, theta) motions as INTEGRATE hypotheses (theta, tx, ty)."""
-    stacked = np.asarray(motions, dtype=np.float64).reshape(-1, 3)
-    return np.column_stack((stacked[:, 2], stacked[:, 0], stacked[:, 1]))
-
-
-def _pose_triple(T_1_2: FloatArray) -> FloatArray:
+def _pose(T_1_2: FloatArray) -> Pose:
     """INTEGRATE's (theta, tx, ty) as an (x, y, theta) pose."""
-    return np.array([T_1_2[1], T_1_2[2], T_1_2[0]], dtype=np.float64)
+    return (float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0]))
+
+
+def _hypotheses(poses: list[Pose]) -> FloatArray:
+    """(x, y, theta) poses as INTEGRATE hypotheses (theta, tx, ty)."""
+    stacked = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    return np.column_stack((stacked[:, 2], stacked[:, 0], stacked[:, 1]))

@@ -3,7 +3,7 @@
 Nodes are keyframes, each an SE(2) pose ``(x, y, theta)`` in its piece's frame; edges are
 relative poses ``T_first_second`` measured by scan matching, with an information matrix from
 the match itself (:func:`core.matching.refine.match_information`). Edges between keyframes
-far apart in time (loop closures, joins between pieces) carry a robust kernel (Cauchy), so
+far apart in time (loop closures, joins between pieces) carry a robust kernel (Huber), so
 one wrong closure that got past the checks pulls with a bounded force. Every piece (a part of
 the map started when the robot was lost) has a prior on its first keyframe: pieces float
 freely until a closure joins them (:meth:`PoseGraph.join`).
@@ -40,7 +40,7 @@ class Edge:
     second: int
     T_first_second: Pose  # x, y, theta
     information: FloatArray  # (3, 3), Pose2 tangent order (x, y, theta)
-    robust: bool  # loop closures and joins: Cauchy kernel
+    robust: bool  # loop closures and joins: Huber kernel
 
 
 class PoseGraph:
@@ -123,11 +123,11 @@ class PoseGraph:
             key, gtsam.Pose2(*pose), gtsam.noiseModel.Diagonal.Sigmas(_ANCHOR_SIGMAS)
         )
 
-    def _factor(self, edge: Edge) -> gtsam.BetweenFactorPose2:
+    def _factor(self, edge: Edge, robust: bool = True) -> gtsam.BetweenFactorPose2:
         information = 0.5 * (edge.information + edge.information.T)
         noise: gtsam.noiseModel.Base = gtsam.noiseModel.Gaussian.Information(information)
-        if edge.robust:
-            kernel = gtsam.noiseModel.mEstimator.Cauchy.Create(self.robust_scale)
+        if edge.robust and robust and self.robust_scale > 0:
+            kernel = gtsam.noiseModel.mEstimator.Huber.Create(self.robust_scale)
             noise = gtsam.noiseModel.Robust.Create(kernel, noise)
         return gtsam.BetweenFactorPose2(
             edge.first, edge.second, gtsam.Pose2(*edge.T_first_second), noise
@@ -175,6 +175,18 @@ class PoseGraph:
         local = np.asarray(gtsam.Pose2.Logmap(gtsam.Pose2(*se2.pose_from_matrix(residual))))
         return float(local @ edge.information @ local)
 
+    def _restart(self) -> None:
+        """A new solver from the stored anchors and edges, linearised at the estimate."""
+        self._isam = gtsam.ISAM2(self._params())
+        self._factor_index.clear()
+        self._removed = []
+        self._new_values = gtsam.Values()
+        for key, pose in self._estimate.items():
+            self._new_values.insert(key, gtsam.Pose2(*pose))
+        self._pending_anchors = list(self._anchors)
+        self._pending_edges = list(self.edges)
+        self._batch()
+
     # --- pieces -----------------------------------------------------------------------------
 
     def join(self, moved: list[int], T_kept_moved: FloatArray, dropped_anchor: int) -> None:
@@ -186,12 +198,4 @@ class PoseGraph:
             T = T_kept_moved @ se2.matrix_from_pose(*self._estimate[key])
             self._estimate[key] = se2.pose_from_matrix(T)
         self._anchors.pop(dropped_anchor, None)
-        self._isam = gtsam.ISAM2(self._params())
-        self._factor_index.clear()
-        self._removed = []
-        self._new_values = gtsam.Values()
-        for key, pose in self._estimate.items():
-            self._new_values.insert(key, gtsam.Pose2(*pose))
-        self._pending_anchors = list(self._anchors)
-        self._pending_edges = list(self.edges)
-        self._batch()
+        self._restart()

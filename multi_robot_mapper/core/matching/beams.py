@@ -163,7 +163,8 @@ def beam_categories(
     r_low, r_high = ranges[low], ranges[high]
     both = valid[low] & valid[high] & (np.abs(r_high - r_low) <= 2.0 * margin + 0.05 * r_low)
     share = np.clip(position - low, 0.0, 1.0)
-    measured = np.where(both, r_low + share * (r_high - r_low), ranges[beam])
+    with np.errstate(invalid="ignore"):  # where a beam has no return: not read below
+        measured = np.where(both, r_low + share * (r_high - r_low), ranges[beam])
     hit = inside & valid[beam]
     with np.errstate(invalid="ignore"):
         confirmed = hit & (np.abs(distance - measured) <= margin)

@@ -45,6 +45,14 @@ BoolArray = NDArray[np.bool_]
 # A match is right when it is within these of the truth: what the confidence estimates.
 RIGHT_DISTANCE = 0.30  # m
 RIGHT_ANGLE = float(np.radians(5.0))
+# A match more likely right than wrong. Two such matches of different scan pairs that agree on
+# a placement corroborate each other: wrong matches rarely agree from two scans (when they do,
+# one structure misleads both, and their confidence is low).
+LIKELY = 0.5
+# Refining one prediction finds the nearest minimum, right or not, and no rival to doubt it: a
+# prediction is refined turned by these (rad) too, so that a wrong minimum has rivals (a turn
+# that starts between two scans is the usual miss of a constant-velocity prediction).
+TRACK_TURNS = (-0.4, -0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3, 0.4)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,0 +1,184 @@
+"""Local mapping table (issues 11 and 17): each log cut into K robots, mapped robot by robot.
+
+For every log and robot count K the real pipeline runs, each step in its own ``mrm`` process:
+``mrm import-carmen LOG --robots K`` (the bag is cached under ``--work``), ``mrm replay BAG
+--method local`` and ``mrm evaluate``. The bench also knows the reference and counts the loop
+closures and joins that are wrong by it (more than 0.30 m / 5 deg from the reference relative
+pose of the two keyframes); the mapper never sees the reference.
+
+    .venv/bin/python bench/local_table.py [--logs intel aces fhw csail freiburg-079 edmonton]
+        [--robots 2 4] [--jobs 2] [--work bench_output/local_table] [--set NAME=VALUE ...]
+
+Prints one Markdown table (ready for the README) and writes every figure to
+``WORK/local_table.json``. Targets: own-frame ATE median <= 0.10 m and max <= 0.30 m over all
+robots; pair_success >= 0.98 (issue 17; >= 0.97 and <= 2 % set aside, issue 11); unposed <= 1 %;
+0 wrong closures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from multi_robot_mapper.cli.evaluate import METRICS_FILE
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.io.bags import read_recordings
+from multi_robot_mapper.io.results import read_results
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data" / "carmen"
+LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079", "edmonton")
+ONE_THREAD = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+COLUMNS = (
+    "log | robots | scans | pair_success | strict | unposed | pieces left | own-frame ATE per "
+    "robot (m) | closures accepted / wrong | joins | per scan median / p95 (ms) | optimisation "
+    "p95 (ms) | replay (s)"
+)
+
+
+def mrm(args: list[str], log: Path) -> float:
+    """Run ``mrm ARGS`` in a child process (output appended to ``log``); its wall time in s."""
+    started = time.perf_counter()
+    with log.open("a") as out:
+        out.write(f"$ mrm {' '.join(args)}\n")
+        out.flush()
+        code = subprocess.run(
+            [sys.executable, "-m", "multi_robot_mapper.cli.main", *args],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env={**os.environ, **ONE_THREAD},
+            cwd=REPO,
+        ).returncode
+    if code:
+        tail = log.read_text().strip().splitlines()[-1:]
+        raise RuntimeError(f"mrm {args[0]} exited {code}: {' '.join(tail)} (see {log})")
+    return time.perf_counter() - started
+
+
+def wrong_closures(bag: Path, stats: dict[str, Any]) -> tuple[int, int]:
+    """(closures, of which wrong by the reference) over every robot's accepted closures."""
+    recordings = read_recordings(bag)
+    total = wrong = 0
+    for robot, entry in stats["robots"].items():
+        truth = recordings[robot].ground_truth
+        stamps = np.array([g.stamp for g in truth])
+        poses = np.array([g.pose for g in truth]).reshape(-1, 3)
+        for closure in entry.get("closures", []):
+            total += 1
+            a = poses[int(np.argmin(np.abs(stamps - closure["first_stamp"])))]
+            b = poses[int(np.argmin(np.abs(stamps - closure["second_stamp"])))]
+            T_truth = se2.invert(se2.matrix_from_pose(*a)) @ se2.matrix_from_pose(*b)
+            found = se2.matrix_from_pose(*closure["T_first_second"])
+            dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_truth) @ found)
+            wrong += not (np.hypot(dx, dy) < 0.30 and abs(dtheta) < np.radians(5.0))
+    return total, wrong
+
+
+def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]:
+    row: dict[str, Any] = {"log": name, "robots": robots}
+    tag = f"{name}_{robots}"
+    bag, out = args.work / "bags" / tag, args.work / "runs" / tag / "result"
+    shutil.rmtree(out, ignore_errors=True)  # a fresh result each run
+    out.parent.mkdir(parents=True, exist_ok=True)
+    log = out.parent / "mrm.log"
+    log.write_text("")
+    try:
+        if not bag.exists():
+            partial = bag.with_name(tag + ".partial")
+            shutil.rmtree(partial, ignore_errors=True)
+            source = str(DATA / f"{name}.log.gz")
+            mrm(["import-carmen", source, "--robots", str(robots), "--out", str(partial)], log)
+            partial.rename(bag)
+        overrides = [item for pair in args.set for item in ("--set", pair)]
+        replay = ["replay", str(bag), "--out", str(out), "--method", "local", *overrides]
+        row["replay_wall_s"] = mrm(replay, log)
+        row["evaluate_wall_s"] = mrm(["evaluate", str(out), "--bag", str(bag), "--json"], log)
+        row["stats"] = read_results(out).stats
+        row["metrics"] = json.loads((out / METRICS_FILE).read_text())
+        row["closures"], row["closures_wrong"] = wrong_closures(bag, row["stats"])
+    except Exception as exc:  # one failing case must not stop the table
+        row["error"] = str(exc)
+    return row
+
+
+def fmt(value: Any, digits: int = 3) -> str:
+    return "n/a" if value is None or value != value else f"{value:.{digits}f}"
+
+
+def table_row(row: dict[str, Any]) -> str:
+    head = f"| {row['log']} | {row['robots']} | "
+    if "error" in row:
+        return head + f"failed: {row['error'][:90]} |" + " |" * 10
+    m, s = row["metrics"], row["stats"]
+    robots = s["robots"]
+    ate = [r["ate_own_frame_m"] for r in m["robots"].values()]
+    joins = sum(1 for r in robots.values() for c in r["closures"] if c["kind"] == "join")
+    pieces = sum(r["pieces_left"] - 1 for r in robots.values())
+    cells = [
+        str(m["scans_total"]),
+        fmt(m["pair_success"]),
+        fmt(m["pair_success_strict"]),
+        f"{m['scans_unposed']} ({100.0 * m['scans_unposed'] / max(m['scans_total'], 1):.1f} %)",
+        str(pieces),
+        ", ".join(fmt(a, 2) for a in ate),
+        f"{row['closures']} / {row['closures_wrong']}",
+        str(joins),
+        f"{fmt(s['local_mapping_median_ms'], 0)} / {fmt(s['local_mapping_p95_ms'], 0)}",
+        fmt(s["optimisation_per_keyframe"]["p95_ms"], 1),
+        fmt(row["replay_wall_s"], 0),
+    ]
+    return head + " | ".join(cells) + " |"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("--logs", nargs="+", default=list(LOGS))
+    parser.add_argument("--robots", type=int, nargs="+", default=[2, 4])
+    parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--work", type=Path, default=REPO / "bench_output" / "local_table")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    args = parser.parse_args()
+    args.work = args.work.resolve()
+    cases = []
+    for name in args.logs:
+        if (DATA / f"{name}.log.gz").is_file():
+            cases += [(name, k) for k in args.robots]
+        else:
+            print(f"{name}: skipped, {DATA / f'{name}.log.gz'} not found", file=sys.stderr)
+    started = time.perf_counter()
+    with ThreadPoolExecutor(max(1, args.jobs)) as pool:
+        futures = [pool.submit(run_case, name, k, args) for name, k in cases]
+        for future in as_completed(futures):
+            print(table_row(future.result()), file=sys.stderr, flush=True)
+    rows = [future.result() for future in futures]
+    wall = time.perf_counter() - started
+    path = args.work / "local_table.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"wall_s": wall, "overrides": args.set, "rows": rows}, indent=1))
+    print(f"| {COLUMNS} |\n|" + " --- |" * (COLUMNS.count("|") + 1))
+    print("\n".join(table_row(row) for row in rows))
+    ate = [a for row in rows if "metrics" in row for a in _ates(row)]
+    if ate:
+        print(
+            f"own-frame ATE over {len(ate)} robots: median {np.median(ate):.3f} m, "
+            f"max {np.max(ate):.3f} m; wall {wall / 60:.1f} min -> {path}",
+            file=sys.stderr,
+        )
+
+
+def _ates(row: dict[str, Any]) -> list[float]:
+    return [float(r["ate_own_frame_m"]) for r in row["metrics"]["robots"].values()]
+
+
+if __name__ == "__main__":
+    main()
