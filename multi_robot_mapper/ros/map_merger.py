@@ -45,7 +45,6 @@ the fields of :class:`MapMergerConfig` (``config/map_merger.yaml``).
 
 from __future__ import annotations
 
-import dataclasses
 import multiprocessing
 import sys
 import threading
@@ -86,6 +85,7 @@ from multi_robot_mapper.ros.markers import (
 )
 from multi_robot_mapper.ros.merger_state import (
     RobotState,
+    after_new_session,
     merge_inputs,
     restore_saved_map,
     result_of_saved,
@@ -225,9 +225,8 @@ class MapMerger(Node):
             kept = store_partial_map(
                 self.robots, name, contents, self._clock_ns(), self.config.keep_sessions
             )
-            if kept is not None and self.result is not None and self.result.reference == name:
-                # The map frame stays where it was: the earlier session keeps being `map`.
-                self.result = dataclasses.replace(self.result, reference=kept)
+            if kept is not None:
+                self.result = after_new_session(self.result, name, kept)
         if kept is not None:
             self.get_logger().info(
                 f"robot '{name}' started a new map (another first keyframe): its earlier map "

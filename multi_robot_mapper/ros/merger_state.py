@@ -140,6 +140,21 @@ def keep_session(
     return kept
 
 
+def after_new_session(result: MergeResult | None, robot: str, kept: str) -> MergeResult | None:
+    """The previous merge as the next one should see it once ``robot`` started a new session
+    (its old map now ``kept``): no pair result or tree edge of ``robot`` is reused (its map
+    frame changed, and a map's signature does not see frames), and when ``robot`` was the
+    reference, ``kept`` is: the ``map`` frame stays where it was."""
+    if result is None:
+        return None
+    return dataclasses.replace(
+        result,
+        reference=kept if result.reference == robot else result.reference,
+        pairs={pair: record for pair, record in result.pairs.items() if robot not in pair},
+        links=[lk for lk in result.links if robot not in (lk.robot_a, lk.robot_b)],
+    )
+
+
 def sessions_of(robots: dict[str, RobotState], robot: str) -> list[tuple[int, str]]:
     """``(k, name)`` of every kept earlier session of ``robot``, oldest first."""
     found = []
