@@ -11,6 +11,7 @@ import pytest
 from conftest import carmen_log
 
 from multi_robot_mapper.cli.import_carmen import increasing, split_runs
+from multi_robot_mapper.cli.main import main
 from multi_robot_mapper.io.bags import read_recordings
 from multi_robot_mapper.io.carmen import read_carmen
 
@@ -122,8 +123,11 @@ def test_intel_as_four_robots(mrm: Mrm, tmp_path: Path, storage: str) -> None:
         (["{log}", "--robots", "0"], "--robots must be at least 1"),
         (["{log}", "--robots", "13"], "more than the 12 scans"),
         (["{log}", "--robots", "2", "--overlap-scans", "-1"], "--overlap-scans"),
-        (["{bad}", "--robots", "2"], "cannot read"),
-        (["{empty}", "--robots", "2"], "no FLASER scan"),
+        (["{bad}", "--robots", "2"], "no usable FLASER scan (FLASER lines skipped: 1 malformed"),
+        (["{empty}", "--robots", "2"], "no usable FLASER scan"),
+        (["{gzipbad}", "--robots", "2"], "cannot read"),
+        (["{log}", "--robots", "2", "--range-max", "nan"], "--range-max must be in"),
+        (["{log}", "--robots", "2", "--range-max", "-1"], "--range-max must be in"),
     ],
 )
 def test_errors_exit_2_with_one_line(
@@ -134,7 +138,9 @@ def test_errors_exit_2_with_one_line(
     bad.write_text("FLASER 3 1.0 2.0\n")
     empty = tmp_path / "empty.log"
     empty.write_text("# nothing\n")
-    names = {"tmp": tmp_path, "log": log, "bad": bad, "empty": empty}
+    gzipbad = tmp_path / "bad.log.gz"
+    gzipbad.write_bytes(b"\x1f\x8b\x08\x00" + bytes(range(256)) * 4)
+    names = {"tmp": tmp_path, "log": log, "bad": bad, "empty": empty, "gzipbad": gzipbad}
     argv = [a.format(**names) for a in argv]
     assert mrm(["import-carmen", *argv, "--out", str(tmp_path / "bag")]) == 2
     err = capsys.readouterr().err
@@ -154,3 +160,68 @@ def test_unwritable_or_existing_out(
     assert err.count("\n") == 1 and "cannot create" in err and str(blocker / "bag") in err
     assert mrm(["import-carmen", str(log), "--robots", "2", "--out", str(blocker)]) == 2
     assert "already exists" in capsys.readouterr().err
+
+
+def _run(capsys: pytest.CaptureFixture[str], *args: object) -> tuple[int, str, str]:
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_nan_lines_are_skipped_so_replay_and_evaluate_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = write_log(tmp_path / "run.log", 8)
+    lines = log.read_text().splitlines()  # FLASER of scan i on line 2 + 2 i
+    lines[4] = lines[4].replace(" 2.000 2.000 ", " nan inf ", 1)  # ranges of scan 1
+    lines[8] = lines[8].replace(" 3.000 -3.000 ", " nan -3.000 ", 1)  # pose of scan 3
+    log.write_text("\n".join(lines) + "\n")
+    bag, out = tmp_path / "bag", tmp_path / "ref"
+    code, stdout, err = _run(capsys, "import-carmen", log, "--robots", 2, "--out", bag)
+    assert code == 0, err
+    assert "FLASER lines skipped: 2 with NaN/inf" in stdout
+    recordings = read_recordings(bag)
+    assert sum(len(r.scans) for r in recordings.values()) == 6
+    code, _, err = _run(capsys, "replay", bag, "--out", out, "--method", "reference")
+    assert code == 0, err
+    code, _, err = _run(capsys, "evaluate", out, "--bag", bag)
+    assert code == 0, err
+
+
+def test_backward_and_negative_stamps_import_in_file_order(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The MIT infinite-corridor log's stamps start at -0.45 s and decrease.
+    log = write_log(tmp_path / "run.log", 6)
+    text = log.read_text()
+    for i in range(6):
+        stamp = f"{100 + 0.5 * i:.3f}"
+        text = text.replace(f" {stamp} host {stamp}", f" {-0.45 - 0.25 * i:.3f} host 0")
+    log.write_text(text)
+    bag = tmp_path / "bag"
+    code, _, err = _run(capsys, "import-carmen", log, "--robots", 1, "--out", bag)
+    assert code == 0, err
+    assert "backwards" in err and "start at -0.45 s" in err
+    scans = read_recordings(bag)["robot1"].scans
+    assert [s.scan.ranges[0] for s in scans] == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]  # file order
+    stamps = np.array([s.stamp for s in scans])
+    assert stamps[0] > 0 and np.diff(stamps) == pytest.approx([0.25] * 5)
+
+
+def test_import_summary_names_geometry_no_return_and_skipped_lines(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = write_log(tmp_path / "run.log", 6, beams=360)
+    with log.open("a") as stream:
+        stream.write(
+            "ROBOTLASER1 0 -1.57 3.14 0.017 50 0.01 0 2 1 2 0 0 0 0 0 0 0 0 0 0 0 0 1 h 1\n"
+        )
+        stream.write("FLASER 360 1.0 2.0 3.0")  # a cut last line
+    code, stdout, err = _run(capsys, "import-carmen", log, "--robots", 2, "--out", tmp_path / "b")
+    assert code == 0, err
+    assert "beams: 360 from -90 deg every 0.5 deg (179.5 deg" in stdout
+    assert "no return: readings >=" in stdout
+    assert "FLASER lines skipped: 1 cut (last line)" in stdout
+    assert "ROBOTLASER1 1" in stdout
+    scan = read_recordings(tmp_path / "b")["robot1"].scans[0].scan
+    assert scan.angle_increment == pytest.approx(np.radians(0.5))

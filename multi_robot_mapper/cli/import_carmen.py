@@ -16,16 +16,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from multi_robot_mapper.cli.common import CliError
 from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan
-from multi_robot_mapper.io.carmen import CarmenFormatError, carmen_scan_data, read_carmen
+from multi_robot_mapper.io.carmen import (
+    CarmenFormatError,
+    carmen_scan_data,
+    increasing,
+    monotonic_stamps,
+    read_carmen,
+)
 
-# Stamps of a run must increase for replay and for sorting by stamp. Some logs repeat or step
-# back their ipc timestamps (intel: 4 times; csail stores them to 6 digits, so all 406 scans
-# share 2 values); such a scan is put this much after the one before it.
-MIN_STAMP_STEP_S = 1e-3
+__all__ = ["increasing", "register", "run", "split_runs"]
 
 
 def register(subparsers: Any) -> None:
@@ -45,6 +47,13 @@ def register(subparsers: Any) -> None:
         metavar="N",
         help="each robot also gets the N scans before its own run (default 0)",
     )
+    parser.add_argument(
+        "--range-max",
+        type=float,
+        metavar="M",
+        help="readings at or beyond M metres are 'no return' (default: from the log's PARAM "
+        "robot_front_laser_max, else the value repeating at the top of its ranges)",
+    )
     parser.add_argument("--out", required=True, metavar="BAG", help="new bag directory")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     parser.set_defaults(func=run)
@@ -57,18 +66,6 @@ def split_runs(count: int, robots: int, overlap: int) -> list[tuple[int, int]]:
     return [(max(0, bounds[k] - overlap), bounds[k + 1]) for k in range(robots)]
 
 
-# Scan period assumed for logs whose own clock cannot order the scans.
-NOMINAL_PERIOD_S = 1.0
-
-
-def increasing(stamps: NDArray[np.float64], step: float = MIN_STAMP_STEP_S) -> NDArray[np.float64]:
-    """``stamps`` made strictly increasing: each at least ``step`` after the one before."""
-    # stamp_i = max over j <= i of (t_j + (i - j) step): a running maximum after removing the
-    # ramp, added back (vectorised form of t_i = max(t_i, t_{i-1} + step)).
-    ramp = step * np.arange(len(stamps), dtype=np.float64)
-    return np.asarray(np.maximum.accumulate(stamps - ramp) + ramp)
-
-
 def run(args: argparse.Namespace) -> int:
     from multi_robot_mapper.io.bags import write_recordings
 
@@ -79,37 +76,23 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"--robots must be at least 1, got {args.robots}")
     if args.overlap_scans < 0:
         raise CliError(f"--overlap-scans must be >= 0, got {args.overlap_scans}")
+    if args.range_max is not None and not (0.0 < args.range_max < 1e6):
+        raise CliError(f"--range-max must be in (0, 1e6) m, got {args.range_max}")
     out = Path(args.out)
     if out.exists():
         raise CliError(f"{out} already exists; not overwriting it")
     try:
-        scans = list(read_carmen(log))
-    except (CarmenFormatError, OSError, EOFError, UnicodeError) as exc:
+        scans = read_carmen(log, range_max=args.range_max)
+    except (CarmenFormatError, OSError, UnicodeError) as exc:
         raise CliError(f"cannot read {log}: {exc}") from exc
     if not scans:
-        raise CliError(f"{log} has no FLASER scan")
+        skipped = "; ".join(scans.skipped_summary())
+        raise CliError(f"{log} has no usable FLASER scan" + (f" ({skipped})" if skipped else ""))
     if args.robots > len(scans):
         raise CliError(f"--robots {args.robots} is more than the {len(scans)} scans of {log}")
 
     logged = np.array([s.timestamp for s in scans], dtype=np.float64)
-    repeats = int(np.count_nonzero(np.diff(logged) <= 0.0))
-    if repeats > len(scans) // 2:
-        # The log's clock is too coarse to order its scans (csail's are written with six
-        # significant digits): number them at a nominal period instead of inventing times.
-        stamps = logged[0] + NOMINAL_PERIOD_S * np.arange(len(scans), dtype=np.float64)
-        note = (
-            f"note: {repeats} of {len(scans)} timestamps of {log.name} repeat (too coarse a "
-            f"clock); stamps set one scan per {NOMINAL_PERIOD_S:g} s from the first"
-        )
-    else:
-        stamps = increasing(logged)
-        adjusted = int(np.count_nonzero(stamps != logged))
-        note = (
-            f"note: {adjusted} of {len(scans)} timestamps of {log.name} do not increase; "
-            f"moved to {MIN_STAMP_STEP_S * 1e3:g} ms after the scan before"
-            if adjusted
-            else ""
-        )
+    stamps, notes = monotonic_stamps(logged, log.name)
     recordings: dict[str, RobotRecording] = {}
     for k, (start, stop) in enumerate(split_runs(len(scans), args.robots, args.overlap_scans)):
         name = f"robot{k + 1}"
@@ -123,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
     write_recordings(out, recordings, storage=args.storage)
     sizes = ", ".join(f"{r.name} {len(r.scans)}" for r in recordings.values())
     print(f"wrote {out} ({args.storage}): scans per robot: {sizes}")
-    if note:  # after writing: an error must stay the only line on stderr
-        print(note, file=sys.stderr)
+    for line in scans.summary():
+        print(line)
+    for note in notes:  # after writing: an error must stay the only line on stderr
+        print(f"note: {note}", file=sys.stderr)
     return 0

@@ -81,19 +81,22 @@ def _cmd_frontend(args: argparse.Namespace) -> int:
         raise CliError(f"no such log file: {args.log}")
     segments, dropped, invalid, rejected = [], [], [], 0
     try:
-        for scan in read_carmen(args.log):
-            try:
-                seg, valid = extract_scan(carmen_scan_data(scan), config.extraction)
-            except ScanError:
-                rejected += 1
-                continue
-            segments.append(len(seg))
-            dropped.append(seg.dropped_points)
-            invalid.append(valid.invalid_count)
-    except (CarmenFormatError, OSError, EOFError) as exc:
+        log = read_carmen(args.log)
+    except (CarmenFormatError, OSError, UnicodeError) as exc:
         raise CliError(f"cannot read {args.log}: {exc}") from exc
+    for scan in log:
+        try:
+            seg, valid = extract_scan(carmen_scan_data(scan), config.extraction)
+        except ScanError:
+            rejected += 1
+            continue
+        segments.append(len(seg))
+        dropped.append(seg.dropped_points)
+        invalid.append(valid.invalid_count)
     if not segments:
         raise CliError(f"{args.log} has no usable FLASER scan")
+    for line in log.summary():
+        print(line)
     print(f"scans: {len(segments)} (rejected {rejected})")
     print(f"segments per scan: median {np.median(segments):.0f}, mean {np.mean(segments):.1f}")
     print(f"points dropped in small clusters per scan: median {np.median(dropped):.0f}")

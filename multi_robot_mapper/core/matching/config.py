@@ -138,6 +138,15 @@ class IntegrateConfig:
         doc="a point this far in front of what the other scan's beam measured is a contradiction",
         minimum=0.0,
     )
+    confirm_margin: float = param(
+        0.1,
+        unit="m",
+        doc="for the match confidence, a return within this of the range the other scan "
+        "measured on its bearing is confirmed by it",
+        minimum=0.0,
+        exclusive_minimum=True,
+        maximum=2.0,
+    )
     free_space_weight: float = param(
         1.0,
         unit="",
