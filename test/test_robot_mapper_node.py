@@ -476,3 +476,20 @@ def test_diagnostics_report_rate_rejections_by_reason_and_staleness(ros_context)
         assert "no scan for" in latest().message
     finally:
         h.close()
+
+
+def test_max_scan_rate_maps_every_nth_scan_of_a_fast_laser_and_counts_the_rest(
+    ros_context,
+) -> None:
+    h = Harness(ros_context, parameter_overrides=[Parameter("max_scan_rate", value=10.0)])
+    try:
+        for k in range(12):  # 40 Hz stamps: 0, 4 and 8 are mapped
+            msg = scan_to_msg(room_scan(), "robot1/laser", stamp_from_seconds(50.0 + k / 40.0))
+            h.send(msg)
+        assert h.mapper.scans_received == 12 and h.mapper.scans_skipped == 9
+        assert h.mapper.mapper.scans_accepted == 3
+        assert [seconds_from_stamp(m.header.stamp) for m in h.received] == pytest.approx(
+            [50.0, 50.1, 50.2]
+        )
+    finally:
+        h.close()

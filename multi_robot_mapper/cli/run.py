@@ -1,5 +1,5 @@
 """``mrm run --robots robot1,robot2,... [--method pivot|ffs] [--params-file FILE]...
-[--use-sim-time]``: the whole system in one process, without launch files.
+[-p NAME:=VALUE]... [--use-sim-time]``: the whole system in one process, without launch files.
 
 One ``robot_mapper`` per robot namespace (``/robot1/scan`` in, ``/robot1/partial_map`` out)
 and one ``map_merger`` of exactly those robots (``/global_map``, ``/global_grid``,
@@ -42,6 +42,15 @@ def register(subparsers: Any) -> None:
         help="ROS 2 params file (repeatable), e.g. config/multi_robot_mapper.yaml",
     )
     parser.add_argument(
+        "-p",
+        "--param",
+        dest="params",
+        action="append",
+        default=[],
+        metavar="NAME:=VALUE",
+        help="a parameter for every node that has it (repeatable), e.g. -p max_scan_rate:=10",
+    )
+    parser.add_argument(
         "--use-sim-time",
         action="store_true",
         help="every node follows /clock (replaying a bag with its clock)",
@@ -56,6 +65,10 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
         if not path.is_file():
             raise CliError(f"no such params file: {path}")
         ros_args += ["--params-file", str(path)]
+    for item in args.params:
+        if ":=" not in item:
+            raise CliError(f"-p {item!r}: write NAME:=VALUE (as ros2 run's -p)")
+        ros_args += ["-p", item]
     if args.use_sim_time:
         ros_args += ["-p", "use_sim_time:=true"]
     return ros_args

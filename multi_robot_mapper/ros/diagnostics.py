@@ -5,7 +5,7 @@ Both nodes publish on the absolute ``/diagnostics``, the topic ``diagnostic_aggr
 
 - ``robot_mapper`` one status per robot, named ``<robot>/robot_mapper``: scan rate (from the
   scans' header stamps), scans received / accepted / set aside / rejected, each by reason,
-  keyframes and map size. OK while scans arrive and are used; WARN when scans were rejected
+  scans skipped by ``max_scan_rate``, keyframes and map size. OK while scans arrive and are used; WARN when scans were rejected
   since the last report or none of them could be placed; STALE when no scan arrived for
   ``stale_timeout``.
 - ``map_merger`` one status per robot, named ``map_merger/<robot>``: OK when merged (placed in
@@ -74,6 +74,7 @@ class MapperHealth:
     recent_received: int  # since the last report
     recent_accepted: int
     recent_rejected: int
+    skipped: int = 0  # left out by max_scan_rate (on purpose, not a fault)
 
 
 def mapper_status(health: MapperHealth) -> DiagnosticStatus:
@@ -94,6 +95,7 @@ def mapper_status(health: MapperHealth) -> DiagnosticStatus:
     values = [
         ("scan rate (Hz)", _number(health.scan_rate)),
         ("scans received", str(health.scans_received)),
+        ("scans skipped (max_scan_rate)", str(health.skipped)),
         ("scans accepted", str(health.scans_accepted)),
         ("scans rejected", str(rejected)),
         *((f"rejected: {reason}", str(n)) for reason, n in sorted(health.rejected.items())),
@@ -163,6 +165,34 @@ def merger_status(health: MergerRobotHealth) -> DiagnosticStatus:
         ("seconds since last input", _number(health.silent_for)),
     ]
     return _status(f"map_merger/{health.robot}", health.robot, level, message, values)
+
+
+def merge_status(
+    result: MergeResult | None,
+    merges: int,
+    errors: int,
+    last_merge_s: float | None,
+    robots: int,
+) -> DiagnosticStatus:
+    """The merger's own status, named ``map_merger``: OK when every robot is merged, WARN
+    when some are not (or the last merge failed), STALE before the first merge."""
+    placed = 0 if result is None else sum(p is not None for p in result.placements.values())
+    if result is None:
+        level, message = STALE, "no merge yet"
+    elif placed < robots:
+        level, message = WARN, f"{placed} of {robots} robots merged"
+    else:
+        level, message = OK, f"all {robots} robots merged"
+    values = [
+        ("robots merged", str(placed)),
+        ("robots", str(robots)),
+        ("reference", "-" if result is None or result.reference is None else result.reference),
+        ("merges", str(merges)),
+        ("merge errors", str(errors)),
+        ("last merge (s)", _number(last_merge_s)),
+        ("global map segments", "0" if result is None else str(len(result.segments))),
+    ]
+    return _status("map_merger", "map_merger", level, message, values)
 
 
 def link_scores(result: MergeResult | None) -> dict[str, tuple[float | None, float]]:

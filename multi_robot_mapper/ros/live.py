@@ -139,21 +139,34 @@ class GlobalMapView:
 def global_map_view(msg: MarkerArray, received_s: float) -> GlobalMapView:
     """The segments and robot poses a ``global_map`` MarkerArray shows, by robot name (the
     robot of a line list is the TEXT marker with the same id)."""
-    names = {m.id: m.text for m in msg.markers if m.type == Marker.TEXT_VIEW_FACING}
+    shown = [m for m in msg.markers if m.action == Marker.ADD]
+    names = {m.id: m.text for m in shown if m.type == Marker.TEXT_VIEW_FACING}
     segments = {
         names.get(m.id, f"robot #{m.id}"): segments_from_marker(m)
-        for m in msg.markers
+        for m in shown
         if m.type == Marker.LINE_LIST and m.ns == "global_map"
     }
-    poses = {names[m.id]: pose_from_msg(m.pose) for m in msg.markers if m.type == Marker.ARROW}
+    poses = {
+        names.get(m.id, f"robot #{m.id}"): pose_from_msg(m.pose)
+        for m in shown
+        if m.type == Marker.ARROW
+    }
     stamp = msg.markers[0].header.stamp if msg.markers else Time()
     return GlobalMapView(received_s, stamp, segments, poses)
 
 
 class Observer(Node):
-    """Subscribes to what a mapping system of ``robots`` publishes and keeps it."""
+    """Subscribes to what a mapping system of ``robots`` publishes and keeps it (``poses``
+    and ``partial_maps`` off: not the robots' own topics, which are heavy with many robots)."""
 
-    def __init__(self, robots: Sequence[str], keep_maps: bool = True, **kwargs: object) -> None:
+    def __init__(
+        self,
+        robots: Sequence[str],
+        keep_maps: bool = True,
+        poses: bool = True,
+        partial_maps: bool = True,
+        **kwargs: object,
+    ) -> None:
         super().__init__("observer", **kwargs)  # type: ignore[arg-type]
         self.robots = list(robots)
         self.keep_maps = keep_maps
@@ -178,20 +191,22 @@ class Observer(Node):
                 lambda msg, r=robot: self._on_frame(r, msg),
                 LATCHED_QOS,
             )
-            self.create_subscription(
-                PoseStamped,
-                f"/{robot}/pose",
-                lambda msg, r=robot: self.poses[r].append(
-                    (seconds_from_stamp(msg.header.stamp), pose_from_msg(msg.pose))
-                ),
-                POSE_QOS,
-            )
-            self.create_subscription(
-                MarkerArray,
-                f"/{robot}/partial_map",
-                lambda msg, r=robot: self._on_partial_map(r, msg),
-                LATCHED_QOS,
-            )
+            if poses:
+                self.create_subscription(
+                    PoseStamped,
+                    f"/{robot}/pose",
+                    lambda msg, r=robot: self.poses[r].append(
+                        (seconds_from_stamp(msg.header.stamp), pose_from_msg(msg.pose))
+                    ),
+                    POSE_QOS,
+                )
+            if partial_maps:
+                self.create_subscription(
+                    MarkerArray,
+                    f"/{robot}/partial_map",
+                    lambda msg, r=robot: self._on_partial_map(r, msg),
+                    LATCHED_QOS,
+                )
 
     def _on_global_map(self, msg: MarkerArray) -> None:
         view = global_map_view(msg, time.monotonic())

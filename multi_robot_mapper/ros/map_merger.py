@@ -48,6 +48,7 @@ from __future__ import annotations
 import multiprocessing
 import sys
 import threading
+import time
 import traceback
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -126,6 +127,7 @@ class MapMerger(Node):
         self.grid: OccupancyGrid | None = None
         self.merges = 0  # merge() runs
         self.merge_errors = 0
+        self.last_merge_s: float | None = None  # wall time of the last merge (worker included)
         self.global_maps_published = 0
         self._merged_versions: dict[str, int] = {}  # partial map versions of the last merge
         self._worker: ProcessPoolExecutor | None = None  # started on the first merge
@@ -265,6 +267,7 @@ class MapMerger(Node):
                     "no_reference", f"waiting for the reference robot '{reference}' to send a map"
                 )
                 return False
+            began = time.perf_counter()
             try:
                 self.result, self.grid = self._merge(inputs.maps, inputs.viewpoints, config)
             except Exception:
@@ -275,6 +278,7 @@ class MapMerger(Node):
                 )
                 return False
             self._merged_versions = inputs.versions
+            self.last_merge_s = time.perf_counter() - began
             self.merges += 1
             merged = True
         result = self.result
@@ -392,6 +396,12 @@ class MapMerger(Node):
                     session_of=state.session_of,
                 )
                 statuses.append(diagnostics.merger_status(health))
+        statuses.insert(
+            0,
+            diagnostics.merge_status(
+                result, self.merges, self.merge_errors, self.last_merge_s, len(statuses)
+            ),
+        )
         if statuses:
             self._diagnostics_pub.publish(diagnostics.diagnostic_array(statuses, newest(stamps)))
 

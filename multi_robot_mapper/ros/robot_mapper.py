@@ -80,6 +80,8 @@ class RobotMapper(Node):
         self.published_keyframes = 0  # keyframes in the last partial map published
         self.published_stamp: Time | None = None  # header stamp of the last partial map
         self.rejected: dict[str, int] = {}  # scans dropped before mapping, by reason
+        self.scans_skipped = 0  # left out by max_scan_rate
+        self._mapped_stamp: float | None = None  # stamp of the last scan not skipped
         self._scan_rate = diagnostics.RateMeter()
         self._last_scan_ns: int | None = None  # node clock when the last scan arrived
         self._last_stamp = Time()  # header stamp of the newest scan
@@ -142,6 +144,9 @@ class RobotMapper(Node):
         self._last_scan_ns = self.get_clock().now().nanoseconds
         self._last_stamp = msg.header.stamp
         self._scan_rate.add(stamp)
+        if self._throttled(stamp):
+            self.scans_skipped += 1
+            return
         try:
             view = scan_from_msg(msg)
             segments, valid = extract_scan(view, self.config.extraction)
@@ -190,6 +195,16 @@ class RobotMapper(Node):
         if update.accepted and update.pose is not None:
             self._pose_pub.publish(pose_stamped(update.pose, msg.header.stamp, self.map_frame))
 
+    def _throttled(self, stamp: float) -> bool:
+        """Whether ``max_scan_rate`` leaves this scan out (too soon after the last one mapped,
+        by the stamps; 1 ms of slack for stamps rounded to the nanosecond)."""
+        rate = self.config.max_scan_rate
+        last = self._mapped_stamp
+        if rate > 0.0 and last is not None and 0.0 <= stamp - last < 1.0 / rate - 1e-3:
+            return True
+        self._mapped_stamp = stamp
+        return False
+
     def publish_map(self) -> bool:
         """Publish the whole partial map if it changed since the last publication."""
         version = self.mapper.version
@@ -232,6 +247,7 @@ class RobotMapper(Node):
             scans_received=self.scans_received,
             scans_accepted=mapper.scans_accepted,
             rejected=dict(self.rejected),
+            skipped=self.scans_skipped,
             set_aside=dict(mapper.set_aside_reasons),
             keyframes=self.published_keyframes,
             map_segments=len(mapper.map_segments),

@@ -24,6 +24,14 @@ class LocalMapperConfig:
         doc="a scan turned this much from the last keyframe becomes a keyframe",
         minimum=0.0,
     )
+    revisit_keyframes: bool = param(
+        True,
+        unit="",
+        doc="a scan within keyframe_distance and keyframe_angle of ANY earlier keyframe adds no "
+        "keyframe (the map already holds that view): a robot driving over known ground keeps "
+        "its map and its partial_map message the same size, so both grow with the area "
+        "covered, not with time; false: only the last keyframe counts",
+    )
     submap_radius: float = param(
         12.0,
         unit="m",

@@ -391,6 +391,8 @@ class LocalMapper:
             turned = abs(float(se2.wrap_angle(T_robotmap_new[2] - last[2])))
             if moved <= self.config.keyframe_distance and turned <= self.config.keyframe_angle:
                 return False
+            if self.config.revisit_keyframes and self._near_keyframe(T_robotmap_new):
+                return False
         index = len(self._keyframe_poses)
         self._keyframe_poses.append(T_robotmap_new.copy())
         self._keyframe_stamps.append(stamp)
@@ -398,6 +400,15 @@ class LocalMapper:
         self._fuse(placed, index, T_robotmap_new)
         self.version += 1
         return True
+
+    def _near_keyframe(self, T_robotmap_new: FloatArray) -> bool:
+        """Whether some keyframe (not only the last) lies within ``keyframe_distance`` and
+        ``keyframe_angle`` of this pose: ground the map already holds from here."""
+        poses = np.asarray(self._keyframe_poses, dtype=np.float64)
+        moved = np.hypot(poses[:, 0] - T_robotmap_new[0], poses[:, 1] - T_robotmap_new[1])
+        turned = np.abs(se2.wrap_angle(poses[:, 2] - T_robotmap_new[2]))
+        near = (moved <= self.config.keyframe_distance) & (turned <= self.config.keyframe_angle)
+        return bool(near.any())
 
     def _fuse(self, placed: FloatArray, index: int, T_robotmap_new: FloatArray) -> None:
         """Alg. 5 between the map near the new keyframe and the keyframe's segments."""
