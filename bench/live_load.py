@@ -84,7 +84,7 @@ def lap(world: str, laser: LaserModel, seed: int) -> tuple[np.ndarray, np.ndarra
     tour = np.asarray(ROUTES[world], dtype=np.float64)
     closed = np.vstack((tour, tour[:1]))
     length = float(_arc_length(closed)[-1])
-    count = int(round(length / SPEED * laser.rate))
+    count = round(length / SPEED * laser.rate)
     three = np.vstack((closed, closed[1:], closed[1:]))
     poses = drive_path(three, SPEED, laser.rate, 3 * count / laser.rate)[count : 2 * count]
     walls = WORLDS[world]()
@@ -191,7 +191,7 @@ def main() -> int:
     laser = LaserModel()
     robots = [f"robot{k + 1}" for k in range(args.robots)]
     started_build = time.monotonic()
-    poses, ranges = lap(args.world, laser, args.seed)
+    _, ranges = lap(args.world, laser, args.seed)
     print(
         f"one lap of the {args.world} tour: {len(ranges)} scans ({len(ranges) / laser.rate:.0f} s) "
         f"of {laser.beams} beams, ray cast in {time.monotonic() - started_build:.0f} s",
@@ -204,12 +204,9 @@ def main() -> int:
         rate = ["-p", f"max_scan_rate:={args.max_scan_rate}"]
         commands = {r: robot_mapper_command(r, rate) for r in robots}
         commands["merger"] = [
-            sys.executable,
-            "-m",
-            "multi_robot_mapper.ros.map_merger",
-            "--ros-args",
-            "-p",
-            f"robots:={names}",
+            *(sys.executable, "-m", "multi_robot_mapper.ros.map_merger", "--ros-args"),
+            *("-p", f"robots:={names}", "-p", "save_on_shutdown:=true"),
+            *("-p", f"map_file:={args.logs.resolve() / 'merged_map.json'}"),
         ]
     else:
         commands = {
@@ -338,57 +335,86 @@ def window(before: dict[str, Any], after: dict[str, Any], robots: list[str]) -> 
     }
 
 
+COLUMNS = (
+    ("end s", 6),
+    ("dropped % min/med/max", 22),
+    ("merges", 6),
+    ("refresh s", 9),
+    ("last merge s", 12),
+    ("merged", 6),
+    ("cores nodes", 11),
+    ("cores machine", 13),
+    ("RSS MB mappers/merger", 21),
+    ("keyframes", 9),
+    ("segments", 8),
+    ("global", 6),
+    ("load average", 16),
+)
+
+
 def header() -> None:
-    print(
-        f"{'end s':>6} {'dropped % min/med/max':>22} {'merges':>6} {'refresh s':>9} "
-        f"{'last merge s':>12} {'merged':>6} {'cores (nodes)':>13} {'cores (machine)':>15} "
-        f"{'RSS MB mappers/merger':>22} {'keyframes med':>13} {'segments med':>12} {'global seg':>10} {'loadavg':>16}",
-        flush=True,
-    )
+    print(" ".join(f"{name:>{width}}" for name, width in COLUMNS), flush=True)
 
 
 def report(sample: dict[str, Any]) -> None:
-    drops = np.array([v for v in sample["dropped"].values()], dtype=float) * 100.0
-    cpu = sample["cpu_cores"]
+    """One line per window; keyframes and segments are the median robot's."""
+    drops = np.array(list(sample["dropped"].values()), dtype=float) * 100.0
+    cpu = {k: v for k, v in sample["cpu_cores"].items() if not k.startswith("bench")}
     rss = sample["rss_mb"]
-    mappers_rss = sum(v for k, v in rss.items() if k.startswith("robot"))
-    other_rss = sum(v for k, v in rss.items() if not k.startswith(("robot", "bench")))
-    cpu = {k: v for k, v in cpu.items() if not k.startswith("bench")}
-    print(
-        f"{sample['elapsed_s']:>6.0f} "
-        f"{np.nanmin(drops):>6.1f} /{np.nanmedian(drops):>6.1f} /{np.nanmax(drops):>6.1f} "
-        f"{sample['merges']:>6.0f} {sample['refresh_s']:>9.2f} {sample['last_merge_s']:>12.2f} "
-        f"{sample['merged']:>6.0f} {sum(cpu.values()):>13.2f} {sample['machine_busy_cores']:>15.2f} "
-        f"{mappers_rss:>10.0f} / {other_rss:>9.0f} "
-        f"{np.nanmedian(list(sample['keyframes'].values())):>13.0f} "
-        f"{np.nanmedian(list(sample['segments'].values())):>12.0f} {sample['global_segments']:>10.0f} "
-        f"{' '.join(sample['loadavg']):>16}",
-        flush=True,
+    mappers = sum(v for k, v in rss.items() if k.startswith("robot"))
+    merger = sum(v for k, v in rss.items() if not k.startswith(("robot", "bench")))
+    cells = (
+        f"{sample['elapsed_s']:.0f}",
+        f"{np.nanmin(drops):.1f} / {np.nanmedian(drops):.1f} / {np.nanmax(drops):.1f}",
+        f"{sample['merges']:.0f}",
+        f"{sample['refresh_s']:.2f}",
+        f"{sample['last_merge_s']:.2f}",
+        f"{sample['merged']:.0f}",
+        f"{sum(cpu.values()):.2f}",
+        f"{sample['machine_busy_cores']:.2f}",
+        f"{mappers:.0f} / {merger:.0f}",
+        f"{np.nanmedian(list(sample['keyframes'].values())):.0f}",
+        f"{np.nanmedian(list(sample['segments'].values())):.0f}",
+        f"{sample['global_segments']:.0f}",
+        " ".join(sample["loadavg"]),
     )
+    line = " ".join(f"{cell:>{width}}" for cell, (_, width) in zip(cells, COLUMNS, strict=True))
+    print(line, flush=True)
 
 
-def summary(samples, final, robots, codes, late) -> None:  # type: ignore[no-untyped-def]
+def summary(
+    samples: list[dict[str, Any]],
+    final: dict[str, Any],
+    robots: list[str],
+    codes: dict[str, int | None],
+    late: list[float],
+) -> None:
     print()
     print(f"node exit codes: {codes}")
     if not samples:
         return
-    first = samples[0]["start"]
-    total = window(first, final, robots)
+    total = window(samples[0]["start"], final, robots)
     print("whole run:")
     for robot in robots:
         print(
-            f"  {robot}: published {total['published'][robot]}, dropped {total['dropped'][robot] * 100:.1f} %, "
-            f"keyframes {final['keyframes'][robot]:.0f}, map segments {final['segments'][robot]:.0f}"
+            f"  {robot}: published {total['published'][robot]}, "
+            f"dropped {total['dropped'][robot] * 100:.1f} %, "
+            f"keyframes {final['keyframes'][robot]:.0f}, "
+            f"map segments {final['segments'][robot]:.0f}"
         )
     late_ms = np.asarray(late) * 1e3
     print(
-        f"  player behind schedule: p50 {np.median(late_ms):.1f} ms, p95 {np.percentile(late_ms, 95):.1f} ms"
+        f"  player behind schedule: p50 {np.median(late_ms):.1f} ms, "
+        f"p95 {np.percentile(late_ms, 95):.1f} ms"
     )
     print(
-        f"  merges {total['merges']:.0f} (mean refresh {total['refresh_s']:.2f} s), robots merged {final['merged']:.0f}"
+        f"  merges {total['merges']:.0f} (mean refresh {total['refresh_s']:.2f} s), "
+        f"robots merged {final['merged']:.0f}"
     )
+    cores = sum(v for k, v in total["cpu_cores"].items() if not k.startswith("bench"))
     print(
-        f"  node cores {sum(total['cpu_cores'].values()):.2f}, machine busy cores {total['machine_busy_cores']:.2f}"
+        f"  node cores {cores:.2f} (the player: {total['cpu_cores']['bench (player)']:.2f}), "
+        f"machine busy cores {total['machine_busy_cores']:.2f}"
     )
 
 

@@ -152,3 +152,15 @@ def test_free_cells_never_lie_outside_a_closed_room_or_on_its_walls(
     if min(x, y, 4.0 - x, 4.0 - y) > 0.3:
         assert cell_at(grid, x, y) in (FREE, UNKNOWN)
         assert np.count_nonzero(grid.cells == FREE) > 0
+
+
+def test_robots_seeing_the_same_place_cast_it_once_with_the_same_cells() -> None:
+    from multi_robot_mapper.core.merging.occupancy import _thinned
+
+    views = np.array([[2.0, 2.0, 0.0], [2.2, 2.0, 0.1], [2.0, 2.0, math.pi]])
+    thinned = _thinned([(ROOM, views), (ROOM, views + [0.05, 0.0, 0.0])], spacing=0.5)
+    assert len(thinned) == 1  # the second robot stood where the first did, facing the same way
+    np.testing.assert_array_equal(thinned[0][1], views[[0, 2]])  # facing back is another view
+    one = occupancy_grid(ROOM, [(ROOM, views)], CONFIG, MergeConfig())
+    two = occupancy_grid(ROOM, [(ROOM, views), (ROOM, views)], CONFIG, MergeConfig())
+    np.testing.assert_array_equal(one.cells, two.cells)

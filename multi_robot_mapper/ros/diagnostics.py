@@ -5,9 +5,9 @@ Both nodes publish on the absolute ``/diagnostics``, the topic ``diagnostic_aggr
 
 - ``robot_mapper`` one status per robot, named ``<robot>/robot_mapper``: scan rate (from the
   scans' header stamps), scans received / accepted / set aside / rejected, each by reason,
-  scans skipped by ``max_scan_rate``, keyframes and map size. OK while scans arrive and are used; WARN when scans were rejected
-  since the last report or none of them could be placed; STALE when no scan arrived for
-  ``stale_timeout``.
+  scans skipped by ``max_scan_rate``, keyframes and map size. OK while scans arrive and are
+  used; WARN when scans were rejected since the last report or none of them could be placed;
+  STALE when no scan arrived for ``stale_timeout``.
 - ``map_merger`` one status per robot, named ``map_merger/<robot>``: OK when merged (placed in
   ``map``), WARN when unmerged, STALE when neither its partial map nor its pose arrived for
   ``stale_timeout`` (its map stays in the global map); the merge score (the value, in metres

@@ -62,7 +62,8 @@ class GridConfig:
     view_spacing: float = param(
         0.5,
         unit="m",
-        doc="keyframe poses closer than this to one already kept add no free space to the grid",
+        doc="a keyframe pose closer than this to one already kept (of any robot) and facing "
+        "the same way adds no free space to the grid (robots on the same ground see the same)",
         minimum=0.0,
     )
     max_views: int = param(
@@ -147,12 +148,12 @@ def occupancy_grid(
     cells = np.full((height, width), UNKNOWN, dtype=np.int8)
     view_config = dataclasses.replace(
         merging,
-        view_spacing=config.view_spacing,
+        view_spacing=0.0,  # thinned here, over every robot at once
         max_views=config.max_views,
         view_field=config.view_field,
         free_space_margin=resolution,
     )
-    for own, poses in views:
+    for own, poses in _thinned(views, config.view_spacing):
         _mark_free(cells, origin, resolution, MapViews.of(own, poses, view_config), view_config)
     if len(walls):
         # Samples at most half a cell apart touch every cell a segment passes through.
@@ -161,6 +162,34 @@ def occupancy_grid(
         inside = (column >= 0) & (column < width) & (row >= 0) & (row < height)
         cells[row[inside], column[inside]] = OCCUPIED
     return OccupancyGrid(origin, resolution, cells)
+
+
+HEADING_TOLERANCE = 0.5  # rad: two views closer than this in heading see the same side
+
+
+def _thinned(
+    views: list[tuple[FloatArray, FloatArray]], spacing: float
+) -> list[tuple[FloatArray, FloatArray]]:
+    """Each ``(segments, viewpoints)`` pair with only the viewpoints that are at least
+    ``spacing`` from every viewpoint kept before them (of any robot) or face another way
+    (HEADING_TOLERANCE): robots driving the same corridor see the same free space, and casting
+    it once per place is enough. Greedy, in order."""
+    kept: list[FloatArray] = []
+    out = []
+    for segments, poses in views:
+        mine = []
+        for pose in poses.reshape(-1, 3):
+            if kept:
+                others = np.asarray(kept)
+                close = np.hypot(others[:, 0] - pose[0], others[:, 1] - pose[1]) < spacing
+                facing = np.abs(se2.wrap_angle(others[:, 2] - pose[2])) < HEADING_TOLERANCE
+                if np.any(close & facing):
+                    continue
+            kept.append(pose)
+            mine.append(pose)
+        if mine:
+            out.append((segments, np.asarray(mine, dtype=np.float64)))
+    return out
 
 
 def _moved(T_map_robot: FloatArray, poses: FloatArray) -> FloatArray:
