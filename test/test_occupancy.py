@@ -158,7 +158,7 @@ def test_robots_seeing_the_same_place_cast_it_once_with_the_same_cells() -> None
     from multi_robot_mapper.core.merging.occupancy import _thinned
 
     views = np.array([[2.0, 2.0, 0.0], [2.2, 2.0, 0.1], [2.0, 2.0, math.pi]])
-    thinned = _thinned([(ROOM, views), (ROOM, views + [0.05, 0.0, 0.0])], spacing=0.5)
+    thinned = _thinned([(ROOM, views), (ROOM, views + np.array([0.05, 0.0, 0.0]))], spacing=0.5)
     assert len(thinned) == 1  # the second robot stood where the first did, facing the same way
     np.testing.assert_array_equal(thinned[0][1], views[[0, 2]])  # facing back is another view
     one = occupancy_grid(ROOM, [(ROOM, views)], CONFIG, MergeConfig())

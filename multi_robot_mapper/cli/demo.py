@@ -239,7 +239,7 @@ def run_demo(out_dir: Path, scenario: DemoScenario | None = None) -> DemoResult:
     statuses = [
         f"{status.name}: {LEVELS.get(status.level[0], '?')} - {status.message}"
         for name, status in sorted(live.observer.diagnostics.items())
-        if name.startswith("map_merger/")
+        if name.startswith("map_merger")
     ]
     return DemoResult(
         result.robots, merged, metrics, table, files, live, statuses, time.monotonic() - begun

@@ -12,7 +12,6 @@ import re
 from collections.abc import Iterable, Sequence
 
 from rclpy.context import Context
-from rclpy.executors import Executor, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -55,14 +54,6 @@ class System:
     @property
     def nodes(self) -> list[Node]:
         return [*self.mappers.values(), self.merger]
-
-    def executor(self, context: Context | None = None) -> Executor:
-        """A multi-threaded executor holding every node: a thread per robot and two for the
-        merger (its merge timer and its inputs run on separate callback groups)."""
-        executor = MultiThreadedExecutor(num_threads=len(self.mappers) + 2, context=context)
-        for node in self.nodes:
-            executor.add_node(node)
-        return executor
 
     def destroy(self) -> None:
         for node in reversed(self.nodes):

@@ -50,6 +50,7 @@ import sys
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
@@ -426,23 +427,14 @@ class MapMerger(Node):
         return loaded
 
     def _on_save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        try:
-            path = self.save_map()
-        except SavedMapError as exc:
-            response.success, response.message = False, str(exc)
-            return response
-        response.success, response.message = True, f"map saved to {path}"
-        return response
+        return _answer(response, lambda: f"map saved to {self.save_map()}")
 
     def _on_load(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        try:
+        def load() -> str:
             loaded = self.load_map()
-        except SavedMapError as exc:
-            response.success, response.message = False, str(exc)
-            return response
-        response.success = True
-        response.message = f"loaded {len(loaded)} robots' maps: {', '.join(loaded) or 'none'}"
-        return response
+            return f"loaded {len(loaded)} robots' maps: {', '.join(loaded) or 'none'}"
+
+        return _answer(response, load)
 
     def _load_at_start(self) -> None:
         try:
@@ -492,6 +484,16 @@ class MapMerger(Node):
             )
         if (config.merge, config.grid) != (old.merge, old.grid):
             self._merged_versions = {}  # merge again with the new settings
+
+
+def _answer(response: Trigger.Response, action: Callable[[], str]) -> Trigger.Response:
+    """A Trigger answer: success and what ``action`` says, or failure and why."""
+    try:
+        response.message = action()
+        response.success = True
+    except SavedMapError as exc:
+        response.success, response.message = False, str(exc)
+    return response
 
 
 def main(args: list[str] | None = None) -> int:
