@@ -2,7 +2,8 @@
 
 One ``robot_mapper`` per robot namespace and one ``map_merger`` that merges exactly those
 robots: what ``mrm run`` spins on a multi-threaded executor (as a component container would),
-and what ``mrm demo``, the node tests and ``bench/live_load.py`` build in their own contexts.
+and what tests build in their own contexts. (``mrm demo`` and ``bench/live_load.py`` run the
+robots' mappers in processes of their own instead: ``ros/processes.py``.)
 """
 
 from __future__ import annotations
