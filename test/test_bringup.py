@@ -91,6 +91,23 @@ def test_mrm_run_refuses_ffs_and_missing_params_files_with_exit_2(mrm, capsys, t
     assert mrm(["run", "--robots", "robot1", "--params-file", str(tmp_path / "no.yaml")]) == 2
     assert "no such params file" in capsys.readouterr().err
     assert mrm(["run", "--robots", "9lives"]) == 2
+    assert mrm(["run", "--robots", "robot1", "-p", "no_such_parameter:=1"]) == 2
+    assert "neither robot_mapper nor map_merger" in capsys.readouterr().err
+
+
+def test_dash_p_goes_to_the_nodes_that_have_the_parameter() -> None:
+    from multi_robot_mapper.cli.run import node_parameters
+
+    mapper, merger = node_parameters(
+        ["max_scan_rate:=10", "merge_period:=2.5", "warning_period:=3", "grid.enabled:=false"]
+    )
+    assert {p.name: p.value for p in mapper} == {"max_scan_rate": 10.0, "warning_period": 3.0}
+    assert all(isinstance(p.value, float) for p in mapper)
+    assert {p.name: p.value for p in merger} == {
+        "merge_period": 2.5,
+        "warning_period": 3,
+        "grid.enabled": False,
+    }
 
 
 @pytest.mark.ros

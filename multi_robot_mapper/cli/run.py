@@ -6,7 +6,8 @@ and one ``map_merger`` of exactly those robots (``/global_map``, ``/global_grid`
 ``/robot_frames/<robot>``, ``/diagnostics``, the ``/save_map`` and ``/load_map``
 services), spun on one multi-threaded executor, as a component container would. Parameters
 come from ROS 2 params files (``config/multi_robot_mapper.yaml`` holds both nodes'), then
-from ``--method``. Runs until Ctrl-C or SIGTERM; exit code 2 for invalid parameters.
+``-p`` (each to the nodes that have that parameter), then ``--method``. Runs until Ctrl-C or
+SIGTERM; exit code 2 for invalid parameters.
 """
 
 from __future__ import annotations
@@ -48,7 +49,8 @@ def register(subparsers: Any) -> None:
         action="append",
         default=[],
         metavar="NAME:=VALUE",
-        help="a parameter for every node that has it (repeatable), e.g. -p max_scan_rate:=10",
+        help="a parameter, given to the nodes that have it (repeatable), e.g. "
+        "-p max_scan_rate:=10 (robot_mapper), -p merge_period:=2.0 (map_merger)",
     )
     parser.add_argument(
         "--use-sim-time",
@@ -65,13 +67,39 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
         if not path.is_file():
             raise CliError(f"no such params file: {path}")
         ros_args += ["--params-file", str(path)]
-    for item in args.params:
-        if ":=" not in item:
-            raise CliError(f"-p {item!r}: write NAME:=VALUE (as ros2 run's -p)")
-        ros_args += ["-p", item]
     if args.use_sim_time:
         ros_args += ["-p", "use_sim_time:=true"]
     return ros_args
+
+
+def node_parameters(items: list[str]) -> tuple[list[Any], list[Any]]:
+    """``-p NAME:=VALUE`` options as the robot_mappers' and the merger's parameters: each goes
+    to the nodes that have it (a name neither node has is an error, as ``ros2 run`` would
+    ignore it without a word)."""
+    from rclpy.parameter import Parameter
+
+    from multi_robot_mapper.core.config import field_specs, parse_override
+    from multi_robot_mapper.core.mapper_config import RobotMapperConfig
+    from multi_robot_mapper.core.merger_config import MapMergerConfig
+
+    kinds = {s.name: s.kind for c in (RobotMapperConfig, MapMergerConfig) for s in field_specs(c)}
+    mapper_names = {spec.name for spec in field_specs(RobotMapperConfig)}
+    merger_names = {spec.name for spec in field_specs(MapMergerConfig)} - {"robots", "method"}
+    mapper, merger = [], []
+    for item in items:
+        if ":=" not in item:
+            raise CliError(f"-p {item!r}: write NAME:=VALUE (as ros2 run's -p)")
+        name, value = parse_override(item.replace(":=", "=", 1))
+        if name not in mapper_names | merger_names:
+            raise CliError(f"-p {name}: neither robot_mapper nor map_merger has this parameter")
+        if kinds[name] is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)  # -p max_scan_rate:=10 means 10.0
+        parameter = Parameter(name, value=value)
+        if name in mapper_names:
+            mapper.append(parameter)
+        if name in merger_names:
+            merger.append(parameter)
+    return mapper, merger
 
 
 def run(args: argparse.Namespace) -> int:
@@ -84,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         raise CliError(str(exc)) from exc
     ros_args = ros_arguments(args)
+    mapper_parameters, merger_parameters = node_parameters(args.params)
     executor_threads = len(robots) + 2
 
     def make_executor() -> Any:
@@ -91,10 +120,14 @@ def run(args: argparse.Namespace) -> int:
 
         return MultiThreadedExecutor(num_threads=executor_threads)
 
+    def make_nodes() -> Any:
+        system = build_system(
+            robots,
+            args.method,
+            mapper_parameters=mapper_parameters,
+            merger_parameters=merger_parameters,
+        )
+        return system.nodes
+
     print(f"mrm run: {', '.join(robots)} and a map_merger; Ctrl-C stops", flush=True)
-    return run_nodes(
-        "mrm run",
-        lambda: build_system(robots, args.method).nodes,
-        ros_args,
-        make_executor,
-    )
+    return run_nodes("mrm run", make_nodes, ros_args, make_executor)

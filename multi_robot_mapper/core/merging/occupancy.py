@@ -65,6 +65,7 @@ class GridConfig:
         doc="a keyframe pose closer than this to one already kept (of any robot) and facing "
         "the same way adds no free space to the grid (robots on the same ground see the same)",
         minimum=0.0,
+        maximum=100.0,
     )
     max_views: int = param(
         200,
