@@ -131,6 +131,7 @@ class MapMerger(Node):
         self.last_merge_s: float | None = None  # wall time of the last merge (worker included)
         self.global_maps_published = 0
         self._merged_versions: dict[str, int] = {}  # partial map versions of the last merge
+        self._new_sessions: list[tuple[str, str]] = []  # (robot, its earlier map's name)
         self._worker: ProcessPoolExecutor | None = None  # started on the first merge
         self._shown: tuple[object, ...] | None = None  # what the last global_map showed
         self._input_groups = MutuallyExclusiveCallbackGroup()
@@ -230,6 +231,7 @@ class MapMerger(Node):
             )
             if kept is not None:
                 self.result = after_new_session(self.result, name, kept)
+                self._new_sessions.append((name, kept))
         if kept is not None:
             self.get_logger().info(
                 f"robot '{name}' started a new map (another first keyframe): its earlier map "
@@ -260,6 +262,7 @@ class MapMerger(Node):
         config = self.config
         with self._lock:
             inputs = merge_inputs(self.robots)
+            sessions = len(self._new_sessions)
         merged = False
         if inputs.maps and inputs.versions != self._merged_versions:
             reference = config.merge.reference
@@ -270,7 +273,7 @@ class MapMerger(Node):
                 return False
             began = time.perf_counter()
             try:
-                self.result, self.grid = self._merge(inputs.maps, inputs.viewpoints, config)
+                result, grid = self._merge(inputs.maps, inputs.viewpoints, config)
             except Exception:
                 self.merge_errors += 1
                 self.warnings.warn(
@@ -278,6 +281,12 @@ class MapMerger(Node):
                     f"merge failed (the last global map stays):\n{traceback.format_exc()}",
                 )
                 return False
+            with self._lock:
+                # A robot that started a new session while this merge ran: its pair results
+                # in this merge are of its old map.
+                for name, kept in self._new_sessions[sessions:]:
+                    result = after_new_session(result, name, kept)
+                self.result, self.grid = result, grid
             self._merged_versions = inputs.versions
             self.last_merge_s = time.perf_counter() - began
             self.merges += 1
