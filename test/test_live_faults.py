@@ -318,16 +318,24 @@ def test_a_silent_robot_turns_stale_and_its_map_stays(rig: Rig) -> None:
     stamp = SIM_START_S + 100.0
     sent = [0.0]
 
-    def alpha_keeps_going() -> bool:
-        nonlocal stamp
-        if time.monotonic() - sent[0] > 0.05:  # stamps 0.1 s apart: 10 Hz for the merger
-            stamp += 0.1
-            sent[0] = time.monotonic()
-            rig.robots["alpha"].pose((0.0, 0.0, 0.0), stamp)
-        status = status_of(rig, "bravo")
-        return status is not None and status.level == STALE
+    def sending(robots: tuple[str, ...], condition: Callable[[], bool]) -> Callable[[], bool]:
+        def step() -> bool:
+            nonlocal stamp
+            if time.monotonic() - sent[0] > 0.05:  # stamps 0.1 s apart: 10 Hz for the merger
+                stamp += 0.1
+                sent[0] = time.monotonic()
+                for robot in robots:
+                    rig.robots[robot].pose((0.0, 0.0, 0.0), stamp)
+            return condition()
 
-    assert rig.spin_until(alpha_keeps_going, 10.0)
+        return step
+
+    def level(robot: str) -> bytes | None:
+        return getattr(status_of(rig, robot), "level", None)
+
+    # Both robots send poses until bravo is reported OK; then bravo falls silent.
+    assert rig.spin_until(sending(("alpha", "bravo"), lambda: level("bravo") == OK), 20.0)
+    assert rig.spin_until(sending(("alpha",), lambda: level("bravo") == STALE), 20.0)
     silent = {kv.key: kv.value for kv in status_of(rig, "bravo").values}
     assert float(silent["seconds since last input"]) > 1.0  # not before stale_timeout
     assert status_of(rig, "alpha").level == OK
@@ -337,7 +345,9 @@ def test_a_silent_robot_turns_stale_and_its_map_stays(rig: Rig) -> None:
     assert rig.spin_until(lambda: "bravo" in rig.observer.global_maps[-1].segments, 5.0)
     assert len(rig.observer.global_maps[-1].segments["bravo"]) > 20
     values = {kv.key: kv.value for kv in status_of(rig, "alpha").values}
-    assert float(values["pose rate (Hz)"]) == pytest.approx(10.0, rel=0.01)  # from the stamps
+    # From the stamps (0.1 s apart), never faster than they say; a pose lost on a busy machine
+    # only lowers it.
+    assert 5.0 < float(values["pose rate (Hz)"]) <= 10.0 * 1.001
     assert (
         float(values["merge score: link value (m)"]) > 15.0
         or values["merge score: link value (m)"] == "-"
@@ -351,11 +361,15 @@ def test_an_unmerged_robot_is_warn_with_its_best_pair_value(rig: Rig) -> None:
     far = maps["bravo"][:4]  # four segments: no link can be valid
     rig.add_robot("bravo", far, views["bravo"][:2])
     assert rig.spin_until(lambda: rig.merger.result is not None and rig.merger.up_to_date())
-    rig.robots["bravo"].pose((0.0, 0.0, 0.0), SIM_START_S + 5)
-    rig.robots["alpha"].pose((0.0, 0.0, 0.0), SIM_START_S + 5)
-    assert rig.spin_until(lambda: status_of(rig, "bravo") is not None, 5.0)
-    levels = {status_of(rig, r).level for r in NAMES}
-    assert levels == {OK, WARN}
+    stamp = [SIM_START_S + 5]
+
+    def levels() -> set[bytes]:
+        stamp[0] += 0.1
+        for name in NAMES:
+            rig.robots[name].pose((0.0, 0.0, 0.0), stamp[0])
+        return {getattr(status_of(rig, r), "level", None) for r in NAMES}
+
+    assert rig.spin_until(lambda: levels() == {OK, WARN}, 20.0), levels()
     assert "unmerged" in (status_of(rig, "alpha").message + status_of(rig, "bravo").message)
 
 
@@ -372,7 +386,7 @@ def test_with_sim_time_outputs_carry_input_stamps_and_staleness_follows_the_cloc
         clock_pub.publish(Clock(clock=stamp_from_seconds(sim[0])))
 
     merger = rig.start_merger(
-        use_sim_time=True, stale_timeout=5.0, diagnostics_period=0.5, merge_period=0.5
+        use_sim_time=True, stale_timeout=30.0, diagnostics_period=0.5, merge_period=0.5
     )
     for name in NAMES:
         rig.add_robot(name, maps[name], views[name])
@@ -402,11 +416,16 @@ def test_with_sim_time_outputs_carry_input_stamps_and_staleness_follows_the_cloc
     assert rig.observer.diagnostic_stamps and all(
         _key(s) in sent | {map_stamp} for s in rig.observer.diagnostic_stamps
     )
-    # Sim time jumps 20 s in a moment of wall time: both robots go STALE at once.
-    started = time.monotonic()
-    tick(20.0)
+    # Sim time jumps 40 s (past stale_timeout, 30 s) while far less wall time passes than
+    # that: both robots go STALE at once (on the wall clock it would take 30 s).
+    last = max(sent)
+
+    def poses_in() -> bool:  # every pose sent has reached the merger (a busy machine queues)
+        return all(_key(merger.robots[r].pose_stamp) == last for r in NAMES)
+
+    assert rig.spin_until(poses_in, 20.0)
+    tick(40.0)
     assert rig.spin_until(
         lambda: all(status_of(rig, r).level == STALE for r in NAMES) or (tick(0.01) and False),
-        10.0,
+        20.0,
     )
-    assert time.monotonic() - started < 5.0  # far less than stale_timeout of wall time
