@@ -164,3 +164,19 @@ def test_robots_seeing_the_same_place_cast_it_once_with_the_same_cells() -> None
     one = occupancy_grid(ROOM, [(ROOM, views)], CONFIG, MergeConfig())
     two = occupancy_grid(ROOM, [(ROOM, views), (ROOM, views)], CONFIG, MergeConfig())
     np.testing.assert_array_equal(one.cells, two.cells)
+
+
+def test_where_the_robots_drove_is_free_even_where_no_laser_looked() -> None:
+    # A 20 m corridor, open at both ends, driven along its axis: straight ahead no wall
+    # bounds what was seen (nothing claimed there), but the path itself is free.
+    corridor = np.array([[0.0, -1.0, 20.0, -1.0], [0.0, 1.0, 20.0, 1.0]])
+    views = np.column_stack((np.arange(1.0, 19.0, 0.5), np.zeros(36), np.zeros(36)))
+    without = occupancy_grid(
+        corridor, [(corridor, views)], GridConfig(resolution=0.1, path_radius=0.0), MergeConfig()
+    )
+    with_path = occupancy_grid(corridor, [(corridor, views)], CONFIG, MergeConfig())
+    on_path = [(x, 0.0) for x in np.arange(1.05, 18.5, 0.1)]
+    assert any(cell_at(without, x, y) == UNKNOWN for x, y in on_path)
+    assert all(cell_at(with_path, x, y) == FREE for x, y in on_path)
+    assert cell_at(with_path, 10.0, 0.5) == FREE and cell_at(with_path, 10.0, 1.0) == OCCUPIED
+    assert with_path.height == 22  # the walls and one cell beyond: nothing outside

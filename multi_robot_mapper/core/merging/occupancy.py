@@ -3,7 +3,8 @@
 Occupied cells are the cells the global map's segments pass through. Free cells are what the
 robots saw: each placed robot's own map ray cast from its keyframe poses (:class:`MapViews`,
 the same views the merge judges links on), a cell being free when it lies nearer its viewpoint
-than the robot's own wall on that bearing, by one cell. Everything else is unknown. A bearing
+than the robot's own wall on that bearing, by one cell; and where the robots drove (within
+``path_radius`` of the path through their keyframes). Everything else is unknown. A bearing
 on which the robot's map has no wall within ``view_range`` (an open door, a hall wider than
 the range) claims nothing: a partial map carries no scans, and nothing says how far the laser
 saw there.
@@ -73,6 +74,14 @@ class GridConfig:
         doc="at most this many viewpoints per robot mark free space (evenly spread)",
         minimum=1,
         maximum=100_000,
+    )
+    path_radius: float = param(
+        0.25,
+        unit="m",
+        doc="cells this close to the path through a robot's keyframe poses are free (the robot "
+        "drove there; its laser does not see right beside and behind itself); 0: off",
+        minimum=0.0,
+        maximum=5.0,
     )
     view_field: float = param(
         1.5 * math.pi,
@@ -156,6 +165,9 @@ def occupancy_grid(
     )
     for own, poses in _thinned(views, config.view_spacing):
         _mark_free(cells, origin, resolution, MapViews.of(own, poses, view_config), view_config)
+    if config.path_radius > 0.0:
+        for _, poses in views:
+            _mark_path(cells, origin, resolution, poses, config.path_radius)
     if len(walls):
         # Samples at most half a cell apart touch every cell a segment passes through.
         wall_points, _ = sample_segments(walls, 0.5 * resolution)
@@ -208,6 +220,37 @@ def _cell_of(
     column = np.floor((points[:, 0] - origin[0]) / resolution).astype(np.int64)
     row = np.floor((points[:, 1] - origin[1]) / resolution).astype(np.int64)
     return column, row
+
+
+PATH_JUMP = 2.0  # m: keyframes farther apart than this were not joined by a drive
+
+
+def _mark_path(
+    cells: CellArray,
+    origin: tuple[float, float],
+    resolution: float,
+    poses: FloatArray,
+    radius: float,
+) -> None:
+    """Set to FREE every cell within ``radius`` of the path through consecutive keyframe
+    poses (where the robot drove; legs longer than PATH_JUMP are skipped)."""
+    poses = poses.reshape(-1, 3)
+    if len(poses) == 0:
+        return
+    legs = np.hstack((poses[:-1, :2], poses[1:, :2]))
+    legs = legs[np.hypot(legs[:, 2] - legs[:, 0], legs[:, 3] - legs[:, 1]) <= PATH_JUMP]
+    stops = np.hstack((poses[:, :2], poses[:, :2]))  # every keyframe, even a lone one
+    points, _ = sample_segments(np.vstack((legs, stops)), 0.5 * resolution)
+    reach = math.ceil(radius / resolution)
+    offsets = np.arange(-reach, reach + 1, dtype=np.int64)
+    d_col, d_row = (a.ravel() for a in np.meshgrid(offsets, offsets))
+    disc = np.hypot(d_col, d_row) * resolution <= radius
+    column, row = _cell_of(points, origin, resolution)
+    column = (column[:, None] + d_col[disc][None, :]).ravel()
+    row = (row[:, None] + d_row[disc][None, :]).ravel()
+    height, width = cells.shape
+    inside = (column >= 0) & (column < width) & (row >= 0) & (row < height)
+    cells[row[inside], column[inside]] = FREE
 
 
 def _mark_free(
