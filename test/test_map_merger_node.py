@@ -41,9 +41,8 @@ from multi_robot_mapper.core.simulation import (
 )
 from multi_robot_mapper.io.bags import (
     RobotRecording,
-    TimedPose,
-    TimedScan,
     read_recordings,
+    recording_of,
     write_recordings,
 )
 from multi_robot_mapper.io.messages import (
@@ -114,20 +113,7 @@ def _stamp(msg_stamp: object) -> tuple[int, int]:
 def simulated_bag(runs: dict[str, SimulatedRobot], folder: Path) -> dict[str, RobotRecording]:
     """The runs written to an mcap bag (``/<robot>/scan``, ``/<robot>/ground_truth``) and read
     back: what a user replays."""
-    recordings = {
-        name: RobotRecording(
-            name,
-            [
-                TimedScan(float(t), f"{name}/laser", scan)
-                for t, scan in zip(run.stamps, run.scans, strict=True)
-            ],
-            [
-                TimedPose(float(t), (float(p[0]), float(p[1]), float(p[2])), "world")
-                for t, p in zip(run.stamps, run.T_world_laser, strict=True)
-            ],
-        )
-        for name, run in runs.items()
-    }
+    recordings = {name: recording_of(name, run) for name, run in runs.items()}
     write_recordings(folder / "bag", recordings)
     return read_recordings(folder / "bag")
 

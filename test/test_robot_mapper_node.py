@@ -433,3 +433,62 @@ def test_main_exits_2_on_a_bad_partial_map_period(
     code = main(["robot_mapper", "--ros-args", "-p", "partial_map_period:=0.0"])
     assert code == 2
     assert "partial_map_period" in capsys.readouterr().err
+
+
+def test_diagnostics_report_rate_rejections_by_reason_and_staleness(ros_context) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from multi_robot_mapper.ros.diagnostics import OK, STALE, WARN
+
+    h = Harness(
+        ros_context,
+        parameter_overrides=[
+            Parameter("diagnostics_period", value=0.1),
+            Parameter("stale_timeout", value=0.6),
+        ],
+    )
+    arrays: list[DiagnosticArray] = []
+    h.driver.create_subscription(DiagnosticArray, "/diagnostics", arrays.append, 50)
+    try:
+        for k in range(8):
+            h.send_good(100.0 + k / 40.0)  # stamps at 40 Hz, whatever the wall clock does
+        bad_scan = bad(**BAD_SCANS["range_max_below_min"][0])
+        bad_scan.header.stamp = stamp_from_seconds(100.5)
+        h.send(bad_scan)
+
+        def latest():
+            return arrays[-1].status[0] if arrays else None
+
+        assert spin_until(h.executor, lambda: latest() is not None and latest().level == WARN, 5.0)
+        status = latest()
+        values = {kv.key: kv.value for kv in status.values}
+        assert status.name == "robot1/robot_mapper" and status.hardware_id == "robot1"
+        assert values["rejected: range_limits"] == "1" and values["scans received"] == "9"
+        assert float(values["scan rate (Hz)"]) == pytest.approx(
+            8 / 0.5, rel=0.01
+        )  # 9 stamps over 0.5 s
+        assert arrays[-1].header.stamp == bad_scan.header.stamp  # the newest input's stamp
+        h.send_good(100.6)
+        assert spin_until(h.executor, lambda: latest().level == OK, 5.0)
+        # Silence: STALE after stale_timeout (node clock), the counts stay.
+        assert spin_until(h.executor, lambda: latest().level == STALE, 5.0)
+        assert "no scan for" in latest().message
+    finally:
+        h.close()
+
+
+def test_max_scan_rate_maps_every_nth_scan_of_a_fast_laser_and_counts_the_rest(
+    ros_context,
+) -> None:
+    h = Harness(ros_context, parameter_overrides=[Parameter("max_scan_rate", value=10.0)])
+    try:
+        for k in range(12):  # 40 Hz stamps: 0, 4 and 8 are mapped
+            msg = scan_to_msg(room_scan(), "robot1/laser", stamp_from_seconds(50.0 + k / 40.0))
+            h.send(msg)
+        assert h.mapper.scans_received == 12 and h.mapper.scans_skipped == 9
+        assert h.mapper.mapper.scans_accepted == 3
+        assert [seconds_from_stamp(m.header.stamp) for m in h.received] == pytest.approx(
+            [50.0, 50.1, 50.2]
+        )
+    finally:
+        h.close()

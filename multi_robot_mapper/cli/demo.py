@@ -1,137 +1,336 @@
-"""``mrm demo``: simulated Hokuyo scans through a real ``robot_mapper`` node, and a picture.
+"""``mrm demo``: three simulated robots mapped live, merged into one map, drawn and scored.
 
-The scan source is the project's own simulator (a built-in office world); the node runs
-in-process and its ``scan_segments`` output is drawn at the simulator's true laser poses, so the
-picture shows what the front end extracts along a whole run.
+The scenario: three robots drive partly overlapping stretches of the built-in office world
+(``core/simulation.py``), each with a simulated Hokuyo UTM-30LX (40 Hz, 1081 beams, 270°),
+starting ``stagger`` seconds apart, none knowing where the others are. Their scans are
+published live on ``/robotK/scan`` at the laser's own rate (``--speed`` plays faster or
+slower) into real ``robot_mapper`` nodes and a real ``map_merger`` spun in this process over
+real DDS topics, with the shipped default parameters. Everything drawn and scored comes back
+over the nodes' topics (``/global_map``, ``/robot_frames/<robot>``, ``/<robot>/pose``,
+``/<robot>/partial_map``, ``/global_grid``, ``/diagnostics``).
+
+Written to ``--out``: ``bag/`` (the simulated scans and ground truth), ``result/`` (map.json,
+robots.json, trajectories, metrics.json: what ``mrm replay`` writes, so ``mrm evaluate
+result --bag bag`` scores it again), ``global_map.png``, ``joining.png`` (snapshots as robots
+join), ``joining.gif``, ``global_grid.png`` and ``saved_map.json`` (the merger's
+``save_map``).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import shutil
+import threading
 import time
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
-from sensor_msgs.msg import LaserScan
-from visualization_msgs.msg import Marker
+from rclpy.parameter import Parameter
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.extraction import extract_segments
-from multi_robot_mapper.core.geometry import split_stamp
-from multi_robot_mapper.core.scan import scan_points
-from multi_robot_mapper.core.simulation import (
-    ROUTES,
-    WORLDS,
-    LaserModel,
-    _arc_length,
-    drive_path,
-    simulate_scan,
-)
+from multi_robot_mapper.core.simulation import WORLDS, LaserModel, SimulatedRobot, simulate_robots
+from multi_robot_mapper.evaluation.metrics import Metrics, evaluate
 from multi_robot_mapper.io import pictures
-from multi_robot_mapper.io.messages import scan_to_msg, segments_from_marker, stamp_from_seconds
-from multi_robot_mapper.ros.robot_mapper import RobotMapper
-from multi_robot_mapper.ros.testing import isolated_context, spin_until
+from multi_robot_mapper.io.bags import RobotRecording, recording_of, write_recordings
+from multi_robot_mapper.io.results import ReplayResult, write_results
+from multi_robot_mapper.ros.live import GlobalMapView, Observer, PlayStats, ScanPlayer, timeline
+from multi_robot_mapper.ros.map_merger import MapMerger
+from multi_robot_mapper.ros.markers import grid_from_msg
+from multi_robot_mapper.ros.processes import NodeProcesses
+from multi_robot_mapper.ros.testing import default_domain_id, isolated_context
+
+FloatArray = np.typing.NDArray[np.float64]
+LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
 
 
-@dataclass
+@dataclasses.dataclass(frozen=True)
+class DemoScenario:
+    """What the demo simulates and how it plays it."""
+
+    world: str = "office"
+    robots: int = 3
+    duration: float = 20.0  # s of driving per robot (0.8 m/s)
+    stagger: float = 6.0  # s between one robot's first scan and the next one's
+    seed: int = 0
+    speed: float = 1.0  # play speed: 1 = in real time, at the laser's rate
+    settle_timeout: float = 30.0  # s after the last scan for the last maps to be merged
+
+    @property
+    def names(self) -> list[str]:
+        return [f"robot{k + 1}" for k in range(self.robots)]
+
+
+@dataclasses.dataclass
+class LiveOutcome:
+    """What came back over the topics while the scenario played."""
+
+    observer: Observer
+    play: PlayStats
+    play_started: float  # time.monotonic() of the first scan
+    scans_received: dict[str, int]  # as each robot_mapper's last /diagnostics said
+    settled: bool  # every final partial map was merged before settle_timeout
+
+
+@dataclasses.dataclass
 class DemoResult:
-    scans_sent: int
-    scans_answered: int
-    segments_per_scan: list[int]
-    latency_s: list[float]
-    picture: Path
+    robots: list[str]
+    merged: list[str]
+    metrics: Metrics
+    table: str
+    files: dict[str, Path]
+    live: LiveOutcome
+    statuses: list[str]  # the merger's last /diagnostics, one line per robot
+    wall_s: float
 
 
-def run_demo(out_dir: Path, world: str = "office", seed: int = 0, every: int = 4) -> DemoResult:
-    """Simulate one robot, run its scans through a robot_mapper node, draw what comes back."""
-    walls = WORLDS[world]()
-    laser = LaserModel()
-    rng = np.random.default_rng(seed)
-    route = np.asarray(ROUTES[world], dtype=np.float64)
-    speed = 1.0  # m/s, once along the route
-    duration = float(_arc_length(route)[-1]) / speed
-    poses = drive_path(route, speed, laser.rate, duration)[::every]
-    received: dict[tuple[int, int], np.ndarray] = {}
-    latency: list[float] = []
-    sent_at: dict[tuple[int, int], float] = {}
+def simulate_scenario(scenario: DemoScenario) -> dict[str, RobotRecording]:
+    """The robots' scans and true poses, robot k starting ``k * stagger`` s after robot 1."""
+    runs = simulate_robots(
+        scenario.world, scenario.robots, LaserModel(), scenario.seed, scenario.duration
+    )
+    late = [
+        SimulatedRobot(run.stamps + k * scenario.stagger, run.T_world_laser, run.scans)
+        for k, run in enumerate(runs)
+    ]
+    return {name: recording_of(name, run) for name, run in zip(scenario.names, late, strict=True)}
 
-    with isolated_context() as context:
-        node = RobotMapper(context=context, namespace="robot1")
-        client = Node("demo_driver", context=context, namespace="robot1")
-        scan_pub = client.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
 
-        def on_segments(msg: Marker) -> None:
-            key = (msg.header.stamp.sec, msg.header.stamp.nanosec)
-            received[key] = segments_from_marker(msg)
-            if key in sent_at:
-                latency.append(time.monotonic() - sent_at[key])
+def play_live(
+    recordings: dict[str, RobotRecording],
+    scenario: DemoScenario,
+    saved_map: Path,
+    log_dir: Path | None = None,
+) -> LiveOutcome:
+    """Play the recordings live into a robot_mapper process per robot (as on the robots) and
+    a map_merger in this process, watch their topics; the merger saves its map to
+    ``saved_map`` at the end."""
+    robots = list(recordings)
+    domain = default_domain_id()
+    mappers = NodeProcesses.robot_mappers(robots, domain, log_dir=log_dir)
+    try:
+        with isolated_context(domain) as context:
+            merger = MapMerger(
+                context=context, parameter_overrides=[Parameter("robots", value=",".join(robots))]
+            )
+            observer = Observer(robots, context=context)
+            driver = Node("demo_player", context=context)
+            player = ScanPlayer(driver, robots, scenario.speed)
+            executor = MultiThreadedExecutor(num_threads=3, context=context)
+            for node in (merger, observer, driver):
+                executor.add_node(node)
+            spinner = threading.Thread(target=executor.spin, daemon=True)
+            spinner.start()
+            try:
+                if not _wait(player.subscribed, 30.0):
+                    raise RuntimeError(
+                        "the robot_mapper processes did not subscribe to their scans within "
+                        f"30 s (running: {mappers.running()}; logs: {log_dir})"
+                    )
+                started = time.monotonic()
+                scans = {r: rec.scans for r, rec in recordings.items()}
+                stats = player.play(timeline(scans, 0.025))
+                done = _wait(lambda: _settled(merger, observer), scenario.settle_timeout)
+                time.sleep(1.5)  # the last global map, frames and diagnostics arrive
+                merger.save_map(str(saved_map))
+            finally:
+                executor.shutdown()
+                spinner.join(timeout=10.0)
+                for node in (merger, observer, driver):
+                    node.destroy_node()
+    finally:
+        mappers.stop()
+    received = {
+        robot: int(observer.status_value(f"{robot}/robot_mapper", "scans received") or 0)
+        for robot in robots
+    }
+    return LiveOutcome(observer, stats, started, received, done)
 
-        client.create_subscription(Marker, "scan_segments", on_segments, QoSProfile(depth=50))
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        executor.add_node(client)
-        spin_until(executor, lambda: scan_pub.get_subscription_count() > 0, timeout=10.0)
 
-        keys: list[tuple[int, int]] = []
-        scans = []
-        for i, pose in enumerate(poses):
-            scan = simulate_scan(walls, tuple(pose), laser, rng)
-            seconds = 100.0 + i * every / laser.rate
-            key = split_stamp(seconds)
-            stamp = stamp_from_seconds(seconds)
-            keys.append(key)
-            scans.append(scan)
-            sent_at[key] = time.monotonic()
-            scan_pub.publish(scan_to_msg(scan, "robot1/laser", stamp, 1.0 / laser.rate))
-            spin_until(executor, lambda k=key: k in received, timeout=2.0)
-        executor.shutdown()
-        node.destroy_node()
-        client.destroy_node()
+QUIET_S = 2.5  # no partial map for this long after the last scan: every final map is out
 
-    fig, (ax_map, ax_scan) = pictures.plt.subplots(1, 2, figsize=(15, 6.5), width_ratios=[1.6, 1.0])
-    pictures.draw_segments(ax_map, walls, "0.75", width=4.0, label="simulated walls")
-    placed = []
-    for key, pose in zip(keys, poses, strict=True):
-        if key in received and len(received[key]):
-            T_world_laser = se2.matrix_from_pose(*pose)
-            placed.append(se2.transform_segments(T_world_laser, received[key]))
-    if placed:
-        pictures.draw_segments(
-            ax_map, np.vstack(placed), pictures.PALETTE[0], width=0.6, label="robot_mapper segments"
+
+def _settled(merger: MapMerger, observer: Observer) -> bool:
+    """Every robot's newest partial map (as the observer saw it) is in the merger's last
+    merge, and no robot has published a map for QUIET_S."""
+    now = time.monotonic()
+    if not observer.partial_maps or any(
+        now - observer.partial_map_times[r] < QUIET_S for r in observer.partial_maps
+    ):
+        return False
+    with merger._lock:
+        stamps = {n: s.map_stamp for n, s in merger.robots.items()}
+    newest = {r: m.markers[0].header.stamp for r, m in observer.partial_maps.items() if m.markers}
+    return merger.up_to_date() and all(stamps.get(r) == stamp for r, stamp in newest.items())
+
+
+def _wait(condition: object, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():  # type: ignore[operator]
+            return True
+        time.sleep(0.05)
+    return bool(condition())  # type: ignore[operator]
+
+
+def live_results(observer: Observer) -> ReplayResult:
+    """The live outputs in the replay result layout: the global map as the merger last
+    published it, each robot's poses moved into ``map`` by its frame (in its own frame when
+    unmerged) and the robot frames."""
+    robots = sorted(observer.robots)
+    last = observer.global_maps[-1] if observer.global_maps else None
+    pieces = [] if last is None else [(r, s) for r, s in last.segments.items() if r in robots]
+    segments = np.vstack([s for _, s in pieces]) if pieces else np.zeros((0, 4))
+    owners = np.concatenate(
+        [np.full(len(s), robots.index(r), dtype=np.int64) for r, s in pieces]
+        or [np.zeros(0, dtype=np.int64)]
+    )
+    frames: dict[str, tuple[float, float, float] | None] = {}
+    trajectories = {}
+    for robot in robots:
+        placement = observer.placement(robot)
+        stamps, poses = observer.trajectory(robot)
+        if placement is not None:
+            poses = _moved(se2.matrix_from_pose(*placement), poses)
+            frames[robot] = (float(placement[0]), float(placement[1]), float(placement[2]))
+        else:
+            frames[robot] = None
+        trajectories[robot] = (stamps, poses)
+    return ReplayResult("pivot (live)", robots, segments, owners, trajectories, frames, {})
+
+
+def _moved(T_map_robot: FloatArray, poses: FloatArray) -> FloatArray:
+    matrices = [T_map_robot @ se2.matrix_from_pose(*p) for p in poses]
+    return np.array([se2.pose_from_matrix(T) for T in matrices]).reshape(-1, 3)
+
+
+def run_demo(out_dir: Path, scenario: DemoScenario | None = None) -> DemoResult:
+    """The whole demo: simulate, play live, collect, score, draw."""
+    from multi_robot_mapper.cli.evaluate import build_inputs, format_table
+
+    begun = time.monotonic()
+    scenario = scenario or DemoScenario()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    recordings = simulate_scenario(scenario)
+    bag = out_dir / "bag"
+    if bag.exists():
+        shutil.rmtree(bag)  # the demo's own bag from an earlier run
+    write_recordings(bag, recordings)
+    files = {"bag": bag, "saved map": out_dir / "saved_map.json"}
+    files["logs"] = out_dir / "logs"
+    live = play_live(recordings, scenario, files["saved map"], files["logs"])
+
+    result = live_results(live.observer)
+    files["result"] = out_dir / "result"
+    write_results(files["result"], result)
+    inputs = build_inputs(result, recordings)
+    metrics = evaluate(
+        inputs.tracks, result.map_segments, inputs.reference_points, result.robot_frames
+    )
+    import json
+
+    (files["result"] / "metrics.json").write_text(json.dumps(metrics.to_dict(), indent=1) + "\n")
+    table = format_table(metrics, result.method)
+    files.update(draw_demo(out_dir, scenario, live, result, metrics))
+    merged = [r for r in result.robots if result.robot_frames[r] is not None]
+    statuses = [
+        f"{status.name}: {LEVELS.get(status.level[0], '?')} - {status.message}"
+        for name, status in sorted(live.observer.diagnostics.items())
+        if name.startswith("map_merger")
+    ]
+    return DemoResult(
+        result.robots, merged, metrics, table, files, live, statuses, time.monotonic() - begun
+    )
+
+
+def draw_demo(
+    out_dir: Path,
+    scenario: DemoScenario,
+    live: LiveOutcome,
+    result: ReplayResult,
+    metrics: Metrics,
+) -> dict[str, Path]:
+    """global_map.png, joining.png, joining.gif and global_grid.png."""
+    observer = live.observer
+    colors = pictures.robot_colors(result.robots)
+    files: dict[str, Path] = {}
+    merged = {r: s for r, s in _by_robot(result).items() if result.robot_frames[r] is not None}
+    unmerged = {r: observer.partial_map(r) for r in result.robots if r not in merged}
+    paths = {r: result.trajectories[r][1][:, :2] for r in result.robots}
+    walls_world = WORLDS[scenario.world]()
+    walls = se2.transform_segments(se2.invert(metrics.T_ref_map), walls_world) if merged else None
+    title = (
+        f"global map (frame 'map'): {len(merged)} of {len(result.robots)} robots merged live, "
+        f"{len(result.map_segments)} segments"
+    )
+    figure = pictures.draw_global_map(
+        merged,
+        {r: p for r, p in paths.items() if r in merged},
+        unmerged,
+        {r: p for r, p in paths.items() if r in unmerged},
+        colors,
+        title,
+        walls,
+    )
+    files["global map"] = pictures.save_figure(figure, out_dir / "global_map.png")
+    views = observer.global_maps
+    if views:
+        extent = pictures.segments_extent([s for v in views for s in v.segments.values()])
+        snapshots = [_titled(v, live.play_started) for v in joining_views(views)]
+        figure = pictures.draw_snapshots(snapshots, colors, extent)
+        files["snapshots"] = pictures.save_figure(figure, out_dir / "joining.png")
+        frames = [_titled(v, live.play_started) for v in every_second(views)]
+        files["animation"] = pictures.animate_snapshots(
+            frames, colors, extent, out_dir / "joining.gif"
         )
-    ax_map.plot(
-        poses[:, 0], poses[:, 1], color=pictures.PALETTE[1], linewidth=1.0, label="robot path"
-    )
-    ax_map.legend(loc="upper left", fontsize=8)
-    pictures.finish_metric_axes(
-        ax_map,
-        f"{len(placed)} scans' segments from robot_mapper, drawn at the simulator's true poses",
-        pictures.segments_extent([walls]),
-    )
-    # One scan in the laser frame: raw points and the segments fitted to them.
-    pick = len(scans) // 3
-    valid = scan_points(scans[pick])
-    local = extract_segments(valid.points, node.config.extraction)
-    ax_scan.plot(
-        valid.points[:, 0], valid.points[:, 1], ".", color="0.5", markersize=2, label="scan points"
-    )
-    pictures.draw_segments(
-        ax_scan, local.segments, pictures.PALETTE[0], width=2.0, label="segments"
-    )
-    ends = local.segments.reshape(-1, 2)
-    ax_scan.plot(ends[:, 0], ends[:, 1], "o", color=pictures.PALETTE[0], markersize=3)
-    ax_scan.plot(
-        [0], [0], marker=(3, 0, -90), color=pictures.PALETTE[1], markersize=12, label="laser"
-    )
-    ax_scan.legend(loc="upper left", fontsize=8)
-    pictures.finish_metric_axes(
-        ax_scan,
-        f"scan {pick} in the laser frame: {len(local)} segments",
-        pictures.segments_extent([local.segments]),
-    )
-    picture = pictures.save_figure(fig, out_dir / "demo_segments.png")
-    counts = [len(received[k]) for k in keys if k in received]
-    return DemoResult(len(keys), len(counts), counts, latency, picture)
+    if observer.grid is not None:
+        grid = grid_from_msg(observer.grid)
+        known = np.count_nonzero(grid.cells >= 0)
+        figure = pictures.draw_grid(
+            grid.cells,
+            grid.origin,
+            grid.resolution,
+            f"global_grid: {grid.width} x {grid.height} cells of {grid.resolution:g} m, "
+            f"{known} known",
+        )
+        files["occupancy grid"] = pictures.save_figure(figure, out_dir / "global_grid.png")
+    return files
+
+
+def _by_robot(result: ReplayResult) -> dict[str, FloatArray]:
+    return {
+        robot: result.map_segments[result.segment_robot == index]
+        for index, robot in enumerate(result.robots)
+    }
+
+
+def joining_views(views: Sequence[GlobalMapView]) -> list[GlobalMapView]:
+    """The first global map, the first one showing each further robot, and the last."""
+    chosen: list[GlobalMapView] = []
+    shown = 0
+    for view in views:
+        if len(view.segments) > shown:
+            shown = len(view.segments)
+            chosen.append(view)
+    if views and (not chosen or chosen[-1] is not views[-1]):
+        chosen.append(views[-1])
+    return chosen
+
+
+def every_second(views: Sequence[GlobalMapView], spacing: float = 1.0) -> list[GlobalMapView]:
+    """Global maps at least ``spacing`` s apart (and the last)."""
+    chosen: list[GlobalMapView] = []
+    for view in views:
+        if not chosen or view.received_s - chosen[-1].received_s >= spacing:
+            chosen.append(view)
+    if views and chosen[-1] is not views[-1]:
+        chosen.append(views[-1])
+    return chosen
+
+
+def _titled(view: GlobalMapView, started: float) -> tuple[str, dict[str, FloatArray]]:
+    names = ", ".join(sorted(view.segments)) or "nobody"
+    return (f"t = {view.received_s - started:.0f} s: {names} in the map", view.segments)

@@ -15,7 +15,6 @@ from typing import Any
 from multi_robot_mapper.cli.common import CliError
 from multi_robot_mapper.core.extraction import ExtractionConfig
 from multi_robot_mapper.core.simulation import ROUTES, LaserModel, simulate_robots
-from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan
 
 DEFAULT_LASER = LaserModel()  # Hokuyo UTM-30LX
 DEFAULT_DURATION_S = 20.0  # about 16 m of driving per robot at the default speed
@@ -58,7 +57,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from multi_robot_mapper.io.bags import write_recordings
+    from multi_robot_mapper.io.bags import recording_of, write_recordings
 
     if args.robots < 1:
         raise CliError(f"--robots must be at least 1, got {args.robots}")
@@ -85,21 +84,7 @@ def run(args: argparse.Namespace) -> int:
         duration=args.duration,
         speed=SPEED_M_S,
     )
-    recordings: dict[str, RobotRecording] = {}
-    for k, robot in enumerate(runs):
-        name = f"robot{k + 1}"
-        stamps = robot.stamps.tolist()
-        recordings[name] = RobotRecording(
-            name=name,
-            scans=[
-                TimedScan(t, f"{name}/laser", scan)
-                for t, scan in zip(stamps, robot.scans, strict=True)
-            ],
-            ground_truth=[
-                TimedPose(t, (x, y, theta), "world")
-                for t, (x, y, theta) in zip(stamps, robot.T_world_laser.tolist(), strict=True)
-            ],
-        )
+    recordings = {f"robot{k + 1}": recording_of(f"robot{k + 1}", run) for k, run in enumerate(runs)}
     write_recordings(out, recordings, storage=args.storage)
     count = sum(len(r.scans) for r in recordings.values())
     print(

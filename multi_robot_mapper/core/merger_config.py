@@ -6,6 +6,7 @@ import dataclasses
 
 from multi_robot_mapper.core.config import ConfigError, param, validate
 from multi_robot_mapper.core.merging import MergeConfig
+from multi_robot_mapper.core.merging.occupancy import GridConfig
 
 METHODS = ("pivot", "ffs")
 IMPLEMENTED_METHODS = ("pivot",)
@@ -72,6 +73,50 @@ class MapMergerConfig:
         "most once per this period",
         minimum=0.0,
     )
+    stale_timeout: float = param(
+        5.0,
+        unit="s",
+        doc="a robot whose partial map and pose have not arrived for this long is STALE in "
+        "/diagnostics (its map stays in the global map; node clock: sim time when "
+        "use_sim_time is set)",
+        minimum=0.0,
+        maximum=86400.0,
+        exclusive_minimum=True,
+    )
+    diagnostics_period: float = param(
+        1.0,
+        unit="s",
+        doc="how often every robot's status (OK merged / WARN unmerged / STALE silent, pose "
+        "rate, merge score) goes out on /diagnostics",
+        minimum=0.0,
+        maximum=3600.0,
+        exclusive_minimum=True,
+    )
+    map_file: str = param(
+        "~/.ros/multi_robot_mapper/global_map.json",
+        unit="",
+        doc="file the save_map and load_map services (std_srvs/Trigger) write and read: every "
+        "robot's partial map and placement, and the global map",
+    )
+    save_on_shutdown: bool = param(
+        False, unit="", doc="save the map to map_file when the node shuts down"
+    )
+    load_on_start: bool = param(
+        False,
+        unit="",
+        doc="load map_file at start-up when it exists (live robots' maps then replace the "
+        "saved ones of the same session)",
+    )
+    keep_sessions: int = param(
+        2,
+        unit="",
+        doc="a robot that restarts (its map begins again with another first keyframe) keeps "
+        "its earlier maps as '<robot>_session<k>', merged like any robot; at most this many "
+        "per robot (the oldest goes first)",
+        minimum=0,
+        maximum=100,
+    )
+    grid: GridConfig = dataclasses.field(default_factory=GridConfig)
     merge: MergeConfig = dataclasses.field(default_factory=MergeConfig)
 
     def __post_init__(self) -> None:

@@ -39,6 +39,7 @@ from multi_robot_mapper.core.geometry import (
     yaw_from_quaternion,
 )
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.simulation import SimulatedRobot
 
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
@@ -113,6 +114,22 @@ class RobotRecording:
     name: str  # the topic namespace: "robot1" for /robot1/scan
     scans: list[TimedScan]
     ground_truth: list[TimedPose] = field(default_factory=list)
+
+
+def recording_of(name: str, run: SimulatedRobot) -> RobotRecording:
+    """A simulated run as a robot's recording: scans in frame ``<name>/laser`` and the true
+    laser poses as ground truth in ``world``."""
+    stamps = run.stamps.tolist()
+    return RobotRecording(
+        name=name,
+        scans=[
+            TimedScan(t, f"{name}/laser", scan) for t, scan in zip(stamps, run.scans, strict=True)
+        ],
+        ground_truth=[
+            TimedPose(t, (x, y, theta), "world")
+            for t, (x, y, theta) in zip(stamps, run.T_world_laser.tolist(), strict=True)
+        ],
+    )
 
 
 @lru_cache(maxsize=1)

@@ -84,6 +84,37 @@ def params_file_header(node: str) -> str:
 def default_params_file(config_class: type, node: str = "robot_mapper") -> str:
     """A ROS 2 params file holding every parameter of ``config_class`` at its default, each
     with its unit and meaning as a comment (``config/<node>.yaml`` is this text)."""
+    return params_file_header(node) + "/**:\n" + _parameters_section(config_class)
+
+
+SYSTEM_PARAMS_FILE = "multi_robot_mapper.yaml"
+
+
+def system_params_file() -> str:
+    """Both nodes' parameters in one params file, a section per node name in any namespace
+    (``/**/robot_mapper``, ``/**/map_merger``): ``config/multi_robot_mapper.yaml``, for
+    ``mrm run``, the launch file and ``ros2 run`` of either node."""
+    from multi_robot_mapper.core.mapper_config import RobotMapperConfig
+    from multi_robot_mapper.core.merger_config import MapMergerConfig
+
+    header = (
+        "# Parameters of every node of multi_robot_mapper (ROS 2 params-file layout), one\n"
+        "# section per node name in any namespace. Generated from the dataclass defaults by\n"
+        "# `make config` (a test keeps it equal). Use: mrm run --robots robot1,robot2\n"
+        f"#   --params-file config/{SYSTEM_PARAMS_FILE}, the launch file, or\n"
+        "#   ros2 run multi_robot_mapper <node> --ros-args --params-file <this file>\n"
+    )
+    return (
+        header
+        + "/**/robot_mapper:\n"
+        + _parameters_section(RobotMapperConfig)
+        + "/**/map_merger:\n"
+        + _parameters_section(MapMergerConfig)
+    )
+
+
+def _parameters_section(config_class: type) -> str:
+    """``  ros__parameters:`` and every field of ``config_class`` at its default."""
     from multi_robot_mapper.core.config import field_specs
 
     def scalar(value: Any) -> str:
@@ -107,7 +138,7 @@ def default_params_file(config_class: type, node: str = "robot_mapper") -> str:
         rows.append((f"{indent}{parts[-1]}: {scalar(spec.default)}", f"# {unit}{spec.doc}"))
     width = max(len(text) for text, comment in rows if comment is not None) + 1
     body = [text if comment is None else f"{text.ljust(width)}{comment}" for text, comment in rows]
-    return params_file_header(node) + "/**:\n  ros__parameters:\n" + "\n".join(body) + "\n"
+    return "  ros__parameters:\n" + "\n".join(body) + "\n"
 
 
 if __name__ == "__main__":  # `make config`: rewrite both nodes' params files in the folder given
@@ -123,3 +154,4 @@ if __name__ == "__main__":  # `make config`: rewrite both nodes' params files in
     ):
         text = default_params_file(config_class, node)
         (folder / f"{node}.yaml").write_text(text, encoding="utf-8")
+    (folder / SYSTEM_PARAMS_FILE).write_text(system_params_file(), encoding="utf-8")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
@@ -11,6 +12,7 @@ from sensor_msgs.msg import LaserScan
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.geometry import (
     quaternion_from_yaw,
     split_stamp,
@@ -204,3 +206,38 @@ def keyframes_from_markers(array: MarkerArray) -> list[Keyframe]:
     map_frame = first[0] if first else None
     keyframes = [keyframe_from_marker(m, map_frame) for m in markers]
     return sorted(keyframes, key=lambda kf: kf.index)
+
+
+@dataclasses.dataclass(frozen=True)
+class PartialMapContents:
+    """A ``partial_map`` MarkerArray as the merger uses it."""
+
+    segments: FloatArray  # (N, 4) in the robot's map frame (each keyframe's moved by its pose)
+    keyframe_poses: FloatArray  # (K, 3) where the robot's laser stood: its free space's viewpoints
+    session: float | None  # stamp of keyframe 0 (s): a new value means the robot started again
+    stamp: Time | None  # header stamp (the newest scan in the map); None for an empty array
+    frame_id: str  # the robot's map frame ("" for an empty array)
+
+
+def partial_map_contents(msg: MarkerArray) -> PartialMapContents:
+    """The segments, keyframe poses and session of a ``partial_map`` MarkerArray: its main
+    piece (the robot's map frame); keyframes of a piece started when the robot was lost lie
+    in frames of their own until the robot's mapper joins them."""
+    every = keyframes_from_markers(msg)
+    keyframes = [kf for kf in every if kf.piece == 0]
+    pieces = [
+        se2.transform_segments(se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments)
+        for kf in keyframes
+        if len(kf.segments)
+    ]
+    poses = np.array([kf.T_robotmap_keyframe for kf in keyframes], dtype=np.float64)
+    first = next((kf for kf in every if kf.index == 0), None)
+    markers = msg.markers
+    stamps = [m.header.stamp for m in markers]
+    return PartialMapContents(
+        segments=np.vstack(pieces) if pieces else np.zeros((0, 4)),
+        keyframe_poses=poses.reshape(-1, 3),
+        session=None if first is None else float(first.stamp),
+        stamp=max(stamps, key=lambda s: (s.sec, s.nanosec)) if stamps else None,
+        frame_id=next((m.header.frame_id for m in markers if int(m.id) == 0), ""),
+    )

@@ -100,3 +100,124 @@ def draw_map(
         ax.legend(loc="upper right", fontsize=8, title="dashed: path, dot: start")
     finish_metric_axes(ax, title, extent)
     return fig
+
+
+def robot_colors(robots: Sequence[str]) -> dict[str, str]:
+    """One colour per robot, by its place in ``robots``."""
+    return {robot: PALETTE[index % len(PALETTE)] for index, robot in enumerate(robots)}
+
+
+def draw_robot_maps(
+    ax: Axes,
+    maps: dict[str, FloatArray],
+    paths: dict[str, FloatArray],
+    colors: dict[str, str],
+    title: str,
+    walls: FloatArray | None = None,
+    extent: FloatArray | None = None,
+) -> None:
+    """Robots' segment maps (and their paths, dashed, start dotted) on one metric axes, over
+    ``walls`` in light grey when given."""
+    if walls is not None and len(walls):
+        draw_segments(ax, walls, "0.85", width=3.0, label="true walls")
+    for robot, segments in maps.items():
+        if len(segments):
+            label = f"{robot} ({len(segments)} segments)"
+            draw_segments(ax, segments, colors[robot], width=0.9, label=label)
+        path = paths.get(robot)
+        if path is not None and len(path):
+            ax.plot(path[:, 0], path[:, 1], color=colors[robot], linewidth=0.8, linestyle="--")
+            ax.plot(path[0, 0], path[0, 1], "o", color=colors[robot], markersize=4)
+    if maps:
+        ax.legend(loc="upper right", fontsize=7)
+    if extent is None:
+        extent = segments_extent([*maps.values(), *(np.hstack((p, p)) for p in paths.values())])
+    finish_metric_axes(ax, title, extent)
+
+
+def draw_global_map(
+    merged: dict[str, FloatArray],
+    merged_paths: dict[str, FloatArray],
+    unmerged: dict[str, FloatArray],
+    unmerged_paths: dict[str, FloatArray],
+    colors: dict[str, str],
+    title: str,
+    walls: FloatArray | None = None,
+) -> Figure:
+    """The merged robots in one frame (``map``); each unmerged robot in a panel of its own,
+    in its own map frame, labelled so."""
+    panels = 1 + len(unmerged)
+    fig, axes = plt.subplots(1, panels, figsize=(9 + 5 * (panels - 1), 7), squeeze=False)
+    draw_robot_maps(axes[0, 0], merged, merged_paths, colors, title, walls)
+    for ax, (robot, segments) in zip(axes[0, 1:], unmerged.items(), strict=True):
+        draw_robot_maps(
+            ax,
+            {robot: segments},
+            {robot: unmerged_paths.get(robot, np.zeros((0, 2)))},
+            colors,
+            f"{robot}: UNMERGED (its own map frame, not placed in map)",
+        )
+    return fig
+
+
+def draw_snapshots(
+    snapshots: Sequence[tuple[str, dict[str, FloatArray]]],
+    colors: dict[str, str],
+    extent: FloatArray,
+) -> Figure:
+    """A strip of global maps, left to right, each titled (e.g. when robots joined)."""
+    fig, axes = plt.subplots(1, len(snapshots), figsize=(5.5 * len(snapshots), 4.5), squeeze=False)
+    for ax, (title, maps) in zip(axes[0], snapshots, strict=True):
+        draw_robot_maps(ax, maps, {}, colors, title, extent=extent)
+    return fig
+
+
+def animate_snapshots(
+    frames: Sequence[tuple[str, dict[str, FloatArray]]],
+    colors: dict[str, str],
+    extent: FloatArray,
+    path: str | Path,
+    fps: float = 4.0,
+) -> Path:
+    """The global maps as an animated GIF, one frame each (written under a temporary name)."""
+    from matplotlib.animation import PillowWriter
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(f".{path.stem}.part{path.suffix}")
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    writer = PillowWriter(fps=fps)
+    with writer.saving(fig, str(temporary), dpi=80):
+        for title, maps in frames:
+            ax.clear()
+            draw_robot_maps(ax, maps, {}, colors, title, extent=extent)
+            writer.grab_frame()
+    plt.close(fig)
+    temporary.replace(path)
+    return path
+
+
+def draw_grid(
+    cells: np.typing.NDArray[np.int8], origin: tuple[float, float], resolution: float, title: str
+) -> Figure:
+    """An occupancy grid: unknown grey, free white, occupied black."""
+    shades = np.full(cells.shape, 0.75)
+    shades[cells == 0] = 1.0
+    shades[cells >= 50] = 0.0
+    height, width = cells.shape
+    extent = np.array(
+        [origin[0], origin[1], origin[0] + width * resolution, origin[1] + height * resolution]
+    )
+    size = float(np.clip(max(extent[2] - extent[0], extent[3] - extent[1]) / 3.0, 6.0, 14.0))
+    fig, ax = plt.subplots(figsize=(size, size * 0.75))
+    ax.imshow(
+        shades,
+        cmap="gray",
+        vmin=0.0,
+        vmax=1.0,
+        origin="lower",
+        extent=(extent[0], extent[2], extent[1], extent[3]),
+        interpolation="nearest",
+    )
+    finish_metric_axes(ax, title, extent)
+    return fig

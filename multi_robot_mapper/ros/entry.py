@@ -1,9 +1,9 @@
-"""The console entry points' common life cycle: init, build the node, spin, shut down."""
+"""The console entry points' common life cycle: init, build the nodes, spin, shut down."""
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
@@ -12,22 +12,24 @@ from rclpy.node import Node
 from multi_robot_mapper.core.config import ConfigError
 
 
-def run_node(
+def run_nodes(
     program: str,
-    make_node: Callable[[], Node],
+    make_nodes: Callable[[], Sequence[Node]],
     args: list[str] | None = None,
     make_executor: Callable[[], Executor] = SingleThreadedExecutor,
 ) -> int:
-    """Spin the node ``make_node`` builds until shutdown; exit code 2 on invalid parameters."""
+    """Spin the nodes ``make_nodes`` builds, on one executor, until shutdown (Ctrl-C, SIGTERM);
+    exit code 2 on invalid parameters. Nodes are destroyed in reverse order of creation."""
     rclpy.init(args=args)
     try:
-        node = make_node()
+        nodes = list(make_nodes())
     except ConfigError as exc:
         print(f"{program}: invalid parameters: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
     spinner = make_executor()  # after init: an executor belongs to the initialised context
-    spinner.add_node(node)
+    for node in nodes:
+        spinner.add_node(node)
     try:
         spinner.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -39,6 +41,17 @@ def run_node(
             raise
     finally:
         spinner.shutdown()
-        node.destroy_node()
+        for node in reversed(nodes):
+            node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def run_node(
+    program: str,
+    make_node: Callable[[], Node],
+    args: list[str] | None = None,
+    make_executor: Callable[[], Executor] = SingleThreadedExecutor,
+) -> int:
+    """:func:`run_nodes` for one node (``ros2 run multi_robot_mapper <node>``)."""
+    return run_nodes(program, lambda: [make_node()], args, make_executor)

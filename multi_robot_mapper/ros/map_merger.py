@@ -16,8 +16,23 @@ Topics (the merger's own are relative to its namespace):
   pub ``robot_frames/<ns>``   geometry_msgs/PoseStamped: T_map_robotmap, the robot's map frame
                               in ``map_frame``, for merged robots only (an unmerged robot gets
                               nothing, and a throttled log line); reliable, transient local
+  pub ``robot_poses/<ns>``    geometry_msgs/PoseStamped: the robot's newest pose moved into
+                              ``map_frame`` (T_map_laser), one per pose it sends while merged,
+                              stamped with that pose's stamp
+  pub ``global_grid``         nav_msgs/OccupancyGrid in ``map_frame``: occupied cells from the
+                              global map's segments, free cells from what each merged robot saw
+                              from its keyframes (``grid.*``); reliable, transient local
+  pub ``/diagnostics``        diagnostic_msgs/DiagnosticArray every ``diagnostics_period``: per
+                              robot OK (merged) / WARN (unmerged) / STALE (silent for
+                              ``stale_timeout``; its map stays), merge score, pose rate
+  srv ``save_map``, ``load_map``  std_srvs/Trigger: write / read ``map_file`` (every robot's
+                              partial map and placement, and the global map; io/saved_map.py);
+                              ``save_on_shutdown``, ``load_on_start``
   TF ``map_frame`` -> ``<ns>/map`` for merged robots, when ``tf2_ros`` can be imported
                               (static broadcaster, stamped from the input)
+
+A robot whose map starts again (another keyframe 0: its node restarted) keeps its earlier map
+as ``<ns>_session<k>`` (ros/merger_state.py); the new session is merged again.
 
 Merging runs on a timer in its own callback group, so a long merge never blocks the
 subscriptions (spin with a MultiThreadedExecutor, as :func:`main` does), and by default in a
@@ -30,11 +45,12 @@ the fields of :class:`MapMergerConfig` (``config/map_merger.yaml``).
 
 from __future__ import annotations
 
-import dataclasses
 import multiprocessing
 import sys
 import threading
+import time
 import traceback
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
@@ -42,6 +58,7 @@ from typing import Any
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TransformStamped
+from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
@@ -49,22 +66,34 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.subscription import Subscription
-from std_msgs.msg import ColorRGBA, Header
-from visualization_msgs.msg import Marker, MarkerArray
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
 
-from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError, config_from_flat, field_specs
 from multi_robot_mapper.core.merger_config import MapMergerConfig
-from multi_robot_mapper.core.merging import MergeResult, merge
-from multi_robot_mapper.io.messages import (
-    keyframes_from_markers,
-    pose_from_msg,
-    pose_msg,
-    pose_stamped,
-    segments_marker,
-)
+from multi_robot_mapper.core.merging import MergeResult
+from multi_robot_mapper.core.merging.occupancy import OccupancyGrid, merge_with_grid
+from multi_robot_mapper.io.messages import partial_map_contents, pose_from_msg, pose_stamped
+from multi_robot_mapper.io.saved_map import SavedMapError, read_saved_map, write_saved_map
+from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.entry import run_node
+from multi_robot_mapper.ros.markers import (
+    frame_transform,
+    global_map_markers,
+    newest,
+    occupancy_grid_msg,
+    placed_poses,
+    stamp_key,
+)
+from multi_robot_mapper.ros.merger_state import (
+    RobotState,
+    after_new_session,
+    merge_inputs,
+    restore_saved_map,
+    result_of_saved,
+    saved_map_of,
+    store_partial_map,
+)
 from multi_robot_mapper.ros.parameters import declare_config
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
 
@@ -83,66 +112,6 @@ LATCHED_QOS = QoSProfile(
 POSE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 PARTIAL_MAP_TYPE = "visualization_msgs/msg/MarkerArray"
 
-# Tableau-like colours, one per robot (by the robot's place in the sorted list of robots).
-PALETTE = (
-    (0.12, 0.47, 0.71),
-    (1.00, 0.50, 0.05),
-    (0.17, 0.63, 0.17),
-    (0.84, 0.15, 0.16),
-    (0.58, 0.40, 0.74),
-    (0.55, 0.34, 0.29),
-    (0.89, 0.47, 0.76),
-    (0.50, 0.50, 0.50),
-    (0.74, 0.74, 0.13),
-    (0.09, 0.75, 0.81),
-)
-
-
-def robot_color(index: int) -> tuple[float, float, float, float]:
-    """The colour of the ``index``-th robot (RGBA)."""
-    r, g, b = PALETTE[index % len(PALETTE)]
-    return (r, g, b, 1.0)
-
-
-def _key(stamp: Time) -> tuple[int, int]:
-    return (int(stamp.sec), int(stamp.nanosec))
-
-
-def newest(stamps: list[Time]) -> Time:
-    """The latest of ``stamps`` (a zero stamp when there are none)."""
-    return max(stamps, key=_key) if stamps else Time()
-
-
-def partial_map_contents(msg: MarkerArray) -> tuple[FloatArray, FloatArray]:
-    """A ``partial_map`` MarkerArray as ``(N, 4)`` segments in the robot's map frame (each
-    keyframe's segments moved by the keyframe's pose) and the ``(K, 3)`` keyframe poses: where
-    the robot's laser stood, the viewpoints of its free space. Only the robot's main piece
-    (its map frame) is merged: keyframes of a piece started when the robot was lost lie in
-    frames of their own until the robot's mapper joins them."""
-    keyframes = [kf for kf in keyframes_from_markers(msg) if kf.piece == 0]
-    pieces = [
-        se2.transform_segments(se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments)
-        for kf in keyframes
-        if len(kf.segments)
-    ]
-    poses = np.array([kf.T_robotmap_keyframe for kf in keyframes], dtype=np.float64)
-    return (np.vstack(pieces) if pieces else np.zeros((0, 4))), poses.reshape(-1, 3)
-
-
-@dataclasses.dataclass
-class RobotState:
-    """What the merger knows of one robot (guarded by the node's lock)."""
-
-    name: str
-    segments: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 4)))
-    keyframe_poses: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
-    map_stamp: Time | None = None  # header stamp of the last partial map
-    map_frame: str = ""  # the robot's own map frame (the partial map's frame_id)
-    version: int = 0  # partial maps received
-    pose: FloatArray | None = None  # T_robotmap_laser of the newest pose message
-    pose_stamp: Time | None = None
-    subscriptions: list[Subscription] = dataclasses.field(default_factory=list)
-
 
 class MapMerger(Node):
     """Merges the partial maps of robots whose relative poses are unknown."""
@@ -156,32 +125,54 @@ class MapMerger(Node):
         self._lock = threading.Lock()
         self.robots: dict[str, RobotState] = {}
         self.result: MergeResult | None = None
+        self.grid: OccupancyGrid | None = None
         self.merges = 0  # merge() runs
         self.merge_errors = 0
+        self.last_merge_s: float | None = None  # wall time of the last merge (worker included)
         self.global_maps_published = 0
         self._merged_versions: dict[str, int] = {}  # partial map versions of the last merge
+        self._new_sessions: list[tuple[str, str]] = []  # (robot, its earlier map's name)
         self._worker: ProcessPoolExecutor | None = None  # started on the first merge
         self._shown: tuple[object, ...] | None = None  # what the last global_map showed
         self._input_groups = MutuallyExclusiveCallbackGroup()
         self._merge_group = MutuallyExclusiveCallbackGroup()
         self._map_pub = self.create_publisher(MarkerArray, "global_map", LATCHED_QOS)
+        self._grid_pub = self.create_publisher(OccupancyGridMsg, "global_grid", LATCHED_QOS)
+        self._diagnostics_pub = self.create_publisher(
+            diagnostics.DiagnosticArray, diagnostics.TOPIC, 10
+        )
         self._frame_pubs: dict[str, Publisher] = {}
         self._tf = StaticTransformBroadcaster(self) if StaticTransformBroadcaster else None
         self._transforms: dict[str, TransformStamped] = {}
+        self._services = [
+            self.create_service(
+                Trigger, "save_map", self._on_save, callback_group=self._input_groups
+            ),
+            self.create_service(
+                Trigger, "load_map", self._on_load, callback_group=self._input_groups
+            ),
+        ]
         self._discovery_timer = self.create_timer(
             self.config.discovery_period, self.discover, callback_group=self._input_groups
         )
         self._merge_timer = self.create_timer(
             self.config.merge_period, self.merge_now, callback_group=self._merge_group
         )
+        self._diagnostics_timer = self.create_timer(
+            self.config.diagnostics_period,
+            self.publish_diagnostics,
+            callback_group=self._input_groups,
+        )
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        if self.config.load_on_start:
+            self._load_at_start()
         self.discover()
 
     # --- Robots and their inputs ------------------------------------------------------------
 
     def discover(self) -> list[str]:
-        """Subscribe to every robot not yet known (from ``robots``, or from the topic list
-        when it is empty); returns the robots added."""
+        """Subscribe to every robot not yet subscribed (from ``robots``, or from the topic
+        list when it is empty); returns the robots added."""
         wanted = self.config.robot_names()
         if not wanted:
             suffix = "/partial_map"
@@ -190,15 +181,20 @@ class MapMerger(Node):
                 for name, types in self.get_topic_names_and_types()
                 if name.endswith(suffix) and PARTIAL_MAP_TYPE in types
             )
-        added = [name for name in wanted if name and name not in self.robots]
+        with self._lock:
+            added = [
+                name
+                for name in wanted
+                if name and (name not in self.robots or not self.robots[name].subscriptions)
+            ]
         for name in added:
             self._add_robot(name)
         return added
 
     def _add_robot(self, name: str) -> None:
-        state = RobotState(name)
         with self._lock:
-            self.robots[name] = state
+            state = self.robots.setdefault(name, RobotState(name))
+        state.pose_publisher = self.create_publisher(PoseStamped, f"robot_poses/{name}", POSE_QOS)
         state.subscriptions = [
             self.create_subscription(
                 MarkerArray,
@@ -217,24 +213,30 @@ class MapMerger(Node):
         ]
         self.get_logger().info(f"merging robot '{name}' (/{name}/partial_map)")
 
+    def _clock_ns(self) -> int:
+        return int(self.get_clock().now().nanoseconds)
+
     def _on_partial_map(self, name: str, msg: MarkerArray) -> None:
         try:
-            segments, keyframe_poses = partial_map_contents(msg)
+            contents = partial_map_contents(msg)
         except Exception:
             self.warnings.warn(
                 f"bad_map:{name}",
                 f"partial map of '{name}' ignored after an error:\n{traceback.format_exc()}",
             )
             return
-        markers = msg.markers
-        stamp = newest([m.header.stamp for m in markers]) if markers else None
         with self._lock:
-            state = self.robots[name]
-            state.segments = segments
-            state.keyframe_poses = keyframe_poses
-            state.map_stamp = stamp
-            state.map_frame = markers[0].header.frame_id if markers else state.map_frame
-            state.version += 1
+            kept = store_partial_map(
+                self.robots, name, contents, self._clock_ns(), self.config.keep_sessions
+            )
+            if kept is not None:
+                self.result = after_new_session(self.result, name, kept)
+                self._new_sessions.append((name, kept))
+        if kept is not None:
+            self.get_logger().info(
+                f"robot '{name}' started a new map (another first keyframe): its earlier map "
+                f"is kept as '{kept}' and the new one will be merged again"
+            )
 
     def _on_pose(self, name: str, msg: PoseStamped) -> None:
         pose = pose_from_msg(msg.pose)
@@ -242,6 +244,15 @@ class MapMerger(Node):
             state = self.robots[name]
             state.pose = pose
             state.pose_stamp = msg.header.stamp
+            state.heard_ns = self._clock_ns()
+            state.pose_rate.add(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+            publisher = state.pose_publisher
+        result = self.result
+        if result is None or publisher is None:
+            return
+        placed = placed_poses(result, {name: (pose, msg.header.stamp)}).get(name)
+        if placed is not None:
+            publisher.publish(pose_stamped(placed[0].tolist(), placed[1], self.config.map_frame))
 
     # --- Merging and output -----------------------------------------------------------------
 
@@ -250,26 +261,19 @@ class MapMerger(Node):
         merge ran."""
         config = self.config
         with self._lock:
-            maps = {n: s.segments for n, s in self.robots.items() if len(s.segments)}
-            versions = {n: s.version for n, s in self.robots.items() if len(s.segments)}
-            viewpoints = {n: s.keyframe_poses for n, s in self.robots.items() if len(s.segments)}
-            stamps = {n: s.map_stamp for n, s in self.robots.items() if s.map_stamp is not None}
-            frames = {n: s.map_frame for n, s in self.robots.items()}
-            poses = {
-                n: (s.pose, s.pose_stamp)
-                for n, s in self.robots.items()
-                if s.pose is not None and s.pose_stamp is not None
-            }
+            inputs = merge_inputs(self.robots)
+            sessions = len(self._new_sessions)
         merged = False
-        if maps and versions != self._merged_versions:
+        if inputs.maps and inputs.versions != self._merged_versions:
             reference = config.merge.reference
-            if reference and reference not in maps:
+            if reference and reference not in inputs.maps:
                 self.notes.warn(
                     "no_reference", f"waiting for the reference robot '{reference}' to send a map"
                 )
                 return False
+            began = time.perf_counter()
             try:
-                self.result = self._merge(maps, viewpoints, config)
+                result, grid = self._merge(inputs.maps, inputs.viewpoints, config)
             except Exception:
                 self.merge_errors += 1
                 self.warnings.warn(
@@ -277,22 +281,36 @@ class MapMerger(Node):
                     f"merge failed (the last global map stays):\n{traceback.format_exc()}",
                 )
                 return False
-            self._merged_versions = versions
+            with self._lock:
+                # A robot that started a new session while this merge ran: its pair results
+                # in this merge are of its old map.
+                for name, kept in self._new_sessions[sessions:]:
+                    result = after_new_session(result, name, kept)
+                self.result, self.grid = result, grid
+            self._merged_versions = inputs.versions
+            self.last_merge_s = time.perf_counter() - began
             self.merges += 1
             merged = True
         result = self.result
         if result is None:
             return merged
-        map_stamp = newest([stamps[r] for r in result.robots if r in stamps])
+        map_stamp = newest([inputs.stamps[r] for r in result.robots if r in inputs.stamps])
         pose_key = tuple(
-            sorted((n, tuple(p.tolist()), _key(t)) for n, (p, t) in poses.items() if p is not None)
+            sorted((n, tuple(p.tolist()), stamp_key(t)) for n, (p, t) in inputs.poses.items())
         )
         shown = (self.merges, config.map_frame, config.marker_width, pose_key)
         if shown != self._shown:
-            self._publish_global_map(result, map_stamp, poses)
+            self._map_pub.publish(
+                global_map_markers(
+                    result, map_stamp, inputs.poses, config.map_frame, config.marker_width
+                )
+            )
+            self.global_maps_published += 1
             self._shown = shown
         if merged:
-            self._publish_frames(result, map_stamp, frames)
+            if self.grid is not None:
+                self._grid_pub.publish(occupancy_grid_msg(self.grid, map_stamp, config.map_frame))
+            self._publish_frames(result, map_stamp, inputs.frames)
         for robot in result.unmerged:
             self.notes.warn(
                 f"unmerged:{robot}",
@@ -301,24 +319,30 @@ class MapMerger(Node):
             )
         return merged
 
+    def up_to_date(self) -> bool:
+        """Every partial map received so far is in the last merge (and there was one)."""
+        with self._lock:
+            versions = merge_inputs(self.robots).versions
+        return bool(versions) and versions == self._merged_versions
+
     def _merge(
         self,
         maps: dict[str, FloatArray],
         viewpoints: dict[str, FloatArray],
         config: MapMergerConfig,
-    ) -> MergeResult:
-        """:func:`merge` with the previous result, in the worker process when
+    ) -> tuple[MergeResult, OccupancyGrid | None]:
+        """:func:`merge_with_grid` with the previous result, in the worker process when
         ``merge_worker`` is on (this thread waits without holding the interpreter lock)."""
         previous = self.result
+        job = (maps, config.merge, config.grid, previous, viewpoints)
         if not config.merge_worker:
-            return merge(maps, config.merge, previous=previous, viewpoints=viewpoints)
+            return merge_with_grid(*job)
         if self._worker is None:
             # spawn, not fork: forking a process that runs DDS threads is unsafe.
             context = multiprocessing.get_context("spawn")
             self._worker = ProcessPoolExecutor(max_workers=1, mp_context=context)
         try:
-            job = self._worker.submit(merge, maps, config.merge, previous, None, viewpoints)
-            return job.result()
+            return self._worker.submit(merge_with_grid, *job).result()
         except BrokenProcessPool:
             # The worker died (killed, out of memory): a new one next time.
             self._worker.shutdown(wait=False, cancel_futures=True)
@@ -326,62 +350,16 @@ class MapMerger(Node):
             raise
 
     def destroy_node(self) -> None:
+        if self.config.save_on_shutdown:
+            try:
+                path = self.save_map()
+                self.get_logger().info(f"map saved to {path} on shutdown")
+            except SavedMapError as exc:
+                self.get_logger().error(f"map not saved on shutdown: {exc}")
         if self._worker is not None:
             self._worker.shutdown(wait=False, cancel_futures=True)
             self._worker = None
         super().destroy_node()
-
-    def _publish_global_map(
-        self,
-        result: MergeResult,
-        map_stamp: Time,
-        poses: dict[str, tuple[FloatArray | None, Time | None]],
-    ) -> None:
-        frame = self.config.map_frame
-        width = self.config.marker_width
-        shown_poses: dict[str, FloatArray] = {}
-        pose_stamps: list[Time] = []
-        for robot, (pose, stamp) in poses.items():
-            T_map_robot = result.matrix(robot)
-            if T_map_robot is None or pose is None or stamp is None:
-                continue
-            T_robot_laser = se2.matrix_from_pose(*pose)
-            shown_poses[robot] = np.array(se2.pose_from_matrix(T_map_robot @ T_robot_laser))
-            pose_stamps.append(stamp)
-        header = Header(frame_id=frame, stamp=newest([map_stamp, *pose_stamps]))
-        clear = Marker(header=header, action=Marker.DELETEALL)
-        markers = [clear]
-        for index in range(len(result.robots)):
-            own = result.segments[result.segment_robot == index]
-            if len(own):
-                markers.append(
-                    segments_marker(own, header, "global_map", width, robot_color(index), index)
-                )
-        for index, robot in enumerate(result.robots):
-            T_map_robot = result.matrix(robot)
-            if T_map_robot is None:
-                continue
-            where = shown_poses.get(robot, np.array(se2.pose_from_matrix(T_map_robot)))
-            color = robot_color(index)
-            if robot in shown_poses:
-                arrow = Marker(header=header, ns="robot_poses", id=index)
-                arrow.type = Marker.ARROW
-                arrow.action = Marker.ADD
-                arrow.pose = pose_msg(where.tolist())
-                arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.6, 0.12, 0.12
-                arrow.color = ColorRGBA(r=color[0], g=color[1], b=color[2], a=color[3])
-                markers.append(arrow)
-            text = Marker(header=header, ns="robot_names", id=index)
-            text.type = Marker.TEXT_VIEW_FACING
-            text.action = Marker.ADD
-            text.pose = pose_msg(where.tolist())
-            text.pose.position.z = 0.6
-            text.scale.z = 0.4
-            text.color = ColorRGBA(r=color[0], g=color[1], b=color[2], a=color[3])
-            text.text = robot
-            markers.append(text)
-        self._map_pub.publish(MarkerArray(markers=markers))
-        self.global_maps_published += 1
 
     def _publish_frames(self, result: MergeResult, stamp: Time, frames: dict[str, str]) -> None:
         map_frame = self.config.map_frame
@@ -395,17 +373,87 @@ class MapMerger(Node):
                 publisher = self.create_publisher(PoseStamped, f"robot_frames/{robot}", LATCHED_QOS)
                 self._frame_pubs[robot] = publisher
             publisher.publish(pose_stamped(pose, stamp, map_frame))
-            if self._tf is not None:
-                transform = TransformStamped()
-                transform.header = Header(frame_id=map_frame, stamp=stamp)
-                transform.child_frame_id = frames.get(robot) or f"{robot}/map"
-                placed = pose_msg(pose)
-                transform.transform.translation.x = placed.position.x
-                transform.transform.translation.y = placed.position.y
-                transform.transform.rotation = placed.orientation
-                self._transforms[robot] = transform
+            child = frames.get(robot) or f"{robot}/map"
+            self._transforms[robot] = frame_transform(pose, stamp, map_frame, child)
         if self._tf is not None and self._transforms:
             self._tf.sendTransform(list(self._transforms.values()))
+
+    def publish_diagnostics(self) -> None:
+        """Every robot's status on /diagnostics, stamped with the newest input."""
+        now = self._clock_ns()
+        result = self.result
+        scores = diagnostics.link_scores(result)
+        statuses = []
+        with self._lock:
+            states = list(self.robots.values())
+            stamps = [s.map_stamp for s in states if s.map_stamp is not None]
+            stamps += [s.pose_stamp for s in states if s.pose_stamp is not None]
+            for state in states:
+                placement = None if result is None else result.placements.get(state.name)
+                link_value, best = scores.get(state.name, (None, 0.0))
+                health = diagnostics.MergerRobotHealth(
+                    robot=state.name,
+                    placement=placement,
+                    reference=result is not None and result.reference == state.name,
+                    link_value=link_value,
+                    best_value=best,
+                    pose_rate=state.pose_rate.rate(),
+                    maps_received=state.version,
+                    keyframes=state.keyframes,
+                    segments=len(state.segments),
+                    silent_for=None if state.heard_ns is None else (now - state.heard_ns) * 1e-9,
+                    stale_timeout=self.config.stale_timeout,
+                    session_of=state.session_of,
+                )
+                statuses.append(diagnostics.merger_status(health))
+        statuses.insert(
+            0,
+            diagnostics.merge_status(
+                result, self.merges, self.merge_errors, self.last_merge_s, len(statuses)
+            ),
+        )
+        if statuses:
+            self._diagnostics_pub.publish(diagnostics.diagnostic_array(statuses, newest(stamps)))
+
+    # --- Saved maps -------------------------------------------------------------------------
+
+    def save_map(self, path: str | None = None) -> str:
+        """Write every robot's partial map and placement and the global map to ``path``
+        (default ``map_file``); raises :class:`SavedMapError`."""
+        with self._lock:
+            saved = saved_map_of(self.robots, self.result, self.config.map_frame)
+        return str(write_saved_map(path or self.config.map_file, saved))
+
+    def load_map(self, path: str | None = None) -> list[str]:
+        """Read a saved map (default ``map_file``) and merge its robots with the live ones;
+        returns the robots loaded. Raises :class:`SavedMapError`."""
+        saved = read_saved_map(path or self.config.map_file)
+        with self._lock:
+            loaded = restore_saved_map(self.robots, saved, self.config.keep_sessions)
+            if self.result is None:
+                self.result = result_of_saved(saved)  # its reference stays the map frame
+            self._merged_versions = {}
+        return loaded
+
+    def _on_save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        return _answer(response, lambda: f"map saved to {self.save_map()}")
+
+    def _on_load(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        def load() -> str:
+            loaded = self.load_map()
+            return f"loaded {len(loaded)} robots' maps: {', '.join(loaded) or 'none'}"
+
+        return _answer(response, load)
+
+    def _load_at_start(self) -> None:
+        try:
+            loaded = self.load_map()
+        except SavedMapError as exc:
+            self.get_logger().warning(f"load_on_start: nothing loaded: {exc}")
+            return
+        self.get_logger().info(
+            f"loaded {', '.join(loaded) or 'no robot'} from {self.config.map_file}"
+        )
 
     # --- Parameters -------------------------------------------------------------------------
 
@@ -436,8 +484,25 @@ class MapMerger(Node):
             self._merge_timer = self.create_timer(
                 config.merge_period, self.merge_now, callback_group=self._merge_group
             )
-        if config.merge != old.merge:
+        if config.diagnostics_period != old.diagnostics_period:
+            self.destroy_timer(self._diagnostics_timer)
+            self._diagnostics_timer = self.create_timer(
+                config.diagnostics_period,
+                self.publish_diagnostics,
+                callback_group=self._input_groups,
+            )
+        if (config.merge, config.grid) != (old.merge, old.grid):
             self._merged_versions = {}  # merge again with the new settings
+
+
+def _answer(response: Trigger.Response, action: Callable[[], str]) -> Trigger.Response:
+    """A Trigger answer: success and what ``action`` says, or failure and why."""
+    try:
+        response.message = action()
+        response.success = True
+    except SavedMapError as exc:
+        response.success, response.message = False, str(exc)
+    return response
 
 
 def main(args: list[str] | None = None) -> int:

@@ -11,6 +11,8 @@ Topics (relative, so ``-r __ns:=/robot1`` gives ``/robot1/scan`` -> ``/robot1/pa
                          stamped with the newest keyframe's scan; the whole map every
                          ``partial_map_period`` when it changed (reliable, transient local,
                          depth 1: a late subscriber gets the map)
+  pub ``/diagnostics``   diagnostic_msgs/DiagnosticArray every ``diagnostics_period``: the
+                         robot's status (ros/diagnostics.py), stamped with the newest scan
 Parameters: the fields of :class:`RobotMapperConfig` (``config/robot_mapper.yaml``).
 """
 
@@ -46,6 +48,7 @@ from multi_robot_mapper.io.messages import (
     segments_marker,
     stamp_from_seconds,
 )
+from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.parameters import declare_config, on_config_change
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
@@ -75,6 +78,15 @@ class RobotMapper(Node):
         self.scans_rejected = 0  # dropped before mapping: bad scan or front-end error
         self.mapping_errors = 0  # scans the local mapper failed on (map kept as it was)
         self.partial_maps_published = 0
+        self.published_keyframes = 0  # keyframes in the last partial map published
+        self.published_stamp: Time | None = None  # header stamp of the last partial map
+        self.rejected: dict[str, int] = {}  # scans dropped before mapping, by reason
+        self.scans_skipped = 0  # left out by max_scan_rate
+        self._mapped_stamp: float | None = None  # stamp of the last scan not skipped
+        self._scan_rate = diagnostics.RateMeter()
+        self._last_scan_ns: int | None = None  # node clock when the last scan arrived
+        self._last_stamp = Time()  # header stamp of the newest scan
+        self._reported = (0, 0, 0)  # received, accepted, rejected at the last diagnostics
         self.mapper = LocalMapper(self.config.local_mapping)
         self.last_update: LocalUpdate | None = None
         # Header stamps of the keyframes' scans, exact (a float second near 1e9 is not).
@@ -89,12 +101,23 @@ class RobotMapper(Node):
             LaserScan, "scan", self._on_scan, qos_profile_sensor_data
         )
         self._map_timer = self.create_timer(self.config.partial_map_period, self.publish_map)
+        self._diagnostics_pub = self.create_publisher(
+            diagnostics.DiagnosticArray, diagnostics.TOPIC, 10
+        )
+        self._diagnostics_timer = self.create_timer(
+            self.config.diagnostics_period, self.publish_diagnostics
+        )
         on_config_change(self, RobotMapperConfig, self._apply_config)
 
     @property
     def map_frame(self) -> str:
         """The frame of ``pose`` and ``partial_map``."""
         return self.config.map_frame or default_map_frame(self.get_namespace())
+
+    @property
+    def map_published(self) -> bool:
+        """The partial map as it is now has gone out (or there is none yet)."""
+        return self.mapper.version in (0, self.published_version)
 
     def _apply_config(self, config: RobotMapperConfig) -> None:
         old = self.config
@@ -104,6 +127,11 @@ class RobotMapper(Node):
         if config.partial_map_period != old.partial_map_period:
             self.destroy_timer(self._map_timer)
             self._map_timer = self.create_timer(config.partial_map_period, self.publish_map)
+        if config.diagnostics_period != old.diagnostics_period:
+            self.destroy_timer(self._diagnostics_timer)
+            self._diagnostics_timer = self.create_timer(
+                config.diagnostics_period, self.publish_diagnostics
+            )
         if (config.map_frame, config.segment_marker_width) != (
             old.map_frame,
             old.segment_marker_width,
@@ -114,17 +142,25 @@ class RobotMapper(Node):
     def _on_scan(self, msg: LaserScan) -> None:
         self.scans_received += 1
         stamp = seconds_from_stamp(msg.header.stamp)
+        self._last_scan_ns = self.get_clock().now().nanoseconds
+        self._last_stamp = msg.header.stamp
+        self._scan_rate.add(stamp)
+        if self._throttled(stamp):
+            self.scans_skipped += 1
+            return
         try:
             view = scan_from_msg(msg)
             segments, valid = extract_scan(view, self.config.extraction)
         except ScanError as exc:
             self.scans_rejected += 1
+            self.rejected[exc.kind] = self.rejected.get(exc.kind, 0) + 1
             self.warnings.warn(
                 exc.kind, f"dropped scan (frame '{msg.header.frame_id}', stamp {stamp:.3f}): {exc}"
             )
             return
         except Exception:  # a bug must not take the robot's mapper down with it
             self.scans_rejected += 1
+            self.rejected["internal_error"] = self.rejected.get("internal_error", 0) + 1
             self.warnings.warn(
                 "internal_error",
                 f"dropped scan (stamp {stamp:.3f}) after an internal error:\n"
@@ -161,6 +197,16 @@ class RobotMapper(Node):
             frame = piece_frame(self.map_frame, update.piece)
             self._pose_pub.publish(pose_stamped(update.pose, msg.header.stamp, frame))
 
+    def _throttled(self, stamp: float) -> bool:
+        """Whether ``max_scan_rate`` leaves this scan out (too soon after the last one mapped,
+        by the stamps; 1 ms of slack for stamps rounded to the nanosecond)."""
+        rate = self.config.max_scan_rate
+        last = self._mapped_stamp
+        if rate > 0.0 and last is not None and 0.0 <= stamp - last < 1.0 / rate - 1e-3:
+            return True
+        self._mapped_stamp = stamp
+        return False
+
     def publish_map(self) -> bool:
         """Publish the whole partial map if it changed since the last publication."""
         version = self.mapper.version
@@ -186,9 +232,37 @@ class RobotMapper(Node):
             )
             return False
         self._map_pub.publish(array)
+        self.published_keyframes = len(array.markers)
+        self.published_stamp = stamp
         self.published_version = version
         self.partial_maps_published += 1
         return True
+
+    def publish_diagnostics(self) -> None:
+        """The robot's status on /diagnostics, stamped with its newest scan."""
+        mapper = self.mapper
+        now = self.get_clock().now().nanoseconds
+        counts = (self.scans_received, mapper.scans_accepted, self.scans_rejected)
+        recent = [now_count - then for now_count, then in zip(counts, self._reported, strict=True)]
+        self._reported = counts
+        health = diagnostics.MapperHealth(
+            robot=self.get_namespace().strip("/") or self.get_name(),
+            scan_rate=self._scan_rate.rate(),
+            silent_for=None if self._last_scan_ns is None else (now - self._last_scan_ns) * 1e-9,
+            stale_timeout=self.config.stale_timeout,
+            scans_received=self.scans_received,
+            scans_accepted=mapper.scans_accepted,
+            rejected=dict(self.rejected),
+            skipped=self.scans_skipped,
+            set_aside=dict(mapper.set_aside_reasons),
+            keyframes=self.published_keyframes,
+            map_segments=len(mapper.map_segments),
+            recent_received=recent[0],
+            recent_accepted=recent[1],
+            recent_rejected=recent[2],
+        )
+        status = diagnostics.mapper_status(health)
+        self._diagnostics_pub.publish(diagnostics.diagnostic_array([status], self._last_stamp))
 
     def _marker(self, keyframe: Keyframe, header: Header) -> Marker:
         """The keyframe's marker, reused (with the new header) when the keyframe is unchanged."""

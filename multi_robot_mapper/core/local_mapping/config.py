@@ -29,6 +29,15 @@ class LocalMapperConfig:
         minimum=0.0,
         maximum=3.2,
     )
+    revisit_keyframes: bool = param(
+        True,
+        unit="",
+        doc="a scan within keyframe_distance and keyframe_angle of ANY earlier keyframe of its "
+        "piece adds no keyframe and is placed on that one instead (the map already holds that "
+        "view): a robot driving over known ground keeps its map and its partial_map message "
+        "the same size, so both grow with the area covered, not with time; false: only the "
+        "last keyframe counts",
+    )
     integrate_confidence: float = param(
         0.8,
         unit="",

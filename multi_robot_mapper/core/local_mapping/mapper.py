@@ -201,7 +201,10 @@ class LocalMapper:
         placed = _Anchor(anchor.keyframe, T_keyframe_new)
         keyframe_added = False
         T_keyframe_new_arr = np.asarray(T_keyframe_new)
-        if (
+        known = self._known_view(pose, chosen.piece) if self.config.revisit_keyframes else None
+        if known is not None:
+            placed = known  # ground the map holds: tracked against that keyframe from now on
+        elif (
             float(np.hypot(*T_keyframe_new_arr[:2])) > self.config.keyframe_distance
             or abs(float(T_keyframe_new_arr[2])) > self.config.keyframe_angle
         ):
@@ -314,6 +317,24 @@ class LocalMapper:
             if (done := settled()) is not None:
                 return done, True
         return max(attempts, key=lambda a: a.result.confidence), False
+
+    def _known_view(self, pose: Pose, piece: int) -> _Anchor | None:
+        """The anchor on the nearest keyframe of ``piece`` within ``keyframe_distance`` and
+        ``keyframe_angle`` of ``pose`` (None: none is; the scan would be a view the map
+        lacks)."""
+        config = self.config
+        with self._lock:
+            keys = [k for k, of in self._pieces.items() if of == piece]
+            if not keys:
+                return None
+            poses = np.array([self._poses[k] for k in keys])
+        moved = np.hypot(poses[:, 0] - pose[0], poses[:, 1] - pose[1])
+        turned = np.abs(se2.wrap_angle(poses[:, 2] - pose[2]))
+        near = (moved <= config.keyframe_distance) & (turned <= config.keyframe_angle)
+        if not near.any():
+            return None
+        best = keys[int(np.argmin(np.where(near, moved, np.inf)))]
+        return _Anchor(best, se2.between(tuple(poses[keys.index(best)]), pose))
 
     def _new_keyframe(
         self,

@@ -1,0 +1,307 @@
+"""The global map as an occupancy grid (what Nav2 and explorers read).
+
+Occupied cells are the cells the global map's segments pass through. Free cells are what the
+robots saw: each placed robot's own map ray cast from its keyframe poses (:class:`MapViews`,
+the same views the merge judges links on), a cell being free when it lies nearer its viewpoint
+than the robot's own wall on that bearing, by one cell; and where the robots drove (within
+``path_radius`` of the path through their keyframes). Everything else is unknown. A bearing
+on which the robot's map has no wall within ``view_range`` (an open door, a hall wider than
+the range) claims nothing: a partial map carries no scans, and nothing says how far the laser
+saw there.
+
+Frames: the grid is in ``map`` (the reference robot's map frame); each robot's map and
+viewpoints are moved by its placement ``T_map_robot`` first. Cell ``(row, col)`` covers
+``origin + (col, row) * resolution`` to one resolution more (row = y, as in
+``nav_msgs/OccupancyGrid``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.config import param, validate
+from multi_robot_mapper.core.geometry import sample_segments
+from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.free_space import MapViews
+from multi_robot_mapper.core.merging.link_graph import MergeResult, merge
+
+FloatArray = NDArray[np.float64]
+CellArray = NDArray[np.int8]
+
+UNKNOWN = -1
+FREE = 0
+OCCUPIED = 100
+_VIEW_CHUNK = 16  # viewpoints tested against their cells at once (bounds the memory per step)
+
+
+@dataclasses.dataclass(frozen=True)
+class GridConfig:
+    """The occupancy grid the merger publishes beside the segment map (``grid.*``)."""
+
+    enabled: bool = param(True, unit="", doc="publish global_grid (nav_msgs/OccupancyGrid)")
+    resolution: float = param(
+        0.05,
+        unit="m",
+        doc="cell size of global_grid (coarsened when the map would need more than max_cells)",
+        minimum=0.005,
+        maximum=10.0,
+    )
+    max_cells: int = param(
+        4_000_000,
+        unit="cells",
+        doc="largest grid published: a larger map gets a coarser resolution (doubled until it "
+        "fits) rather than an unbounded message",
+        minimum=100,
+        maximum=100_000_000,
+    )
+    view_spacing: float = param(
+        0.5,
+        unit="m",
+        doc="a keyframe pose closer than this to one already kept (of any robot) and facing "
+        "the same way adds no free space to the grid (robots on the same ground see the same)",
+        minimum=0.0,
+        maximum=100.0,
+    )
+    max_views: int = param(
+        200,
+        unit="",
+        doc="at most this many viewpoints per robot mark free space (evenly spread)",
+        minimum=1,
+        maximum=100_000,
+    )
+    path_radius: float = param(
+        0.25,
+        unit="m",
+        doc="cells this close to the path through a robot's keyframe poses are free (the robot "
+        "drove there; its laser does not see right beside and behind itself); 0: off",
+        minimum=0.0,
+        maximum=5.0,
+    )
+    view_field: float = param(
+        1.5 * math.pi,
+        unit="rad",
+        doc="field of view marked free around each keyframe's heading: the laser's (270 "
+        "degrees: Hokuyo UTM/UST, SICK TiM and LMS1xx; set 3.14 for a 180-degree laser, "
+        "which would otherwise mark unseen cells behind it free)",
+        minimum=0.0,
+        exclusive_minimum=True,
+        maximum=2.0 * math.pi,
+    )
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclasses.dataclass(frozen=True)
+class OccupancyGrid:
+    """Cells of -1 (unknown), 0 (free) or 100 (occupied) over a rectangle of ``map``."""
+
+    origin: tuple[float, float]  # map coordinates of cell (0, 0)'s lower-left corner (m)
+    resolution: float  # m per cell
+    cells: CellArray  # (height, width): row = y index, column = x index
+
+    @property
+    def width(self) -> int:
+        return int(self.cells.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.cells.shape[0])
+
+
+def global_grid(
+    result: MergeResult,
+    maps: Mapping[str, FloatArray],
+    viewpoints: Mapping[str, FloatArray],
+    config: GridConfig,
+    merging: MergeConfig,
+) -> OccupancyGrid:
+    """The occupancy grid of a merge: ``result.segments`` occupied, each placed robot's views
+    (its map ``maps[robot]`` ray cast from ``viewpoints[robot]``, both in its own frame) free."""
+    placed_views = []
+    for robot in result.robots:
+        T_map_robot = result.matrix(robot)
+        poses = np.asarray(viewpoints.get(robot, np.zeros((0, 3))), dtype=np.float64)
+        segments = np.asarray(maps.get(robot, np.zeros((0, 4))), dtype=np.float64)
+        if T_map_robot is None or len(poses.reshape(-1, 3)) == 0 or len(segments) == 0:
+            continue
+        placed_views.append(
+            (se2.transform_segments(T_map_robot, segments), _moved(T_map_robot, poses))
+        )
+    return occupancy_grid(result.segments, placed_views, config, merging)
+
+
+def occupancy_grid(
+    segments: FloatArray,
+    views: list[tuple[FloatArray, FloatArray]],
+    config: GridConfig,
+    merging: MergeConfig,
+) -> OccupancyGrid:
+    """The grid of ``segments`` (occupied) and of each ``(own segments, viewpoints)`` pair's
+    free space, all in one frame."""
+    walls = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    corners = [walls.reshape(-1, 2)] + [poses[:, :2] for _, poses in views]
+    points = np.vstack([c for c in corners if len(c)] or [np.zeros((1, 2))])
+    resolution = config.resolution
+    low = points.min(axis=0) - resolution
+    span = points.max(axis=0) + resolution - low
+    while math.ceil(span[0] / resolution) * math.ceil(span[1] / resolution) > config.max_cells:
+        resolution *= 2.0
+    width, height = (max(1, math.ceil(float(s) / resolution)) for s in span)
+    origin = (float(low[0]), float(low[1]))
+    cells = np.full((height, width), UNKNOWN, dtype=np.int8)
+    view_config = dataclasses.replace(
+        merging,
+        view_spacing=0.0,  # thinned here, over every robot at once
+        max_views=config.max_views,
+        view_field=config.view_field,
+        free_space_margin=resolution,
+    )
+    for own, poses in _thinned(views, config.view_spacing):
+        _mark_free(cells, origin, resolution, MapViews.of(own, poses, view_config), view_config)
+    if config.path_radius > 0.0:
+        for _, poses in views:
+            _mark_path(cells, origin, resolution, poses, config.path_radius)
+    if len(walls):
+        # Samples at most half a cell apart touch every cell a segment passes through.
+        wall_points, _ = sample_segments(walls, 0.5 * resolution)
+        column, row = _cell_of(wall_points, origin, resolution)
+        inside = (column >= 0) & (column < width) & (row >= 0) & (row < height)
+        cells[row[inside], column[inside]] = OCCUPIED
+    return OccupancyGrid(origin, resolution, cells)
+
+
+HEADING_TOLERANCE = 0.5  # rad: two views closer than this in heading see the same side
+
+
+def _thinned(
+    views: list[tuple[FloatArray, FloatArray]], spacing: float
+) -> list[tuple[FloatArray, FloatArray]]:
+    """Each ``(segments, viewpoints)`` pair with only the viewpoints that are at least
+    ``spacing`` from every viewpoint kept before them (of any robot) or face another way
+    (HEADING_TOLERANCE): robots driving the same corridor see the same free space, and casting
+    it once per place is enough. Greedy, in order."""
+    kept: list[FloatArray] = []
+    out = []
+    for segments, poses in views:
+        mine = []
+        for pose in poses.reshape(-1, 3):
+            if kept:
+                others = np.asarray(kept)
+                close = np.hypot(others[:, 0] - pose[0], others[:, 1] - pose[1]) < spacing
+                facing = np.abs(se2.wrap_angle(others[:, 2] - pose[2])) < HEADING_TOLERANCE
+                if np.any(close & facing):
+                    continue
+            kept.append(pose)
+            mine.append(pose)
+        if mine:
+            out.append((segments, np.asarray(mine, dtype=np.float64)))
+    return out
+
+
+def _moved(T_map_robot: FloatArray, poses: FloatArray) -> FloatArray:
+    """``(K, 3)`` poses in a robot's frame moved into ``map``."""
+    poses = poses.reshape(-1, 3)
+    xy = se2.transform_points(T_map_robot, poses[:, :2])
+    theta = poses[:, 2] + math.atan2(T_map_robot[1, 0], T_map_robot[0, 0])
+    return np.column_stack((xy, theta))
+
+
+def _cell_of(
+    points: FloatArray, origin: tuple[float, float], resolution: float
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Column and row of the cell holding each ``(P, 2)`` point."""
+    column = np.floor((points[:, 0] - origin[0]) / resolution).astype(np.int64)
+    row = np.floor((points[:, 1] - origin[1]) / resolution).astype(np.int64)
+    return column, row
+
+
+PATH_JUMP = 2.0  # m: keyframes farther apart than this were not joined by a drive
+
+
+def _mark_path(
+    cells: CellArray,
+    origin: tuple[float, float],
+    resolution: float,
+    poses: FloatArray,
+    radius: float,
+) -> None:
+    """Set to FREE every cell within ``radius`` of the path through consecutive keyframe
+    poses (where the robot drove; legs longer than PATH_JUMP are skipped)."""
+    poses = poses.reshape(-1, 3)
+    if len(poses) == 0:
+        return
+    legs = np.hstack((poses[:-1, :2], poses[1:, :2]))
+    legs = legs[np.hypot(legs[:, 2] - legs[:, 0], legs[:, 3] - legs[:, 1]) <= PATH_JUMP]
+    stops = np.hstack((poses[:, :2], poses[:, :2]))  # every keyframe, even a lone one
+    points, _ = sample_segments(np.vstack((legs, stops)), 0.5 * resolution)
+    reach = math.ceil(radius / resolution)
+    offsets = np.arange(-reach, reach + 1, dtype=np.int64)
+    d_col, d_row = (a.ravel() for a in np.meshgrid(offsets, offsets))
+    disc = np.hypot(d_col, d_row) * resolution <= radius
+    column, row = _cell_of(points, origin, resolution)
+    column = (column[:, None] + d_col[disc][None, :]).ravel()
+    row = (row[:, None] + d_row[disc][None, :]).ravel()
+    height, width = cells.shape
+    inside = (column >= 0) & (column < width) & (row >= 0) & (row < height)
+    cells[row[inside], column[inside]] = FREE
+
+
+def _mark_free(
+    cells: CellArray,
+    origin: tuple[float, float],
+    resolution: float,
+    views: MapViews,
+    config: MergeConfig,
+) -> None:
+    """Set to FREE every cell whose centre lies in the free space of ``views``: within the
+    field of view, nearer the viewpoint than the map's wall on that bearing (the nearest
+    within ``view_spread`` bearings) by ``free_space_margin``."""
+    reach = views.free_limits(config.view_spread) - config.free_space_margin
+    radius = min(config.view_range, float(np.max(reach, initial=0.0)))
+    if radius <= 0.0 or len(views.poses) == 0:
+        return
+    height, width = cells.shape
+    # The same disc of cell offsets around every viewpoint, its distances and bearings
+    # computed once: each viewpoint stands at its cell's centre (at most half a cell off).
+    half = math.ceil(radius / resolution)
+    offsets = np.arange(-half, half + 1, dtype=np.int64)
+    d_col, d_row = (a.ravel() for a in np.meshgrid(offsets, offsets))
+    distance = np.hypot(d_col, d_row) * resolution
+    disc = distance <= radius
+    d_col, d_row, distance = d_col[disc], d_row[disc], distance[disc]
+    direction = np.arctan2(d_row, d_col)
+    for start in range(0, len(views.poses), _VIEW_CHUNK):
+        poses = views.poses[start : start + _VIEW_CHUNK]
+        limits = reach[start : start + _VIEW_CHUNK]
+        bearing = se2.wrap_angle(direction[None, :] - poses[:, 2, None])
+        beam = np.rint((bearing - views.angle_min) / views.angle_increment).astype(np.int64)
+        in_field = (beam >= 0) & (beam < limits.shape[1])
+        wall = np.take_along_axis(limits, np.where(in_field, beam, 0), axis=1)
+        view, cell = np.nonzero(in_field & (distance[None, :] < wall))
+        home_col, home_row = _cell_of(poses[:, :2], origin, resolution)
+        column = home_col[view] + d_col[cell]
+        row = home_row[view] + d_row[cell]
+        inside = (column >= 0) & (column < width) & (row >= 0) & (row < height)
+        cells[row[inside], column[inside]] = FREE
+
+
+def merge_with_grid(
+    maps: Mapping[str, FloatArray],
+    config: MergeConfig,
+    grid: GridConfig,
+    previous: MergeResult | None = None,
+    viewpoints: Mapping[str, FloatArray] | None = None,
+) -> tuple[MergeResult, OccupancyGrid | None]:
+    """:func:`merge` and, when ``grid.enabled``, the :func:`global_grid` of its result: what
+    ``map_merger`` computes in its worker process after each change of a partial map."""
+    result = merge(maps, config, previous=previous, viewpoints=viewpoints)
+    if not grid.enabled:
+        return result, None
+    return result, global_grid(result, maps, viewpoints or {}, grid, config)

@@ -1,0 +1,151 @@
+"""What ``map_merger`` publishes, built as plain functions (no node): the global map's markers,
+the occupancy grid, robot poses and frames in ``map``.
+
+Every message is stamped with a stamp its caller took from the inputs, never ``now()``.
+"""
+
+from __future__ import annotations
+
+import array
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import TransformStamped
+from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.merging import MergeResult
+from multi_robot_mapper.core.merging.occupancy import OccupancyGrid
+from multi_robot_mapper.io.messages import pose_msg, segments_marker
+
+FloatArray = np.typing.NDArray[np.float64]
+
+# Tableau-like colours, one per robot (by the robot's place in the sorted list of robots).
+PALETTE = (
+    (0.12, 0.47, 0.71),
+    (1.00, 0.50, 0.05),
+    (0.17, 0.63, 0.17),
+    (0.84, 0.15, 0.16),
+    (0.58, 0.40, 0.74),
+    (0.55, 0.34, 0.29),
+    (0.89, 0.47, 0.76),
+    (0.50, 0.50, 0.50),
+    (0.74, 0.74, 0.13),
+    (0.09, 0.75, 0.81),
+)
+
+
+def robot_color(index: int) -> tuple[float, float, float, float]:
+    """The colour of the ``index``-th robot (RGBA)."""
+    r, g, b = PALETTE[index % len(PALETTE)]
+    return (r, g, b, 1.0)
+
+
+def stamp_key(stamp: Time) -> tuple[int, int]:
+    """A stamp as a sortable ``(sec, nanosec)`` pair."""
+    return (int(stamp.sec), int(stamp.nanosec))
+
+
+def newest(stamps: Sequence[Time]) -> Time:
+    """The latest of ``stamps`` (a zero stamp when there are none)."""
+    return max(stamps, key=stamp_key) if stamps else Time()
+
+
+def placed_poses(
+    result: MergeResult, poses: Mapping[str, tuple[FloatArray, Time]]
+) -> dict[str, tuple[FloatArray, Time]]:
+    """Each merged robot's newest pose ``T_robotmap_laser`` moved into ``map``
+    (``T_map_laser``), with the stamp of the pose message it came from."""
+    placed: dict[str, tuple[FloatArray, Time]] = {}
+    for robot, (pose, stamp) in poses.items():
+        T_map_robot = result.matrix(robot)
+        if T_map_robot is None:
+            continue
+        T_map_laser = T_map_robot @ se2.matrix_from_pose(*pose)
+        placed[robot] = (np.array(se2.pose_from_matrix(T_map_laser)), stamp)
+    return placed
+
+
+def global_map_markers(
+    result: MergeResult,
+    map_stamp: Time,
+    poses: Mapping[str, tuple[FloatArray, Time]],
+    frame: str,
+    width: float,
+) -> MarkerArray:
+    """The global map: a DELETEALL marker, the fused segments as one LINE_LIST per robot
+    (``id`` = the robot's index in ``result.robots``, coloured per robot), each merged robot's
+    newest pose as an ARROW and its name as TEXT_VIEW_FACING. ``poses`` are the robots'
+    newest poses in their own map frames; every marker is stamped with the newest of
+    ``map_stamp`` and the poses shown."""
+    shown = placed_poses(result, poses)
+    header = Header(frame_id=frame, stamp=newest([map_stamp, *(s for _, s in shown.values())]))
+    markers = [Marker(header=header, action=Marker.DELETEALL)]
+    for index in range(len(result.robots)):
+        own = result.segments[result.segment_robot == index]
+        if len(own):
+            markers.append(
+                segments_marker(own, header, "global_map", width, robot_color(index), index)
+            )
+    for index, robot in enumerate(result.robots):
+        T_map_robot = result.matrix(robot)
+        if T_map_robot is None:
+            continue
+        where = shown[robot][0] if robot in shown else np.array(se2.pose_from_matrix(T_map_robot))
+        color = ColorRGBA(**dict(zip("rgba", robot_color(index), strict=True)))
+        if robot in shown:
+            arrow = Marker(header=header, ns="robot_poses", id=index, type=Marker.ARROW)
+            arrow.action = Marker.ADD
+            arrow.pose = pose_msg(where.tolist())
+            arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.6, 0.12, 0.12
+            arrow.color = color
+            markers.append(arrow)
+        text = Marker(header=header, ns="robot_names", id=index, type=Marker.TEXT_VIEW_FACING)
+        text.action = Marker.ADD
+        text.pose = pose_msg(where.tolist())
+        text.pose.position.z = 0.6
+        text.scale.z = 0.4
+        text.color = color
+        text.text = robot
+        markers.append(text)
+    return MarkerArray(markers=markers)
+
+
+def occupancy_grid_msg(grid: OccupancyGrid, stamp: Time, frame: str) -> OccupancyGridMsg:
+    """``nav_msgs/OccupancyGrid`` of a grid: row-major from cell (0, 0), x fastest, cells
+    -1 unknown / 0 free / 100 occupied; ``info.map_load_time`` = ``header.stamp`` = ``stamp``."""
+    msg = OccupancyGridMsg()
+    msg.header = Header(frame_id=frame, stamp=stamp)
+    msg.info.map_load_time = stamp
+    msg.info.resolution = float(grid.resolution)
+    msg.info.width = grid.width
+    msg.info.height = grid.height
+    msg.info.origin = pose_msg((grid.origin[0], grid.origin[1], 0.0))
+    msg.data = array.array("b", np.ascontiguousarray(grid.cells, dtype=np.int8).tobytes())
+    return msg
+
+
+def grid_from_msg(msg: OccupancyGridMsg) -> OccupancyGrid:
+    """The grid of an ``nav_msgs/OccupancyGrid`` (inverse of :func:`occupancy_grid_msg`; the
+    origin's rotation is assumed zero, as the merger publishes it)."""
+    cells = np.frombuffer(msg.data, dtype=np.int8)
+    origin = (float(msg.info.origin.position.x), float(msg.info.origin.position.y))
+    shape = (int(msg.info.height), int(msg.info.width))
+    return OccupancyGrid(origin, float(msg.info.resolution), cells.reshape(shape).copy())
+
+
+def frame_transform(
+    placement: Sequence[float], stamp: Time, map_frame: str, child_frame: str
+) -> TransformStamped:
+    """TF of a robot's map frame ``child_frame`` in ``map_frame`` (its placement)."""
+    transform = TransformStamped()
+    transform.header = Header(frame_id=map_frame, stamp=stamp)
+    transform.child_frame_id = child_frame
+    placed = pose_msg(placement)
+    transform.transform.translation.x = placed.position.x
+    transform.transform.translation.y = placed.position.y
+    transform.transform.rotation = placed.orientation
+    return transform

@@ -1,0 +1,185 @@
+"""Bringup without launch (``mrm run``), the params file of both nodes, and the launch file."""
+
+from __future__ import annotations
+
+import ast
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from multi_robot_mapper.core.config import ConfigError, config_to_flat
+from multi_robot_mapper.core.mapper_config import RobotMapperConfig
+from multi_robot_mapper.core.merger_config import MapMergerConfig
+from multi_robot_mapper.core.simulation import LaserModel, simulate_robots
+from multi_robot_mapper.io.bags import recording_of
+from multi_robot_mapper.io.config_files import (
+    SYSTEM_PARAMS_FILE,
+    parameters_from_yaml,
+    system_params_file,
+)
+from multi_robot_mapper.ros.bringup import build_system, robot_names
+from multi_robot_mapper.ros.live import Observer, ScanPlayer, timeline
+from multi_robot_mapper.ros.testing import default_domain_id, isolated_context, spin_until
+
+REPO = Path(__file__).resolve().parents[1]
+PARAMS = REPO / "config" / SYSTEM_PARAMS_FILE
+LAUNCH = REPO / "launch" / "multi_robot_mapper.launch.py"
+
+
+def test_robot_names_are_namespaces() -> None:
+    assert robot_names("robot1, /robot2/,robot1,,team_a/r3") == ["robot1", "robot2", "team_a/r3"]
+    for bad in ("", " , ", "1robot", "robot-1", "a//b"):
+        with pytest.raises(ConfigError):
+            robot_names(bad)
+
+
+def test_the_system_params_file_is_generated_and_holds_both_nodes_defaults() -> None:
+    assert PARAMS.read_text(encoding="utf-8") == system_params_file(), "run `make config`"
+    mapper = parameters_from_yaml(PARAMS, node_name="robot_mapper")
+    merger = parameters_from_yaml(PARAMS, node_name="map_merger")
+    assert mapper == config_to_flat(RobotMapperConfig())
+    assert merger == config_to_flat(MapMergerConfig())
+
+
+@pytest.mark.ros
+def test_build_system_applies_the_params_file_to_every_robot_and_the_merger(
+    tmp_path: Path,
+) -> None:
+    # The shipped file, with two values changed, given as --ros-args as ros2 run would.
+    text = PARAMS.read_text(encoding="utf-8")
+    text = text.replace("partial_map_period: 1.0 ", "partial_map_period: 0.7 ", 1)
+    text = text.replace("merge_period: 1.0 ", "merge_period: 0.3 ", 1)
+    changed = tmp_path / "p.yaml"
+    changed.write_text(text, encoding="utf-8")
+    context = Context()
+    rclpy.init(
+        args=["test", "--ros-args", "--params-file", str(changed)],
+        context=context,
+        domain_id=default_domain_id(),
+    )
+    try:
+        system = build_system(["robot1", "robot2"], method="pivot", context=context)
+        try:
+            assert sorted(system.mappers) == ["robot1", "robot2"]
+            for name, mapper in system.mappers.items():
+                assert mapper.get_namespace() == f"/{name}"
+                assert mapper.config.partial_map_period == 0.7
+            assert system.merger.config.merge_period == 0.3
+            assert system.merger.config.robot_names() == ["robot1", "robot2"]
+            assert sorted(system.merger.robots) == ["robot1", "robot2"]
+        finally:
+            system.destroy()
+        with pytest.raises(ConfigError, match="not implemented"):
+            build_system(["robot1"], method="ffs", context=context)
+    finally:
+        context.try_shutdown()
+
+
+def test_mrm_run_refuses_ffs_and_missing_params_files_with_exit_2(mrm, capsys, tmp_path) -> None:
+    os.environ.setdefault("ROS_DOMAIN_ID", str(default_domain_id()))
+    assert mrm(["run", "--robots", "robot1", "--method", "ffs"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "ffs" in err and "not implemented" in err
+    assert mrm(["run", "--robots", "robot1", "--params-file", str(tmp_path / "no.yaml")]) == 2
+    assert "no such params file" in capsys.readouterr().err
+    assert mrm(["run", "--robots", "9lives"]) == 2
+    assert mrm(["run", "--robots", "robot1", "-p", "no_such_parameter:=1"]) == 2
+    assert "neither robot_mapper nor map_merger" in capsys.readouterr().err
+
+
+def test_dash_p_goes_to_the_nodes_that_have_the_parameter() -> None:
+    from multi_robot_mapper.cli.run import node_parameters
+
+    mapper, merger = node_parameters(
+        ["max_scan_rate:=10", "merge_period:=2.5", "warning_period:=3", "grid.enabled:=false"]
+    )
+    assert {p.name: p.value for p in mapper} == {"max_scan_rate": 10.0, "warning_period": 3.0}
+    assert all(isinstance(p.value, float) for p in mapper)
+    assert {p.name: p.value for p in merger} == {
+        "merge_period": 2.5,
+        "warning_period": 3,
+        "grid.enabled": False,
+    }
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
+def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) -> None:
+    """``mrm run`` in a process of its own: two simulated robots' scans go in on their topics,
+    the merged global map comes out; SIGINT and SIGTERM end it with exit code 0."""
+    robots = ["robot1", "robot2"]
+    env = dict(os.environ, ROS_DOMAIN_ID=str(default_domain_id()))
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    command = [sys.executable, "-m", "multi_robot_mapper.cli.main", "run"]
+    command += ["--robots", ",".join(robots), "--params-file", str(PARAMS)]
+    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        with isolated_context() as context:
+            observer = Observer(robots, context=context)
+            driver = Node("driver", context=context)
+            player = ScanPlayer(driver, robots, speed=1.0)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(observer)
+            executor.add_node(driver)
+            try:
+                assert spin_until(executor, player.subscribed, 30.0), process.poll()
+                if stop == signal.SIGINT:
+                    # The office: two robots, 8 s each, every 4th scan (10 Hz), played live.
+                    runs = simulate_robots("office", 2, LaserModel(), seed=1, duration=8.0)
+                    scans = {
+                        r: recording_of(r, run).scans[::4]
+                        for r, run in zip(robots, runs, strict=True)
+                    }
+                    player.start(timeline(scans))
+                    assert spin_until(
+                        executor, lambda: len(observer.merged()) == 2 and not player.running(), 60.0
+                    ), (observer.merged(), player.stats.published)
+                    assert len(observer.global_maps[-1].segments) == 2
+                    assert spin_until(executor, lambda: observer.grid is not None, 10.0)
+            finally:
+                player.stop()
+                executor.shutdown()
+                observer.destroy_node()
+                driver.destroy_node()
+        process.send_signal(stop)
+        out, err = process.communicate(timeout=20.0)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 0, err.decode()
+    assert b"Traceback" not in err, err.decode()
+    assert b"robot1, robot2 and a map_merger" in out
+
+
+def test_the_launch_file_parses_and_is_installed() -> None:
+    tree = ast.parse(LAUNCH.read_text(encoding="utf-8"))
+    functions = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
+    assert "generate_launch_description" in functions
+    setup = (REPO / "setup.py").read_text(encoding="utf-8")
+    assert 'glob("launch/*.launch.py")' in setup
+    assert "<exec_depend>launch_ros</exec_depend>" in (REPO / "package.xml").read_text()
+
+
+def test_the_launch_file_builds_its_description_where_launch_is_installed(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    pytest.importorskip("launch_ros", reason="launch and launch_ros come with apt ROS, not PyPI")
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("multi_robot_mapper_launch", LAUNCH)
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setattr(
+        "ament_index_python.packages.get_package_share_directory", lambda _: str(REPO)
+    )
+    spec.loader.exec_module(module)
+    description = module.generate_launch_description()
+    assert len(description.entities) == 5
