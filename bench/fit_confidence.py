@@ -84,7 +84,7 @@ KINDS = (
 )
 WINDOW = 3  # scans per window
 WINDOW_SAMPLES = 150  # revisit and unrelated window pairs per log
-RAW = 14  # numbers of MatchEvidence.as_array
+RAW = 19  # numbers of MatchEvidence.as_array
 SAMPLES = 300  # revisit and unrelated pairs per log
 L2 = 1e-2  # regularisation of the logistic fit (per pair, on standardised features)
 

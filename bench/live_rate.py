@@ -1,4 +1,4 @@
-"""Live rate: a real robot_mapper node fed simulated UTM-30LX scans at 40 Hz wall-clock pace.
+"""Live rate: a real robot_mapper node fed scans at their own pace, simulated or from a real log.
 
 A driver publishes pre-built ``sensor_msgs/LaserScan`` messages (1081 beams, the simulator's
 default laser) on ``/robot1/scan`` with sensor-data QoS, one every 25 ms by the wall clock, from
@@ -23,9 +23,21 @@ Measured (and only this):
 
     .venv/bin/python bench/live_rate.py [--seconds 30] [--world office] [--seed 0]
         [--set local_mapping.keyframe_distance=0.5 ...] [--cpu 0] [--json]
+    .venv/bin/python bench/live_rate.py --log freiburg-079 [--robots 4 --robot 1] [--speed 4]
 
-Target (issue 4): dropped <= 1 %, latency p95 < 25 ms on one core. The mapper is not tuned
-here; this only measures it.
+``--log NAME`` plays a real CARMEN log from ``../shared/data/carmen`` instead (the simulated
+bench hides the real cost: 360-beam SICK scans of a real building): robot ``--robot`` of the
+log cut into ``--robots`` contiguous runs (as ``mrm import-carmen`` cuts it), each scan
+published when its own stamp comes (times ``1 / --speed``). The table adds the time per
+stage of the node's scan callback: front end (LaserScan to segments), matching (tracking,
+search, recent keyframes), confidence, integrate (placing the scan), graph hand-off (a
+keyframe's edge to the back end, which runs on its own thread), and the back end's time per
+keyframe (matching, loop closures, optimisation; not on the scan's path).
+
+Targets (issue 4, simulated): dropped <= 1 %, latency p95 < 25 ms on one core. Issue 17 (real
+data, freiburg-079 in 4): time from scan received to partial map updated (the end of the scan
+callback) p95 < 25 ms; 0 scans dropped at the log's own rate; dropped scans counted at 4x.
+The mapper is not tuned here; this only measures it.
 """
 
 from __future__ import annotations
@@ -41,6 +53,7 @@ import json  # noqa: E402
 import math  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -50,14 +63,22 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 
+from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import parse_override  # noqa: E402
-from multi_robot_mapper.core.simulation import ROUTES, LaserModel, simulate_robots  # noqa: E402
+from multi_robot_mapper.core.simulation import (  # noqa: E402
+    ROUTES,
+    LaserModel,
+    SimulatedRobot,
+    simulate_robots,
+)
+from multi_robot_mapper.io.carmen import carmen_scan_data, monotonic_stamps, read_carmen  # noqa: E402
 from multi_robot_mapper.io.messages import scan_to_msg, stamp_from_seconds  # noqa: E402
 from multi_robot_mapper.ros.robot_mapper import RobotMapper  # noqa: E402
 from multi_robot_mapper.ros.testing import isolated_context, spin_until  # noqa: E402
 
 Key = tuple[int, int]
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
 
 
 class TimedMapper(RobotMapper):
@@ -68,15 +89,22 @@ class TimedMapper(RobotMapper):
         self.service: list[float] = []
         self.map_publish: list[float] = []
         self.local_mapping: list[float] = []
+        self.stages: dict[str, list[float]] = {}  # per scan: seconds of each stage
         super().__init__(**kwargs)
         add_scan = self.mapper.add_scan
 
         def timed_add_scan(*args: Any) -> Any:
             start = time.monotonic()
+            update = None
             try:
-                return add_scan(*args)
+                update = add_scan(*args)
+                return update
             finally:
-                self.local_mapping.append(time.monotonic() - start)
+                spent = time.monotonic() - start
+                self.local_mapping.append(spent)
+                if update is not None:
+                    for stage, seconds in update.seconds.items():
+                        self.stages.setdefault(stage, []).append(seconds)
 
         self.mapper.add_scan = timed_add_scan  # type: ignore[method-assign]
 
@@ -106,12 +134,32 @@ def percentiles_ms(values: list[float]) -> dict[str, float]:
     }
 
 
+def log_robot(args: argparse.Namespace) -> SimulatedRobot:
+    """Robot ``--robot`` of a CARMEN log cut into ``--robots`` runs, with its reference poses."""
+    path = DATA / f"{args.log}.log.gz"
+    if not path.is_file():
+        raise SystemExit(f"live_rate: {path} not found")
+    scans = list(read_carmen(path))
+    start, stop = split_runs(len(scans), args.robots, 0)[args.robot - 1]
+    run = scans[start:stop]
+    stamps, _ = monotonic_stamps(np.array([s.timestamp for s in run]), args.log)
+    return SimulatedRobot(
+        stamps=stamps - stamps[0] + 1000.0,
+        T_world_laser=np.array([s.reference_pose for s in run]),
+        scans=[carmen_scan_data(s) for s in run],
+    )
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    laser = LaserModel()
     sim_start = time.monotonic()
-    robot = simulate_robots(args.world, 1, laser, seed=args.seed, duration=args.seconds)[0]
+    if args.log:
+        robot = log_robot(args)
+    else:
+        robot = simulate_robots(args.world, 1, LaserModel(), seed=args.seed, duration=args.seconds)[
+            0
+        ]
     messages = [
-        scan_to_msg(scan, "robot1/laser", stamp_from_seconds(stamp), 1.0 / laser.rate)
+        scan_to_msg(scan, "robot1/laser", stamp_from_seconds(stamp), 0.0)
         for scan, stamp in zip(robot.scans, robot.stamps, strict=True)
     ]
     simulated_s = time.monotonic() - sim_start
@@ -130,11 +178,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         spinner = threading.Thread(target=executor.spin, name="robot_mapper", daemon=True)
         spinner.start()
 
-        period = 1.0 / laser.rate
+        # Each scan goes out when its stamp comes (sped up by --speed).
+        offsets = (robot.stamps - robot.stamps[0]) / args.speed
+        period = float(np.median(np.diff(offsets))) if len(offsets) > 1 else 0.0
         late = 0  # publications more than one period behind the schedule (driver lag)
         t0 = time.monotonic() + 0.2
         for i, msg in enumerate(messages):
-            due = t0 + i * period
+            due = t0 + float(offsets[i])
             now = time.monotonic()
             if due > now:
                 time.sleep(due - now)
@@ -145,6 +195,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         wall_s = time.monotonic() - t0
         # Let the node finish what reached it (a queue of at most 5 scans), then stop it.
         deadline = time.monotonic() + 5.0
+        backend_wait = time.monotonic()
+        while not node.mapper.idle and time.monotonic() - backend_wait < 600.0:
+            time.sleep(0.05)  # the back end catches up (not on the scans' path)
         quiet_since = time.monotonic()
         seen = node.scans_received
         while time.monotonic() < deadline and time.monotonic() - quiet_since < 1.0:
@@ -172,11 +225,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                     abs(math.remainder(truth[2] - kf.T_robotmap_keyframe[2], math.tau)),
                 )
             )
+        beams = len(robot.scans[0].ranges)
         result = {
-            "world": args.world,
-            "seconds": args.seconds,
-            "rate_hz": laser.rate,
-            "beams": laser.beams,
+            "world": args.world if not args.log else f"{args.log} robot {args.robot}/{args.robots}",
+            "seconds": float(robot.stamps[-1] - robot.stamps[0]),
+            "speed": args.speed,
+            "rate_hz": 1.0 / period if period > 0 else math.nan,
+            "beams": beams,
             "overrides": list(args.set),
             "cpu": args.cpu,
             "simulation_s": simulated_s,
@@ -192,6 +247,15 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "latency_ms": percentiles_ms(latency),
             "service_ms": percentiles_ms(node.service),
             "local_mapping_ms": percentiles_ms(node.local_mapping),
+            "front_end_ms": percentiles_ms(
+                [s - m for s, m in zip(node.service, node.local_mapping, strict=False)]
+            ),
+            "stage_ms": {stage: percentiles_ms(v) for stage, v in sorted(node.stages.items())},
+            "stage_scans": {stage: len(v) for stage, v in node.stages.items()},
+            "backend_per_keyframe_ms": percentiles_ms(list(mapper.backend_seconds)),
+            "optimisation_per_keyframe_ms": percentiles_ms(list(mapper.optimise_seconds)),
+            "pieces_started": mapper.pieces_started,
+            "closures": len(mapper.closures),
             "partial_map_publications": len(node.map_publish),
             "partial_map_publish_ms": percentiles_ms(node.map_publish),
             "accepted": mapper.scans_accepted,
@@ -215,7 +279,8 @@ def print_table(r: dict[str, Any]) -> None:
         return f"{d['median']:.1f} / {d['p95']:.1f} / {d['max']:.1f}"
 
     print(
-        f"live rate: {r['world']}, {r['seconds']:g} s at {r['rate_hz']:g} Hz, {r['beams']} beams"
+        f"live rate: {r['world']}, {r['seconds']:.0f} s at {r['rate_hz']:.1f} Hz "
+        f"(speed x{r['speed']:g}), {r['beams']} beams"
         + (f", pinned to CPU {r['cpu']}" if r["cpu"] is not None else "")
         + (f", overrides {' '.join(r['overrides'])}" if r["overrides"] else "")
     )
@@ -230,6 +295,12 @@ def print_table(r: dict[str, Any]) -> None:
     row("latency ms med/p95/max", ms(lat), f"publish -> end of scan callback; {ok}")
     row("service ms med/p95/max", ms(r["service_ms"]), "scan callback alone")
     row("  of which local mapper", ms(r["local_mapping_ms"]), "LocalMapper.add_scan")
+    row("  the rest", ms(r["front_end_ms"]), "conversion, extraction, publishing")
+    for stage, times in r["stage_ms"].items():
+        row(f"    {stage}", ms(times), f"in {r['stage_scans'][stage]} scans")
+    row("back end per keyframe", ms(r["backend_per_keyframe_ms"]), "on its own thread")
+    row("  of which optimisation", ms(r["optimisation_per_keyframe_ms"]))
+    row("pieces started / closures", f"{r['pieces_started']} / {r['closures']}")
     row(
         "partial_map publications",
         f"{r['partial_map_publications']}",
@@ -263,6 +334,10 @@ def main() -> None:
     parser.add_argument(
         "--cpu", type=int, default=None, help="pin the whole process (node, driver, DDS) to a CPU"
     )
+    parser.add_argument("--log", help="a CARMEN log of ../shared/data/carmen (e.g. freiburg-079)")
+    parser.add_argument("--robots", type=int, default=4, help="with --log: runs the log is cut in")
+    parser.add_argument("--robot", type=int, default=1, help="with --log: the run played (1..)")
+    parser.add_argument("--speed", type=float, default=1.0, help="play this many times faster")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args()
     if args.cpu is not None:

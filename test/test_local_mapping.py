@@ -23,6 +23,7 @@ from multi_robot_mapper.core.simulation import (
     WORLDS,
     LaserModel,
     box,
+    clutter_for,
     drive_path,
     route_section,
     simulate_robots,
@@ -266,3 +267,20 @@ def test_a_lost_robot_maps_on_in_a_piece_that_joins_the_map_again(monkeypatch) -
         float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
     }
     assert _ate(times, poses, truth_at) < 0.02
+
+
+def test_a_cluttered_office_is_tracked_within_centimetres() -> None:
+    # Chairs, tables, pillars and people walking to and fro: a third of the returns or more
+    # fall in clusters too small for a segment. The drive is still tracked.
+    clutter = clutter_for("office", 0.15, seed=2)
+    run = simulate_robots("office", 1, LaserModel(), seed=2, duration=4.0, clutter=clutter)[0]
+    segments = [extract_scan(s, EXTRACTION)[0] for s in run.scans[:5]]
+    assert all(s.dropped_points > 20 for s in segments)
+    mapper = LocalMapper()
+    for t, s, true_pose in zip(run.stamps, run.scans, run.T_world_laser, strict=True):
+        update = _feed(mapper, float(t), s)
+        assert update.accepted and update.piece == 0
+        assert update.pose is not None
+        expected = _relative(run.T_world_laser[0], true_pose)
+        assert np.hypot(update.pose[0] - expected[0], update.pose[1] - expected[1]) < 0.05
+        assert abs(se2.wrap_angle(update.pose[2] - expected[2])) < np.radians(1.0)

@@ -196,3 +196,43 @@ def test_an_extra_hypothesis_is_always_evaluated_and_refined() -> None:
     result = integrate(ROOM, moved, CONFIG, heuristics=(), extra_hypotheses=guess[None, :])
     np.testing.assert_allclose(result.T_1_2, T_1_2, atol=1e-4)
     assert result.evaluated == 1
+
+
+def _corridor(door: bool) -> np.ndarray:
+    """A 2.4 m wide corridor, 60 m long (its ends beyond the laser's reach), with or without a
+    door recess on one side."""
+    if not door:
+        return np.array([[-30.0, -1.2, 30.0, -1.2], [-30.0, 1.2, 30.0, 1.2]])
+    return np.array(
+        [
+            [-30.0, -1.2, 30.0, -1.2],
+            [-30.0, 1.2, 1.0, 1.2],
+            [1.0, 1.2, 1.0, 2.0],
+            [1.0, 2.0, 2.0, 2.0],
+            [2.0, 2.0, 2.0, 1.2],
+            [2.0, 1.2, 30.0, 1.2],
+        ]
+    )
+
+
+def test_a_corridor_that_fits_at_many_places_gets_a_low_confidence() -> None:
+    # Two scans 0.8 m apart in a bare corridor: every slide along it fits the walls as well as
+    # the true one (a tie), and the match must not claim to be right.
+    laser = LaserModel(beams=361, range_noise=0.005, dropout=0.0, range_max=20.0)
+    rng = np.random.default_rng(3)
+    bare = _corridor(False)
+    first = simulate_scan(bare, (0.0, 0.0, 0.0), laser, rng)
+    second = simulate_scan(bare, (0.8, 0.0, 0.0), laser, rng)
+    segments = [extract_scan(s, ExtractionConfig())[0].segments for s in (first, second)]
+    result = integrate(*segments, CONFIG, views=(first, second))
+    assert result.confidence < 0.5
+    assert result.evidence is not None and result.evidence.support < 0.1
+    # A door recess fixes the offset along the corridor: the same motion is matched, right
+    # and confident.
+    door = _corridor(True)
+    first = simulate_scan(door, (0.0, 0.0, 0.0), laser, rng)
+    second = simulate_scan(door, (0.8, 0.0, 0.0), laser, rng)
+    segments = [extract_scan(s, ExtractionConfig())[0].segments for s in (first, second)]
+    result = integrate(*segments, CONFIG, views=(first, second))
+    assert result.confidence > 0.9
+    np.testing.assert_allclose(result.T_1_2, [0.0, 0.8, 0.0], atol=0.05)

@@ -285,7 +285,7 @@ def test_late_subscriber_receives_the_whole_partial_map(fast_map_harness: Harnes
     h = fast_map_harness
     msgs = send_drive(h)
     mapper = h.mapper.mapper
-    assert spin_until(h.executor, lambda: h.mapper.published_version == mapper.version, timeout=5.0)
+    assert spin_until(h.executor, lambda: h.mapper.map_published, timeout=10.0)
     published = h.mapper.partial_maps_published
     # Created after the map went out: transient local delivers the last (whole) map to it.
     maps: list[MarkerArray] = []

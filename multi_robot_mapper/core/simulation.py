@@ -12,7 +12,7 @@ import dataclasses
 import numpy as np
 from numpy.typing import NDArray
 
-from multi_robot_mapper.core.geometry import ranges_index
+from multi_robot_mapper.core.geometry import point_segment_distance, ranges_index
 from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = NDArray[np.float64]
@@ -467,12 +467,14 @@ def simulate_robots(
     speed: float = 0.8,
     overlap: float = 0.3,
     start: float = SIM_START_S,
+    clutter: Clutter | None = None,
 ) -> list[SimulatedRobot]:
     """Simulate ``robots`` robots driving partly overlapping stretches of a built-in world.
 
     All robots scan at ``laser.rate`` from the same first stamp ``start``. Robot ``k`` draws its
     noise from its own stream of ``seed`` (``SeedSequence(seed, spawn_key=(k,))``), so a seed
-    gives the same scans for a robot however many robots are simulated.
+    gives the same scans for a robot however many robots are simulated. ``clutter``
+    (:func:`clutter_for`) adds furniture and walking people (where they are at each stamp).
     """
     if world not in WORLDS or world not in ROUTES:
         raise ValueError(f"unknown world {world!r}; known: {', '.join(sorted(ROUTES))}")
@@ -487,6 +489,121 @@ def simulate_robots(
         rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,)))
         poses = drive_path(waypoints, speed, laser.rate, duration)
         stamps = start + np.arange(len(poses), dtype=np.float64) / laser.rate
-        scans = [simulate_scan(walls, (p[0], p[1], p[2]), laser, rng) for p in poses]
+        if clutter is None:
+            scans = [simulate_scan(walls, (p[0], p[1], p[2]), laser, rng) for p in poses]
+        else:
+            scans = [
+                simulate_scan(clutter.walls_at(walls, t - start), (p[0], p[1], p[2]), laser, rng)
+                for p, t in zip(poses, stamps, strict=True)
+            ]
         runs.append(SimulatedRobot(stamps=stamps, T_world_laser=poses, scans=scans))
     return runs
+
+
+# ---------------------------------------------------------------------------------------------
+# Clutter: chair and table legs, pillars and walking people (``mrm simulate --clutter``).
+# ---------------------------------------------------------------------------------------------
+
+_LEG = 0.04  # m, side of a chair or table leg
+_PERSON_LEG = 0.06  # m, radius of a walking person's leg
+_PERSON_SPEED = 1.0  # m/s
+_EXTENT = 0.7  # m, the farthest an object reaches from where it is placed (a table's corner)
+
+
+@dataclasses.dataclass(frozen=True)
+class Clutter:
+    """What a crowded place adds to a world: furniture that stays put and people who walk.
+
+    ``static`` are small objects (chair and table legs, pillars) that make clusters of a few
+    returns, too small for a segment; ``walkers`` are people walking to and fro along a line,
+    each two legs that a laser at knee height sees as two small arcs.
+    """
+
+    static: FloatArray  # (N, 4) segments
+    walkers: FloatArray  # (W, 4) x1, y1, x2, y2 of each person's line of walking
+
+    def walls_at(self, walls: FloatArray, seconds: float) -> FloatArray:
+        """The world's walls, the furniture and every person where they are at ``seconds``."""
+        pieces = [walls, self.static]
+        for x1, y1, x2, y2 in self.walkers:
+            length = float(np.hypot(x2 - x1, y2 - y1))
+            # To and fro along the line: position along it, a triangle wave in time.
+            phase = (seconds * _PERSON_SPEED / max(length, 1e-9)) % 2.0
+            share = phase if phase <= 1.0 else 2.0 - phase
+            cx, cy = x1 + share * (x2 - x1), y1 + share * (y2 - y1)
+            nx, ny = -(y2 - y1) / max(length, 1e-9), (x2 - x1) / max(length, 1e-9)
+            stride = 0.15 * np.sin(2.0 * np.pi * seconds)  # legs swing while walking
+            for side in (-1.0, 1.0):
+                lx = cx + side * 0.12 * nx + side * stride * (x2 - x1) / max(length, 1e-9)
+                ly = cy + side * 0.12 * ny + side * stride * (y2 - y1) / max(length, 1e-9)
+                pieces.append(arc((lx, ly), _PERSON_LEG, 0.0, 2 * np.pi, pieces=6))
+        return np.vstack(pieces)
+
+
+def clutter_for(world: str, density: float, seed: int = 0) -> Clutter:
+    """Clutter for a built-in world: ``density`` objects per square metre of free floor (a
+    chair, a table, a pillar or a walking person, drawn at random), kept 0.6 m from the
+    world's route (where robots drive) and 0.3 m from every wall. Deterministic for a seed."""
+    if world not in WORLDS or world not in ROUTES:
+        raise ValueError(f"unknown world {world!r}; known: {', '.join(sorted(ROUTES))}")
+    if not 0.0 <= density <= 2.0:
+        raise ValueError(f"clutter density must be in [0, 2] objects per m^2, got {density}")
+    walls = WORLDS[world]()
+    route = _closed(np.asarray(ROUTES[world], dtype=np.float64))
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(1000,)))
+    ends = walls.reshape(-1, 2)
+    lo, hi = ends.min(axis=0), ends.max(axis=0)
+    area = float(np.prod(hi - lo))
+    wanted = round(density * area)
+    static: list[FloatArray] = []
+    walkers: list[tuple[float, float, float, float]] = []
+    route_segments = np.hstack((route[:-1], route[1:]))
+    tries = 0
+    while len(static) + len(walkers) < wanted and tries < 50 * max(wanted, 1):
+        tries += 1
+        x, y = rng.uniform(lo, hi)
+        near_wall = _distance_to(walls, x, y) < 0.3 + _EXTENT
+        if near_wall or _distance_to(route_segments, x, y) < 0.6 + _EXTENT:
+            continue
+        kind = rng.choice(4, p=[0.4, 0.25, 0.15, 0.2])
+        turn = rng.uniform(0.0, np.pi)
+        if kind == 0:  # a chair: four legs on a 0.45 m square
+            static.append(_legs(x, y, 0.45, 0.45, turn))
+        elif kind == 1:  # a table: four legs on a 0.8 x 1.2 m rectangle
+            static.append(_legs(x, y, 0.8, 1.2, turn))
+        elif kind == 2:  # a round pillar
+            static.append(arc((x, y), rng.uniform(0.1, 0.25), 0.0, 2 * np.pi, pieces=8))
+        else:  # a person walking to and fro along 2-4 m
+            reach = rng.uniform(1.0, 2.0)
+            dx, dy = reach * np.cos(turn), reach * np.sin(turn)
+            walkers.append((x - dx, y - dy, x + dx, y + dy))
+    return Clutter(
+        np.vstack(static) if static else np.zeros((0, 4)),
+        np.asarray(walkers, dtype=np.float64).reshape(-1, 4),
+    )
+
+
+def _legs(x: float, y: float, width: float, depth: float, turn: float) -> FloatArray:
+    """Four small square legs at the corners of a ``width`` x ``depth`` rectangle."""
+    c, s = np.cos(turn), np.sin(turn)
+    legs = []
+    for u, v in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+        lx = x + c * u * width / 2 - s * v * depth / 2
+        ly = y + s * u * width / 2 + c * v * depth / 2
+        legs.append(box(lx, ly, _LEG, _LEG))
+    return np.vstack(legs)
+
+
+def _distance_to(segments: FloatArray, x: float, y: float) -> float:
+    """Distance from ``(x, y)`` to the nearest of ``segments``."""
+    n = len(segments)
+    return float(
+        point_segment_distance(
+            np.full(n, x),
+            np.full(n, y),
+            segments[:, 0],
+            segments[:, 1],
+            segments[:, 2],
+            segments[:, 3],
+        ).min(initial=np.inf)
+    )

@@ -87,7 +87,11 @@ class RobotMapper(Node):
         self._last_scan_ns: int | None = None  # node clock when the last scan arrived
         self._last_stamp = Time()  # header stamp of the newest scan
         self._reported = (0, 0, 0)  # received, accepted, rejected at the last diagnostics
-        self.mapper = LocalMapper(self.config.local_mapping)
+        # The back end (keyframe graph, loop closures, fusion) works on a thread of its own:
+        # a scan never waits for it.
+        self.mapper = LocalMapper(self.config.local_mapping, backend=False, trajectory=False)
+        self.mapper.start_worker()
+        self._backend_errors_logged = 0
         self.last_update: LocalUpdate | None = None
         # Header stamps of the keyframes' scans, exact (a float second near 1e9 is not).
         self._keyframe_stamps: dict[float, Time] = {}
@@ -117,13 +121,13 @@ class RobotMapper(Node):
     @property
     def map_published(self) -> bool:
         """The partial map as it is now has gone out (or there is none yet)."""
-        return self.mapper.version in (0, self.published_version)
+        return self.mapper.idle and self.mapper.version in (0, self.published_version)
 
     def _apply_config(self, config: RobotMapperConfig) -> None:
         old = self.config
         self.config = config
         self.warnings.period = config.warning_period
-        self.mapper.config = config.local_mapping  # read at every scan; the map is kept
+        self.mapper.reconfigure(config.local_mapping)  # from the next scan; the map is kept
         if config.partial_map_period != old.partial_map_period:
             self.destroy_timer(self._map_timer)
             self._map_timer = self.create_timer(config.partial_map_period, self.publish_map)
@@ -207,8 +211,24 @@ class RobotMapper(Node):
         self._mapped_stamp = stamp
         return False
 
+    def destroy_node(self) -> None:
+        self.mapper.stop_worker()
+        super().destroy_node()
+
+    def _report_backend_errors(self) -> None:
+        """A back-end step that failed (a bug) is logged, throttled, with its traceback."""
+        errors = self.mapper.backend_errors
+        if errors > self._backend_errors_logged and self.mapper.last_backend_error:
+            self._backend_errors_logged = errors
+            self.warnings.warn(
+                "backend_error",
+                f"the local mapper's back end skipped a step after an internal error ({errors} "
+                f"so far; the map is kept):\n{self.mapper.last_backend_error}",
+            )
+
     def publish_map(self) -> bool:
         """Publish the whole partial map if it changed since the last publication."""
+        self._report_backend_errors()
         version = self.mapper.version
         if version == self.published_version or version == 0:
             return False

@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
+import traceback
 from collections import deque
 
 import numpy as np
@@ -60,6 +61,10 @@ FloatArray = NDArray[np.float64]
 Pose = tuple[float, float, float]
 
 
+# Back-end times kept (per keyframe): enough for any replay, bounded for a node running for hours.
+_TIMES_KEPT = 100_000
+
+
 @dataclasses.dataclass(frozen=True)
 class LocalUpdate:
     """What one scan did."""
@@ -71,6 +76,9 @@ class LocalUpdate:
     reason: str  # why a scan was set aside, or why a new piece started ("" otherwise)
     piece: int = 0  # the piece the scan is in
     new_piece: bool = False  # the robot was lost: this scan starts a new piece
+    # seconds per stage of this scan: track / search / recent (matching), confidence,
+    # handoff (a keyframe's edge to the back end), integrate (the rest)
+    seconds: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,6 +87,17 @@ class _Anchor:
 
     keyframe: int
     T_keyframe_scan: Pose
+
+
+# A tracked scan refined this close to its constant-velocity prediction needs no rivals: a
+# third of the correctness tolerance.
+_NEAR = RIGHT_DISTANCE / 3.0
+_NEAR_ANGLE = RIGHT_ANGLE / 3.0
+
+
+def _close(a: Pose, b: Pose, distance: float, angle: float) -> bool:
+    dx, dy, dtheta = se2.between(b, a)
+    return bool(np.hypot(dx, dy) <= distance and abs(dtheta) <= angle)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,7 +141,15 @@ class _Last:
 class LocalMapper:
     """One robot's keyframe graph and partial map, built scan by scan with no odometry."""
 
-    def __init__(self, config: LocalMapperConfig | None = None, backend: bool = True) -> None:
+    def __init__(
+        self,
+        config: LocalMapperConfig | None = None,
+        backend: bool = True,
+        trajectory: bool = True,
+    ) -> None:
+        """``backend`` False: the back end runs only when :meth:`run_backend` is called or
+        on the thread :meth:`start_worker` starts. ``trajectory`` False: every placed scan is
+        not remembered (a node running for hours needs only the keyframes)."""
         self.config = config if config is not None else LocalMapperConfig()
         self.map = KeyframeMap(
             self.config.integrate, self.config.fusion_tolerance, self.config.fusion_radius
@@ -136,15 +163,17 @@ class LocalMapper:
         self.set_aside_reasons: dict[str, int] = {}
         self.pieces_started = 0  # new pieces after the first (the robot was lost)
         self.stage_seconds: dict[str, float] = {}  # front-end time per stage, summed
-        self.backend_seconds: list[float] = []  # per keyframe
+        self._scan_seconds: dict[str, float] = {}  # the current scan's
+        self.backend_seconds: deque[float] = deque(maxlen=_TIMES_KEPT)  # per keyframe
         self.backend_errors = 0  # back-end steps that failed and were skipped (bugs)
         self.last_backend_error: str | None = None  # the newest one's traceback
-        self.optimise_seconds: list[float] = []  # per keyframe
+        self.optimise_seconds: deque[float] = deque(maxlen=_TIMES_KEPT)  # per keyframe
         self._last: _Last | None = None
         self._velocity: FloatArray | None = None  # (x, y, theta) per second, last scan frame
         self._piece_of_last = 0
         # The scans placed so far: (stamp, anchor), for the trajectory.
-        self._placed: list[tuple[float, _Anchor]] = []
+        self._placed: list[tuple[float, _Anchor]] | None = [] if trajectory else None
+        self._scans_at: dict[int, int] = {}  # keyframe -> scans placed on it
         # Keyframes the front end made and the back end has not taken yet.
         self._queue: deque[tuple[KeyframeScan, Pose, int, Edge | None, LostFrom | None]] = deque()
         # Front-end copy of every keyframe's pose and piece (the back end updates it).
@@ -152,6 +181,10 @@ class LocalMapper:
         self._pieces: dict[int, int] = {}
         self._scans: dict[int, KeyframeScan] = {}
         self._lock = threading.Lock()  # front end vs. a back end on another thread
+        self._worker: threading.Thread | None = None  # the back end's thread, when started
+        self._wake = threading.Event()  # keyframes queued for the worker
+        self._busy = False  # the back end is on a keyframe
+        self._stop = threading.Event()
         self._keyframes: list[Keyframe] = []  # the back end's last published state
 
     # --- the method -------------------------------------------------------------------------
@@ -178,6 +211,14 @@ class LocalMapper:
 
     def add_scan(self, stamp: float, segments: SegmentScan, view: LaserScanData) -> LocalUpdate:
         """Place one scan (its segments and the scan they came from) and extend the map."""
+        started = time.perf_counter()
+        self._scan_seconds = {}
+        update = self._add_scan(stamp, segments, view)
+        spent = time.perf_counter() - started
+        self._count("integrate", spent - sum(self._scan_seconds.values()))
+        return dataclasses.replace(update, seconds=dict(self._scan_seconds))
+
+    def _add_scan(self, stamp: float, segments: SegmentScan, view: LaserScanData) -> LocalUpdate:
         new = np.asarray(segments.segments, dtype=np.float64).reshape(-1, 4)
         new = new[np.isfinite(new).all(axis=1)]
         if float(lines_of(new).length.sum()) < self.config.integrate.min_match_value:
@@ -211,9 +252,9 @@ class LocalMapper:
             started = time.perf_counter()
             placed = self._new_keyframe(stamp, new, view, anchor, result, reference)
             keyframe_added = True
-            self._count("keyframe", time.perf_counter() - started)
+            self._count("handoff", time.perf_counter() - started)
         self._last = _Last(stamp, new, view, placed)
-        self._placed.append((stamp, placed))
+        self._record(stamp, placed)
         self.scans_accepted += 1
         return LocalUpdate(
             True, self.pose, keyframe_added, result.confidence, "", self.piece, False
@@ -260,14 +301,14 @@ class LocalMapper:
             ref_view: LaserScanData,
             anchor: _Anchor,
             search: bool,
-            more: list[Pose] = [],  # noqa: B006 - read only
+            guesses_from_last: list[Pose],
         ) -> _Attempt:
             started = time.perf_counter()
             # The predictions, from the reference's frame.
             T_ref_last = se2.between(
                 se2.compose(poses[anchor.keyframe], anchor.T_keyframe_scan), here
             )
-            guesses = [se2.compose(T_ref_last, m) for m in motions + more]
+            guesses = [se2.compose(T_ref_last, m) for m in guesses_from_last]
             result = integrate(
                 reference,
                 new,
@@ -286,7 +327,9 @@ class LocalMapper:
                 stage,
             )
             attempts.append(done)
-            self._count(stage, time.perf_counter() - started)
+            checked = result.seconds.get("confidence", 0.0)
+            self._count(stage, time.perf_counter() - started - checked)
+            self._count("confidence", checked)
             return done
 
         def settled() -> _Attempt | None:
@@ -304,16 +347,27 @@ class LocalMapper:
             # motion, and "did not move" refined in a corridor stays where it started.
             start = self._scans[keyframe]
             anchor = _Anchor(keyframe, (0.0, 0.0, 0.0))
-            attempt("track", start.segments, start.view, anchor, False, turned)
+            # A fast laser's prediction is good: refined alone, it lands next to it. When it
+            # lands farther, or is not confident, it is refined again with its turned copies
+            # (rivals that a wrong minimum cannot hide from).
+            quick = attempt("track", start.segments, start.view, anchor, False, motions[:1])
+            if quick.result.confidence >= threshold and _close(
+                se2.between(here, quick.pose), motions[0], _NEAR, _NEAR_ANGLE
+            ):
+                self.scans_tracked += 1
+                return quick, True
+            attempts.remove(quick)
+            attempt("track", start.segments, start.view, anchor, False, motions + turned)
             if (done := settled()) is not None:
                 self.scans_tracked += 1
                 return done, True
-        attempt("search", last.segments, last.view, last.anchor, True)
+        attempt("search", last.segments, last.view, last.anchor, True, motions)
         if (done := settled()) is not None:
             return done, True
         for k in older:
             candidate = self._scans[k]
-            attempt("recent", candidate.segments, candidate.view, _Anchor(k, (0.0, 0.0, 0.0)), True)
+            anchor = _Anchor(k, (0.0, 0.0, 0.0))
+            attempt("recent", candidate.segments, candidate.view, anchor, True, motions)
             if (done := settled()) is not None:
                 return done, True
         return max(attempts, key=lambda a: a.result.confidence), False
@@ -384,7 +438,7 @@ class LocalMapper:
         self._add_keyframe(scan, (0.0, 0.0, 0.0), index, None, lost_from)
         anchor = _Anchor(index, (0.0, 0.0, 0.0))
         self._last = _Last(stamp, segments, view, anchor)
-        self._placed.append((stamp, anchor))
+        self._record(stamp, anchor)
         self._velocity = None
         self.scans_accepted += 1
         if index > 0:
@@ -405,8 +459,55 @@ class LocalMapper:
             self._poses[scan.index] = pose
             self._pieces[scan.index] = piece
             self._queue.append((scan, pose, piece, edge, lost_from))
-        if self.inline_backend:
+        if self._worker is not None:
+            self._wake.set()
+        elif self.inline_backend:
             self.run_backend()
+
+    @property
+    def idle(self) -> bool:
+        """No keyframe waits for the back end and none is being worked on."""
+        with self._lock:
+            return not self._queue and not self._busy
+
+    def reconfigure(self, config: LocalMapperConfig) -> None:
+        """New settings from the next scan and the next keyframe on; the map is kept."""
+        self.config = config
+        self.closer.config = config
+        self.map.config = config.integrate
+        self.map.tolerance, self.map.radius = config.fusion_tolerance, config.fusion_radius
+
+    def start_worker(self) -> None:
+        """Run the back end on a thread of its own from now on: :meth:`add_scan` only hands
+        keyframes over and never waits for matching or the optimiser (what a node does; a
+        replay runs it in line and is deterministic)."""
+        if self._worker is not None:
+            return
+        self._stop.clear()
+        self._worker = threading.Thread(target=self._work, name="local-mapping-back-end")
+        self._worker.daemon = True  # never holds a process open at exit
+        self._worker.start()
+        self._wake.set()  # keyframes queued before
+
+    def stop_worker(self, timeout: float = 5.0) -> None:
+        """Stop the back-end thread (the keyframe it is on is finished first)."""
+        worker, self._worker = self._worker, None
+        if worker is None:
+            return
+        self._stop.set()
+        self._wake.set()
+        worker.join(timeout)
+
+    def _work(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait()
+            self._wake.clear()
+            try:
+                while not self._stop.is_set() and self.run_backend(limit=1):
+                    pass
+            except Exception:  # a bug must not end the thread: the next keyframe is tried
+                self.backend_errors += 1
+                self.last_backend_error = traceback.format_exc()
 
     # --- the back end -----------------------------------------------------------------------
 
@@ -420,11 +521,17 @@ class LocalMapper:
                 if not self._queue:
                     break
                 scan, pose, piece, edge, lost_from = self._queue.popleft()
+                self._busy = True
                 # The front end may have moved the keyframe since (earlier closures).
                 pose, piece = self._poses[scan.index], self._pieces[scan.index]
-            update = self.closer.add_keyframe(scan, pose, piece, edge, lost_from)
-            # What readers see, whole and consistent: the changed keyframes rebuilt.
-            fresh = self.map.keyframes(self.map.take_changed())
+            try:
+                update = self.closer.add_keyframe(scan, pose, piece, edge, lost_from)
+                # What readers see, whole and consistent: the changed keyframes rebuilt.
+                fresh = self.map.keyframes(self.map.take_changed())
+            except Exception:
+                with self._lock:
+                    self._busy = False
+                raise
             with self._lock:
                 for keyframe in fresh:
                     if keyframe.index == len(self._keyframes):
@@ -440,6 +547,7 @@ class LocalMapper:
                 # Keyframes made after this one moved with their anchors.
                 self._follow(update, scan.index)
                 self.version += 1
+                self._busy = False
             self.backend_seconds.append(update.seconds)
             self.optimise_seconds.append(update.optimise_seconds)
             self.backend_errors += len(update.errors)
@@ -469,13 +577,20 @@ class LocalMapper:
         ]
         return np.vstack(pieces) if pieces else np.zeros((0, 4))
 
+    def _record(self, stamp: float, anchor: _Anchor) -> None:
+        """A scan placed on ``anchor``: counted on its keyframe, and remembered for the
+        trajectory when asked."""
+        self._scans_at[anchor.keyframe] = self._scans_at.get(anchor.keyframe, 0) + 1
+        if self._placed is not None:
+            self._placed.append((stamp, anchor))
+
     def main_piece(self) -> int:
         """The piece holding the most placed scans (ties: the oldest)."""
         counts: dict[int, int] = {}
         with self._lock:
-            for _, anchor in self._placed:
-                piece = self._pieces[anchor.keyframe]
-                counts[piece] = counts.get(piece, 0) + 1
+            for keyframe, scans in self._scans_at.items():
+                piece = self._pieces[keyframe]
+                counts[piece] = counts.get(piece, 0) + scans
         return min(counts, key=lambda p: (-counts[p], p)) if counts else 0
 
     def keyframes(self) -> list[Keyframe]:
@@ -487,6 +602,8 @@ class LocalMapper:
     def trajectory(self, piece: int | None = None) -> tuple[FloatArray, FloatArray]:
         """Stamps (N,) and poses (N, 3) of the placed scans of ``piece`` (default: the main
         piece), at the keyframes' current poses."""
+        if self._placed is None:
+            raise ValueError("this mapper does not keep its trajectory (trajectory=False)")
         chosen = self.main_piece() if piece is None else piece
         stamps, poses = [], []
         with self._lock:
@@ -507,6 +624,7 @@ class LocalMapper:
 
     def _count(self, stage: str, seconds: float) -> None:
         self.stage_seconds[stage] = self.stage_seconds.get(stage, 0.0) + seconds
+        self._scan_seconds[stage] = self._scan_seconds.get(stage, 0.0) + seconds
 
     def _set_aside(self, reason: str) -> LocalUpdate:
         self.scans_set_aside += 1

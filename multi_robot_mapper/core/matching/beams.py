@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import threading
+from collections import OrderedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -91,7 +93,33 @@ class ViewReturns:
         return float(self.weights.sum())
 
 
+# The returns of the scans matched most recently (a keyframe's scan is matched many times):
+# id -> (the scan itself, which keeps the id from being reused, cap, points, weights).
+_RETURNS: OrderedDict[int, tuple[LaserScanData, float, FloatArray, FloatArray]] = OrderedDict()
+_RETURNS_KEPT = 256
+_RETURNS_LOCK = threading.Lock()
+
+
 def scan_returns(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArray]:
+    """A scan's returns in its laser frame (at most one per degree), each weighted by the
+    surface it stands for: the smaller gap to a neighbouring return, at most ``cap``. Kept
+    for the scans matched most recently (read only)."""
+    with _RETURNS_LOCK:  # a node's front end and back end share it
+        cached = _RETURNS.get(id(view))
+        if cached is not None and cached[0] is view and cached[1] == cap:
+            _RETURNS.move_to_end(id(view))
+            return cached[2], cached[3]
+    points, weights = _scan_returns(view, cap)
+    points.flags.writeable = False
+    weights.flags.writeable = False
+    with _RETURNS_LOCK:
+        _RETURNS[id(view)] = (view, cap, points, weights)
+        if len(_RETURNS) > _RETURNS_KEPT:
+            _RETURNS.popitem(last=False)
+    return points, weights
+
+
+def _scan_returns(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArray]:
     points = scan_points(view).points
     points = points[:: max(1, round(np.radians(1.0) / abs(view.angle_increment)))]
     if len(points) < 2:
@@ -110,6 +138,11 @@ class BeamAgreement:
     occluded: float  # behind what the other saw
     outside: float  # outside the other's fields of view and ranges
     total: float
+
+    @staticmethod
+    def nothing() -> BeamAgreement:
+        """No returns at all."""
+        return BeamAgreement(0.0, 0.0, 0.0, 0.0, 0.0)
 
     @staticmethod
     def unjudged(total: float) -> BeamAgreement:
@@ -161,9 +194,10 @@ def beam_categories(
     low = np.clip(np.floor(position).astype(np.int64), 0, max(count - 2, 0))
     high = np.minimum(low + 1, count - 1)
     r_low, r_high = ranges[low], ranges[high]
-    both = valid[low] & valid[high] & (np.abs(r_high - r_low) <= 2.0 * margin + 0.05 * r_low)
     share = np.clip(position - low, 0.0, 1.0)
     with np.errstate(invalid="ignore"):  # where a beam has no return: not read below
+        jump = np.abs(r_high - r_low) <= 2.0 * margin + 0.05 * r_low
+        both = valid[low] & valid[high] & jump
         measured = np.where(both, r_low + share * (r_high - r_low), ranges[beam])
     hit = inside & valid[beam]
     with np.errstate(invalid="ignore"):

@@ -65,24 +65,32 @@ class MatchEvidence:
     rival_score: float  # net score of the best distinct rival placement (0: none)
     support: float  # matched length across the least constrained direction
     fraction: float  # INTEGRATE's net value / shorter set's segment length
+    # both sets' returns judged with the best rival placement (all zero: no rival)
+    rival: BeamAgreement = dataclasses.field(default_factory=BeamAgreement.nothing)
 
     def as_array(self) -> FloatArray:
-        """The raw evidence as 14 numbers (:meth:`from_array` inverts it): what the fitting
+        """The raw evidence as 19 numbers (:meth:`from_array` inverts it): what the fitting
         script stores, so that features can change without matching again."""
         return np.concatenate(
             (
                 self.second_in_first.as_array(),
                 self.first_in_second.as_array(),
                 [self.score, self.rival_score, self.support, self.fraction],
+                self.rival.as_array(),
             )
         )
 
     @staticmethod
     def from_array(raw: FloatArray) -> MatchEvidence:
+        score, rival_score, support, fraction = (float(v) for v in raw[10:14])
         return MatchEvidence(
             BeamAgreement(*(float(v) for v in raw[0:5])),
             BeamAgreement(*(float(v) for v in raw[5:10])),
-            *(float(v) for v in raw[10:14]),
+            score,
+            rival_score,
+            support,
+            fraction,
+            BeamAgreement(*(float(v) for v in raw[14:19])),
         )
 
     def features(self) -> FloatArray:
@@ -107,8 +115,20 @@ class MatchEvidence:
                 min(_possible(side) for side in sides),
                 uniqueness * confirmed,
                 support * confirmed,
+                _beam_margin(both, self.rival),
             ]
         )
+
+
+def _beam_margin(best: BeamAgreement, rival: BeamAgreement) -> float:
+    """How much better the beams explain the best placement than its best rival: (confirmed
+    - seen through) of the best minus that of the rival, per metre of returns, within +-1. A
+    slide along a bare corridor, or a room that fits turned round, explains them as well: a
+    tie however much agrees."""
+    if best.total <= 0.0:
+        return 0.0
+    margin = (best.confirmed - best.seen_through) - (rival.confirmed - rival.seen_through)
+    return float(np.clip(margin / best.total, -1.0, 1.0))
 
 
 def _agreement(agreement: BeamAgreement) -> float:
@@ -137,6 +157,7 @@ FEATURES = (
     "weaker_overlap",  # the lower possible overlap of the two sides
     "uniqueness_x_log_confirmed",  # a tie is suspect however much agrees
     "log_support_x_log_confirmed",  # a corridor is suspect however much agrees
+    "beam_margin",  # how much better the beams explain the best placement than its rival
 )
 
 

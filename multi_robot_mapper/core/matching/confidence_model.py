@@ -21,6 +21,7 @@ SCAN_FEATURES = (
     "weaker_overlap",
     "uniqueness_x_log_confirmed",
     "log_support_x_log_confirmed",
+    "beam_margin",
 )
 SCAN_INTERCEPT = -6.97193
 SCAN_WEIGHTS = (
@@ -36,4 +37,5 @@ SCAN_WEIGHTS = (
     2.74296,
     0.840301,
     0.112568,
+    0.0,
 )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,6 +63,9 @@ class MatchResult:
     evaluated: int  # hypotheses fully evaluated after pruning
     confidence: float = 0.0  # P(right within 0.30 m / 5 deg), see core.matching.confidence
     evidence: MatchEvidence | None = None  # what the confidence was computed from
+    # seconds per stage: hypotheses, evaluation, refinement, ranking (free space and slides),
+    # confidence
+    seconds: dict[str, float] = dataclasses.field(default_factory=dict)
 
     @property
     def matrix(self) -> FloatArray:
@@ -101,6 +105,7 @@ def integrate(
     prescreen when there are many); the best distinct ones, refused ones dropped (Alg. 4
     l. 6-7, 20-23); refinement; slides along corridors; the best net score wins.
     """
+    clock = _StageClock()
     rng = np.random.default_rng(config.seed)
     total1 = float(lines_of(segments1).length.sum()) if len(segments1) else 0.0
     total2 = float(lines_of(segments2).length.sum()) if len(segments2) else 0.0
@@ -125,15 +130,20 @@ def integrate(
         else np.asarray(extra_hypotheses, dtype=np.float64).reshape(-1, 3)
     )
     transforms = np.vstack((extra, transforms))
+    clock.lap("hypotheses")
     if len(transforms) == 0:
-        return MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0)
+        return MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0, seconds=clock.seconds)
     values, evaluated = pruned_values(segments1, segments2, transforms, config, len(extra))
     # Alg. 4 l. 20-23 (keep the best), widened: the best few DISTINCT hypotheses are refused
     # (l. 6-7) or refined, then ranked by their net score (overlap and the scans' beams).
     candidates = _distinct_candidates(segments1, segments2, transforms, values, config)
+    clock.lap("evaluation")
     if candidates.size == 0:
-        return MatchResult(np.zeros(3), 0.0, 0.0, False, len(transforms), evaluated)
+        return MatchResult(
+            np.zeros(3), 0.0, 0.0, False, len(transforms), evaluated, seconds=clock.seconds
+        )
     refined = refine_many(segments1, segments2, transforms[candidates], config)
+    clock.lap("refinement")
     refined_values, scores, support, slide = _net_scores(
         segments1, segments2, refined, views, config
     )
@@ -166,6 +176,7 @@ def integrate(
         ):
             refined[pick], refined_values[pick] = polished[0], polished_value[0]
     best_T, best_value = refined[pick], float(refined_values[pick])
+    clock.lap("ranking")
     # Validity on the net value: overlap that the other scan's free space contradicts counts
     # against it (two unrelated rectilinear places easily overlap by a third).
     through, _ = seen_through_many(segments1, segments2, best_T[None, :], views, config)
@@ -188,9 +199,12 @@ def integrate(
         config,
         score=float(scores[pick]),
         rival_score=float(scores[rivals].max()) if rivals.any() else 0.0,
+        rival_T=refined[rivals][int(np.argmax(scores[rivals]))] if rivals.any() else None,
         support=best_support,
         fraction=fraction,
     )
+    probability = confidence(evidence.features())
+    clock.lap("confidence")
     return MatchResult(
         best_T.copy(),
         best_value,
@@ -198,9 +212,23 @@ def integrate(
         bool(valid),
         len(transforms),
         evaluated,
-        confidence(evidence.features()),
+        probability,
         evidence,
+        clock.seconds,
     )
+
+
+class _StageClock:
+    """Seconds per stage, each lap from the previous one."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._last = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        now = time.perf_counter()
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + now - self._last
+        self._last = now
 
 
 def _distinct_from(transforms: FloatArray, T: FloatArray) -> BoolArray:
@@ -221,10 +249,12 @@ def match_evidence(
     rival_score: float,
     support: float,
     fraction: float,
+    rival_T: FloatArray | None = None,
 ) -> MatchEvidence:
     """The evidence for the placement ``T_1_2`` (theta, tx, ty) of S2 in S1: each side's
     returns (points along its segments when its views are unknown) judged by the other side's
-    beams, with the score, the rival's and the fit's spread."""
+    beams, with the score, the rival's, the fit's spread, and how the beams judge the best
+    rival placement ``rival_T`` (a slide along a bare corridor explains them as well)."""
     cap = config.view_point_length
     sides = [viewpoints_of(v) for v in views]
     returns = [
@@ -233,18 +263,27 @@ def match_evidence(
         else ViewReturns(*_segment_returns(segments, cap))
         for viewpoints, segments in zip(sides, (segments1, segments2), strict=True)
     ]
-    T = se2.matrix_from_pose(float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0]))
     margin, spread = config.confirm_margin, config.free_space_spread
-    # S2's returns judged by S1's beams, and S1's by S2's (unjudged: every return outside).
-    judged = [
-        beam_agreement(
-            returns[1 - side], T if side == 0 else se2.invert(T), viewpoints, margin, spread
-        )
-        if viewpoints is not None
-        else BeamAgreement.unjudged(returns[1 - side].total)
-        for side, viewpoints in enumerate(sides)
-    ]
-    return MatchEvidence(judged[0], judged[1], score, rival_score, support, fraction)
+
+    def judge(row: FloatArray) -> list[BeamAgreement]:
+        """S2's returns judged by S1's beams, and S1's by S2's (unjudged: every return
+        outside), with S2 placed by ``row``."""
+        T = se2.matrix_from_pose(float(row[1]), float(row[2]), float(row[0]))
+        return [
+            beam_agreement(
+                returns[1 - side], T if side == 0 else se2.invert(T), viewpoints, margin, spread
+            )
+            if viewpoints is not None
+            else BeamAgreement.unjudged(returns[1 - side].total)
+            for side, viewpoints in enumerate(sides)
+        ]
+
+    judged = judge(T_1_2)
+    rival = BeamAgreement.nothing()
+    if rival_T is not None:
+        rival_judged = judge(rival_T)
+        rival = rival_judged[0] + rival_judged[1]
+    return MatchEvidence(judged[0], judged[1], score, rival_score, support, fraction, rival)
 
 
 def _segment_returns(segments: FloatArray, spacing: float) -> tuple[FloatArray, FloatArray]:
