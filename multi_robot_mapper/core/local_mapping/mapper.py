@@ -58,6 +58,7 @@ from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
 Pose = tuple[float, float, float]
 
 
@@ -612,6 +613,21 @@ class LocalMapper:
                     stamps.append(stamp)
                     poses.append(self._placed_pose_unlocked(anchor))
         return np.asarray(stamps, dtype=np.float64), np.asarray(poses).reshape(-1, 3)
+
+    def anchors(self, piece: int | None = None) -> tuple[FloatArray, IntArray, FloatArray]:
+        """Where the placed scans of ``piece`` (default: the main piece) are relative to their
+        keyframes: stamps (N,), keyframe indices (N,) and ``T_keyframe_scan`` (N, 3). A merger
+        that moves keyframes places the scans with them."""
+        if self._placed is None:
+            raise ValueError("this mapper does not keep its trajectory (trajectory=False)")
+        chosen = self.main_piece() if piece is None else piece
+        with self._lock:
+            kept = [(s, a) for s, a in self._placed if self._pieces[a.keyframe] == chosen]
+        return (
+            np.array([s for s, _ in kept], dtype=np.float64),
+            np.array([a.keyframe for _, a in kept], dtype=np.int64),
+            np.array([a.T_keyframe_scan for _, a in kept], dtype=np.float64).reshape(-1, 3),
+        )
 
     @property
     def closures(self) -> list[Closure]:
