@@ -46,7 +46,7 @@ from multi_robot_mapper.core.local_mapping.loop_closer import (
     LoopCloser,
     LostFrom,
 )
-from multi_robot_mapper.core.local_mapping.pose_graph import Edge
+from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
 from multi_robot_mapper.core.matching.confidence import (
     LIKELY,
