@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import ExtractionConfig, SegmentScan, extract_scan
-from multi_robot_mapper.core.local_mapping import LocalMapper, LocalMapperConfig
+from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalMapperConfig
 from multi_robot_mapper.core.merging import MergeConfig, merge
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
 
@@ -62,6 +62,14 @@ class OfflineMap:
     stats: dict[str, object]
     # robot -> (K, 3) keyframe poses in the robot's own map frame (local mapping only)
     keyframe_poses: dict[str, FloatArray] = dataclasses.field(default_factory=dict)
+    # robot -> every keyframe of every piece (pose in its piece's frame, segments in its own),
+    # what the robot's partial_map carries (local mapping only)
+    keyframes: dict[str, list[Keyframe]] = dataclasses.field(default_factory=dict)
+    # robot -> every placed scan of every piece: stamps (N,), keyframe (N,), T_keyframe_scan
+    # (N, 3) (LocalMapper.anchors; local mapping only)
+    anchors: dict[str, tuple[FloatArray, IntArray, FloatArray]] = dataclasses.field(
+        default_factory=dict
+    )
 
 
 Progress = Callable[[str, int, int], None]  # (robot, scans done, scans total)
@@ -177,6 +185,8 @@ def _run_local(
     owners: list[IntArray] = []
     trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
     keyframe_poses: dict[str, FloatArray] = {}
+    all_keyframes: dict[str, list[Keyframe]] = {}
+    anchors: dict[str, tuple[FloatArray, IntArray, FloatArray]] = {}
     per_robot: dict[str, dict[str, object]] = {}
     scan_times: list[float] = []
     backend_times: list[float] = []
@@ -206,6 +216,14 @@ def _run_local(
         segment_sets.append(map_segments)
         owners.append(np.full(len(map_segments), index, dtype=np.int64))
         trajectories[robot] = mapper.trajectory(main)
+        all_keyframes[robot] = mapper.keyframes()
+        pieces = sorted({kf.piece for kf in all_keyframes[robot]})
+        placed = [mapper.anchors(piece) for piece in pieces]
+        anchors[robot] = (
+            np.concatenate([a[0] for a in placed]) if placed else np.zeros(0),
+            np.concatenate([a[1] for a in placed]) if placed else np.zeros(0, dtype=np.int64),
+            np.vstack([a[2] for a in placed]) if placed else np.zeros((0, 3)),
+        )
         scans = mapper.map.scans
         per_robot[robot] = {
             "scans_accepted": mapper.scans_accepted,
@@ -269,6 +287,8 @@ def _run_local(
         frames,
         stats,
         keyframe_poses,
+        all_keyframes,
+        anchors,
     )
 
 

@@ -1,4 +1,4 @@
-"""The keyframe pose graph: the one module that talks to gtsam.
+"""The keyframe pose graph: the one module that talks to gtsam (local mapping and merging).
 
 Nodes are keyframes, each an SE(2) pose ``(x, y, theta)`` in its piece's frame; edges are
 relative poses ``T_first_second`` measured by scan matching, with an information matrix from
@@ -10,7 +10,11 @@ freely until a closure joins them (:meth:`PoseGraph.join`).
 
 Optimisation is incremental (ISAM2: a new keyframe or closure costs milliseconds, not a batch
 solve of the whole graph); joining pieces moves a whole piece into another's frame and
-rebuilds the solver from the stored edges. The rest of core sees numpy arrays only:
+rebuilds the solver from the stored edges. The merger builds a graph of every robot's
+keyframes at once from a rough start and solves it in one batch (:meth:`PoseGraph.solve`,
+Levenberg-Marquardt), its links between robots under the Dynamic Covariance Scaling kernel
+(``kernel="dcs"``: a wrong link that got past the consistency checks is switched off rather
+than bending two robots' maps). The rest of core sees numpy arrays only:
 ``(x, y, theta)`` triples and 3x3 information matrices in gtsam's Pose2 tangent order
 ``(x, y, theta)``, expressed in the ``second`` keyframe's frame (gtsam's ``between`` error).
 """
@@ -30,6 +34,10 @@ Pose = tuple[float, float, float]
 
 # The prior that holds each piece's first keyframe where it is: 1 mm, 0.006 degrees.
 _ANCHOR_SIGMAS = np.array([1e-3, 1e-3, 1e-4])
+_KERNELS = {
+    "huber": gtsam.noiseModel.mEstimator.Huber.Create,
+    "dcs": gtsam.noiseModel.mEstimator.DCS.Create,
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,8 +54,15 @@ class Edge:
 class PoseGraph:
     """Keyframe poses optimised with gtsam's ISAM2."""
 
-    def __init__(self, robust_scale: float = 1.0) -> None:
+    def __init__(self, robust_scale: float = 1.0, kernel: str = "huber") -> None:
+        """``kernel`` of the robust edges: ``"huber"`` (convex: a closure correcting metres of
+        drift still pulls from where the drift left the keyframes) or ``"dcs"`` (Dynamic
+        Covariance Scaling, Agarwal et al. 2013: an edge whose error is far beyond
+        ``robust_scale`` squared Mahalanobis units is scaled down towards nothing)."""
+        if kernel not in _KERNELS:
+            raise ValueError(f"kernel {kernel!r}: choose one of {', '.join(_KERNELS)}")
         self.robust_scale = robust_scale
+        self.kernel = kernel
         self.edges: dict[int, Edge] = {}  # edge id -> edge
         self._anchors: dict[int, Pose] = {}  # key -> prior pose (each piece's first keyframe)
         self._estimate: dict[int, Pose] = {}
@@ -127,7 +142,7 @@ class PoseGraph:
         information = 0.5 * (edge.information + edge.information.T)
         noise: gtsam.noiseModel.Base = gtsam.noiseModel.Gaussian.Information(information)
         if edge.robust and robust and self.robust_scale > 0:
-            kernel = gtsam.noiseModel.mEstimator.Huber.Create(self.robust_scale)
+            kernel = _KERNELS[self.kernel](self.robust_scale)
             noise = gtsam.noiseModel.Robust.Create(kernel, noise)
         return gtsam.BetweenFactorPose2(
             edge.first, edge.second, gtsam.Pose2(*edge.T_first_second), noise
@@ -153,6 +168,28 @@ class PoseGraph:
         for key in self._estimate:
             pose = values.atPose2(key)
             self._estimate[key] = (float(pose.x()), float(pose.y()), float(pose.theta()))
+
+    def solve(self, max_iterations: int = 50) -> int:
+        """Optimise the whole graph in one batch (Levenberg-Marquardt from the current
+        estimate), for a graph built at once from a rough start rather than grown keyframe by
+        keyframe; the incremental solver restarts from the result. Returns the iterations."""
+        graph = gtsam.NonlinearFactorGraph()
+        for key, pose in self._anchors.items():
+            graph.push_back(self._anchor_factor(key, pose))
+        for edge in self.edges.values():
+            graph.push_back(self._factor(edge))
+        initial = gtsam.Values()
+        for key, pose in self._estimate.items():
+            initial.insert(key, gtsam.Pose2(*pose))
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(max_iterations)
+        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
+        values = optimizer.optimize()
+        for key in self._estimate:
+            pose = values.atPose2(key)
+            self._estimate[key] = (float(pose.x()), float(pose.y()), float(pose.theta()))
+        self._restart()
+        return int(optimizer.iterations())
 
     def pose(self, key: int) -> Pose:
         """The keyframe's current estimate (as of the last :meth:`optimize`, or as added)."""

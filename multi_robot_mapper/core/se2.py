@@ -82,3 +82,19 @@ def between(T_a_b: ArrayLike, T_a_c: ArrayLike) -> tuple[float, float, float]:
     """``T_b_c`` of two ``(x, y, theta)`` poses in the same frame a."""
     ab, ac = np.asarray(T_a_b, dtype=np.float64), np.asarray(T_a_c, dtype=np.float64)
     return pose_from_matrix(invert(matrix_from_pose(*ab)) @ matrix_from_pose(*ac))
+
+
+def rigid_fit(poses_from: FloatArray, poses_to: FloatArray) -> FloatArray:
+    """``T_to_from`` (3x3): the rigid motion that best carries ``(K, 3)`` poses given in frame
+    ``from`` onto the same poses given in frame ``to`` (least squares on their positions,
+    2-D Kabsch); with one pose, exactly onto it."""
+    a = np.asarray(poses_from, dtype=np.float64).reshape(-1, 3)
+    b = np.asarray(poses_to, dtype=np.float64).reshape(-1, 3)
+    if len(a) == 1 or np.ptp(a[:, :2], axis=0).max() < 1e-9:
+        return np.asarray(matrix_from_pose(*b[0]) @ invert(matrix_from_pose(*a[0])))
+    ca, cb = a[:, :2].mean(axis=0), b[:, :2].mean(axis=0)
+    da, db = a[:, :2] - ca, b[:, :2] - cb
+    theta = float(np.arctan2(np.sum(da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]), np.sum(da * db)))
+    c, s = np.cos(theta), np.sin(theta)
+    t = cb - np.array([[c, -s], [s, c]]) @ ca
+    return matrix_from_pose(float(t[0]), float(t[1]), theta)

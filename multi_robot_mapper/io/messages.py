@@ -169,6 +169,15 @@ def piece_frame(map_frame: str, piece: int) -> str:
     return map_frame if piece == 0 else f"{map_frame}_{piece}"
 
 
+def piece_of_frame(map_frame: str | None, frame: str) -> int:
+    """The piece whose frame is ``frame`` (inverse of :func:`piece_frame`): 0 for the robot's
+    map frame (or when ``map_frame`` is unknown), -1 for a frame that is neither."""
+    if map_frame is None or frame == map_frame or not frame.startswith(map_frame + "_"):
+        return 0
+    suffix = frame[len(map_frame) + 1 :]
+    return int(suffix) if suffix.isdigit() else -1
+
+
 def keyframe_from_marker(marker: Marker, map_frame: str | None = None) -> Keyframe:
     """The keyframe a :func:`keyframe_marker` carries (the stamp from ``text``, else the
     header); its piece from its frame (:func:`piece_frame`) when ``map_frame`` is known."""
@@ -176,11 +185,7 @@ def keyframe_from_marker(marker: Marker, map_frame: str | None = None) -> Keyfra
         stamp = float(marker.text)
     except ValueError:
         stamp = seconds_from_stamp(marker.header.stamp)
-    frame = marker.header.frame_id
-    piece = 0
-    if map_frame is not None and frame != map_frame and frame.startswith(map_frame + "_"):
-        suffix = frame[len(map_frame) + 1 :]
-        piece = int(suffix) if suffix.isdigit() else -1
+    piece = piece_of_frame(map_frame, marker.header.frame_id)
     return Keyframe(
         index=int(marker.id),
         stamp=stamp,
@@ -217,13 +222,23 @@ class PartialMapContents:
     session: float | None  # stamp of keyframe 0 (s): a new value means the robot started again
     stamp: Time | None  # header stamp (the newest scan in the map); None for an empty array
     frame_id: str  # the robot's map frame ("" for an empty array)
+    # every keyframe of every piece (what the joint merger matches; a piece with a frame of
+    # its own is a map of its own to it)
+    keyframes: list[Keyframe] = dataclasses.field(default_factory=list)
 
 
 def partial_map_contents(msg: MarkerArray) -> PartialMapContents:
     """The segments, keyframe poses and session of a ``partial_map`` MarkerArray: its main
     piece (the robot's map frame); keyframes of a piece started when the robot was lost lie
-    in frames of their own until the robot's mapper joins them."""
-    every = keyframes_from_markers(msg)
+    in frames of their own until the robot's mapper joins them. ``keyframes`` holds every
+    keyframe of every piece (bad keyframes, with non-finite numbers, left out)."""
+    every = [
+        kf
+        for kf in keyframes_from_markers(msg)
+        if kf.piece >= 0
+        and np.isfinite(kf.T_robotmap_keyframe).all()
+        and np.isfinite(kf.segments).all()
+    ]
     keyframes = [kf for kf in every if kf.piece == 0]
     pieces = [
         se2.transform_segments(se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments)
@@ -240,4 +255,5 @@ def partial_map_contents(msg: MarkerArray) -> PartialMapContents:
         session=None if first is None else float(first.stamp),
         stamp=max(stamps, key=lambda s: (s.sec, s.nanosec)) if stamps else None,
         frame_id=next((m.header.frame_id for m in markers if int(m.id) == 0), ""),
+        keyframes=every,
     )

@@ -67,18 +67,29 @@ from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
-from visualization_msgs.msg import MarkerArray
+from visualization_msgs.msg import Marker, MarkerArray
 
+from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError, config_from_flat, field_specs
+from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.core.merging.occupancy import OccupancyGrid, merge_with_grid
-from multi_robot_mapper.io.messages import partial_map_contents, pose_from_msg, pose_stamped
+from multi_robot_mapper.io.messages import (
+    partial_map_contents,
+    piece_frame,
+    piece_of_frame,
+    pose_from_msg,
+    pose_stamped,
+)
 from multi_robot_mapper.io.saved_map import SavedMapError, read_saved_map, write_saved_map
 from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.markers import (
+    MarkerCache,
+    MarkerKey,
     frame_transform,
+    frame_matrix,
     global_map_markers,
     newest,
     occupancy_grid_msg,
@@ -134,6 +145,8 @@ class MapMerger(Node):
         self._new_sessions: list[tuple[str, str]] = []  # (robot, its earlier map's name)
         self._worker: ProcessPoolExecutor | None = None  # started on the first merge
         self._shown: tuple[object, ...] | None = None  # what the last global_map showed
+        self._marker_ids: set[MarkerKey] = set()  # its markers (deleted once gone)
+        self._marker_cache: MarkerCache = {}  # each keyframe's marker, rebuilt when it changes
         self._input_groups = MutuallyExclusiveCallbackGroup()
         self._merge_group = MutuallyExclusiveCallbackGroup()
         self._map_pub = self.create_publisher(MarkerArray, "global_map", LATCHED_QOS)
@@ -144,6 +157,7 @@ class MapMerger(Node):
         self._frame_pubs: dict[str, Publisher] = {}
         self._tf = StaticTransformBroadcaster(self) if StaticTransformBroadcaster else None
         self._transforms: dict[str, TransformStamped] = {}
+        self._piece_transforms: dict[str, TransformStamped] = {}
         self._services = [
             self.create_service(
                 Trigger, "save_map", self._on_save, callback_group=self._input_groups
@@ -244,13 +258,15 @@ class MapMerger(Node):
             state = self.robots[name]
             state.pose = pose
             state.pose_stamp = msg.header.stamp
+            state.pose_piece = piece_of_frame(state.map_frame or None, msg.header.frame_id)
+            piece = state.pose_piece
             state.heard_ns = self._clock_ns()
             state.pose_rate.add(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
             publisher = state.pose_publisher
         result = self.result
         if result is None or publisher is None:
             return
-        placed = placed_poses(result, {name: (pose, msg.header.stamp)}).get(name)
+        placed = placed_poses(result, {name: (pose, msg.header.stamp)}, {name: piece}).get(name)
         if placed is not None:
             publisher.publish(pose_stamped(placed[0].tolist(), placed[1], self.config.map_frame))
 
@@ -264,7 +280,9 @@ class MapMerger(Node):
             inputs = merge_inputs(self.robots)
             sessions = len(self._new_sessions)
         merged = False
-        if inputs.maps and inputs.versions != self._merged_versions:
+        # A merge update matches places within its time budget: while some wait, merge again.
+        pending = self.result is not None and self.result.stats.get("matches_pending", 0) > 0
+        if inputs.maps and (inputs.versions != self._merged_versions or pending):
             reference = config.merge.reference
             if reference and reference not in inputs.maps:
                 self.notes.warn(
@@ -273,7 +291,7 @@ class MapMerger(Node):
                 return False
             began = time.perf_counter()
             try:
-                result, grid = self._merge(inputs.maps, inputs.viewpoints, config)
+                result, grid = self._merge(inputs.keyframes, config)
             except Exception:
                 self.merge_errors += 1
                 self.warnings.warn(
@@ -300,11 +318,18 @@ class MapMerger(Node):
         )
         shown = (self.merges, config.map_frame, config.marker_width, pose_key)
         if shown != self._shown:
-            self._map_pub.publish(
-                global_map_markers(
-                    result, map_stamp, inputs.poses, config.map_frame, config.marker_width
-                )
+            array = global_map_markers(
+                result,
+                map_stamp,
+                inputs.poses,
+                config.map_frame,
+                config.marker_width,
+                inputs.pose_pieces,
+                self._marker_ids,
+                self._marker_cache,
             )
+            self._map_pub.publish(array)
+            self._marker_ids = {(m.ns, m.id) for m in array.markers if m.action == Marker.ADD}
             self.global_maps_published += 1
             self._shown = shown
         if merged:
@@ -326,15 +351,12 @@ class MapMerger(Node):
         return bool(versions) and versions == self._merged_versions
 
     def _merge(
-        self,
-        maps: dict[str, FloatArray],
-        viewpoints: dict[str, FloatArray],
-        config: MapMergerConfig,
+        self, keyframes: dict[str, list[Keyframe]], config: MapMergerConfig
     ) -> tuple[MergeResult, OccupancyGrid | None]:
         """:func:`merge_with_grid` with the previous result, in the worker process when
         ``merge_worker`` is on (this thread waits without holding the interpreter lock)."""
         previous = self.result
-        job = (maps, config.merge, config.grid, previous, viewpoints)
+        job = (keyframes, config.merge, config.grid, previous)
         if not config.merge_worker:
             return merge_with_grid(*job)
         if self._worker is None:
@@ -375,8 +397,20 @@ class MapMerger(Node):
             publisher.publish(pose_stamped(pose, stamp, map_frame))
             child = frames.get(robot) or f"{robot}/map"
             self._transforms[robot] = frame_transform(pose, stamp, map_frame, child)
-        if self._tf is not None and self._transforms:
-            self._tf.sendTransform(list(self._transforms.values()))
+        # The other pieces of robots' maps that the merge placed (their own frames).
+        self._piece_transforms = {}
+        for robot, pieces in result.frames.items():
+            base = frames.get(robot) or f"{robot}/map"
+            for piece in pieces:
+                T = frame_matrix(result, robot, piece)
+                if piece and T is not None:
+                    child = piece_frame(base, piece)
+                    placement = se2.pose_from_matrix(T)
+                    transform = frame_transform(placement, stamp, map_frame, child)
+                    self._piece_transforms[child] = transform
+        every = [*self._transforms.values(), *self._piece_transforms.values()]
+        if self._tf is not None and every:
+            self._tf.sendTransform(every)
 
     def publish_diagnostics(self) -> None:
         """Every robot's status on /diagnostics, stamped with the newest input."""

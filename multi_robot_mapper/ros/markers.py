@@ -7,7 +7,7 @@ Every message is stamped with a stamp its caller took from the inputs, never ``n
 from __future__ import annotations
 
 import array
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -55,18 +55,42 @@ def newest(stamps: Sequence[Time]) -> Time:
 
 
 def placed_poses(
-    result: MergeResult, poses: Mapping[str, tuple[FloatArray, Time]]
+    result: MergeResult,
+    poses: Mapping[str, tuple[FloatArray, Time]],
+    pieces: Mapping[str, int] | None = None,
 ) -> dict[str, tuple[FloatArray, Time]]:
-    """Each merged robot's newest pose ``T_robotmap_laser`` moved into ``map``
-    (``T_map_laser``), with the stamp of the pose message it came from."""
+    """Each merged robot's newest pose ``T_piece_laser`` moved into ``map`` (``T_map_laser``),
+    with the stamp of the pose message it came from. ``pieces``: the piece each pose is in
+    (its frame ``<robot>/map_<piece>``; default 0, the robot's map frame); a pose in a piece
+    the merge did not place is left out."""
     placed: dict[str, tuple[FloatArray, Time]] = {}
     for robot, (pose, stamp) in poses.items():
-        T_map_robot = result.matrix(robot)
-        if T_map_robot is None:
+        T_map_frame = frame_matrix(result, robot, (pieces or {}).get(robot, 0))
+        if T_map_frame is None:
             continue
-        T_map_laser = T_map_robot @ se2.matrix_from_pose(*pose)
+        T_map_laser = T_map_frame @ se2.matrix_from_pose(*pose)
         placed[robot] = (np.array(se2.pose_from_matrix(T_map_laser)), stamp)
     return placed
+
+
+def frame_matrix(result: MergeResult, robot: str, piece: int) -> FloatArray | None:
+    """``T_map_piece`` of a piece of a robot's map (piece 0: the robot's map frame), or None
+    when the merge did not place it."""
+    if piece == 0:
+        return result.matrix(robot)
+    pose = result.frames.get(robot, {}).get(piece)
+    return None if pose is None else se2.matrix_from_pose(*pose)
+
+
+MarkerKey = tuple[str, int]  # (namespace, id)
+# A keyframe's marker kept for the next publication: its content key and the marker.
+MarkerCache = dict[MarkerKey, tuple[bytes, Marker]]
+WHOLE_MAP_ID = -1  # a robot merged without keyframes (a saved map): its segments in one marker
+
+
+def map_namespace(robot: str) -> str:
+    """The namespace of a robot's keyframe markers in ``global_map``."""
+    return f"global_map/{robot}"
 
 
 def global_map_markers(
@@ -75,26 +99,44 @@ def global_map_markers(
     poses: Mapping[str, tuple[FloatArray, Time]],
     frame: str,
     width: float,
+    pieces: Mapping[str, int] | None = None,
+    earlier: Iterable[MarkerKey] = (),
+    cache: MarkerCache | None = None,
 ) -> MarkerArray:
-    """The global map: a DELETEALL marker, the fused segments as one LINE_LIST per robot
-    (``id`` = the robot's index in ``result.robots``, coloured per robot), each merged robot's
-    newest pose as an ARROW and its name as TEXT_VIEW_FACING. ``poses`` are the robots'
-    newest poses in their own map frames; every marker is stamped with the newest of
-    ``map_stamp`` and the poses shown."""
-    shown = placed_poses(result, poses)
+    """The global map: one LINE_LIST per merged keyframe (namespace ``global_map/<robot>``,
+    ``id`` = keyframe index, coloured per robot), its ``pose`` the keyframe's optimised pose in
+    ``map`` and its points the global map segments it owns, in its own frame (a robot merged
+    without keyframes: one marker, ``id`` -1, in ``map``); each merged robot's newest pose as
+    an ARROW and its name as TEXT_VIEW_FACING; a DELETE for every marker of ``earlier`` (what
+    the last publication showed) that is gone. ``poses`` are the robots' newest poses in their
+    own frames (``pieces``: the piece each is in); every marker is stamped with the newest of
+    ``map_stamp`` and the poses shown. ``cache`` keeps each keyframe's marker: a keyframe whose
+    segments did not change is not rebuilt, only moved."""
+    shown = placed_poses(result, poses, pieces)
     header = Header(frame_id=frame, stamp=newest([map_stamp, *(s for _, s in shown.values())]))
-    markers = [Marker(header=header, action=Marker.DELETEALL)]
-    for index in range(len(result.robots)):
+    markers: list[Marker] = []
+    for index, robot in enumerate(result.robots):
+        color = robot_color(index)
+        namespace = map_namespace(robot)
+        keyframes = result.keyframe_maps(robot)
+        if keyframes:
+            for keyframe, pose, segments in keyframes:
+                markers.append(
+                    _keyframe_marker(namespace, keyframe, pose, segments, header, width, color, cache)
+                )
+            continue
         own = result.segments[result.segment_robot == index]
-        if len(own):
-            markers.append(
-                segments_marker(own, header, "global_map", width, robot_color(index), index)
-            )
+        if len(own) and result.placements.get(robot) is not None:
+            markers.append(segments_marker(own, header, namespace, width, color, WHOLE_MAP_ID))
     for index, robot in enumerate(result.robots):
         T_map_robot = result.matrix(robot)
-        if T_map_robot is None:
+        if T_map_robot is None and robot not in shown:
             continue
-        where = shown[robot][0] if robot in shown else np.array(se2.pose_from_matrix(T_map_robot))
+        where = (
+            shown[robot][0]
+            if robot in shown
+            else np.array(se2.pose_from_matrix(T_map_robot))  # type: ignore[arg-type]
+        )
         color = ColorRGBA(**dict(zip("rgba", robot_color(index), strict=True)))
         if robot in shown:
             arrow = Marker(header=header, ns="robot_poses", id=index, type=Marker.ARROW)
@@ -111,7 +153,38 @@ def global_map_markers(
         text.color = color
         text.text = robot
         markers.append(text)
+    current = {(m.ns, m.id) for m in markers}
+    for namespace, marker_id in sorted(set(earlier) - current):
+        markers.append(Marker(header=header, ns=namespace, id=marker_id, action=Marker.DELETE))
     return MarkerArray(markers=markers)
+
+
+def _keyframe_marker(
+    namespace: str,
+    keyframe: int,
+    pose: FloatArray,
+    segments: FloatArray,
+    header: Header,
+    width: float,
+    color: tuple[float, float, float, float],
+    cache: MarkerCache | None,
+) -> Marker:
+    """A keyframe's marker, rebuilt only when its segments (or width, colour) changed."""
+    content = (
+        np.ascontiguousarray(segments, dtype=np.float64).tobytes()
+        + np.array([width, *color]).tobytes()
+    )
+    key = (namespace, keyframe)
+    cached = None if cache is None else cache.get(key)
+    if cached is not None and cached[0] == content:
+        marker = cached[1]
+    else:
+        marker = segments_marker(segments, header, namespace, width, color, keyframe)
+        if cache is not None:
+            cache[key] = (content, marker)
+    marker.header = header
+    marker.pose = pose_msg(pose)
+    return marker
 
 
 def occupancy_grid_msg(grid: OccupancyGrid, stamp: Time, frame: str) -> OccupancyGridMsg:

@@ -21,6 +21,8 @@ from builtin_interfaces.msg import Time
 from rclpy.publisher import Publisher
 from rclpy.subscription import Subscription
 
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.io.messages import PartialMapContents
 from multi_robot_mapper.io.saved_map import SavedMap, SavedRobot
@@ -38,12 +40,16 @@ class RobotState:
     name: str
     segments: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 4)))
     keyframe_poses: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+    # every keyframe of every piece as received (empty for a map loaded from a file, which
+    # keeps only the segments and keyframe poses of the main piece)
+    all_keyframes: list[Keyframe] = dataclasses.field(default_factory=list)
     map_stamp: Time | None = None  # header stamp of the last partial map
     map_frame: str = ""  # the robot's own map frame (the partial map's frame_id)
     version: int = 0  # partial maps received (or loaded)
     session: float | None = None  # stamp of its keyframe 0
     pose: FloatArray | None = None  # T_robotmap_laser of the newest pose message
     pose_stamp: Time | None = None
+    pose_piece: int = 0  # the piece of its map the newest pose is in (its frame's suffix)
     heard_ns: int | None = None  # node clock at its last partial map or pose
     pose_rate: RateMeter = dataclasses.field(default_factory=RateMeter)
     session_of: str | None = None  # set for an earlier session: the robot it belonged to
@@ -62,9 +68,11 @@ class MergeInputs:
     maps: dict[str, FloatArray]
     versions: dict[str, int]
     viewpoints: dict[str, FloatArray]
+    keyframes: dict[str, list[Keyframe]]
     stamps: dict[str, Time]
     frames: dict[str, str]
     poses: dict[str, tuple[FloatArray, Time]]
+    pose_pieces: dict[str, int] = dataclasses.field(default_factory=dict)
 
 
 def merge_inputs(robots: dict[str, RobotState]) -> MergeInputs:
@@ -74,6 +82,10 @@ def merge_inputs(robots: dict[str, RobotState]) -> MergeInputs:
         maps={n: s.segments for n, s in with_map.items()},
         versions={n: s.version for n, s in with_map.items()},
         viewpoints={n: s.keyframe_poses for n, s in with_map.items()},
+        keyframes={
+            n: s.all_keyframes or keyframes_of(s.segments, s.keyframe_poses)
+            for n, s in with_map.items()
+        },
         stamps={n: s.map_stamp for n, s in robots.items() if s.map_stamp is not None},
         frames={n: s.map_frame for n, s in robots.items()},
         poses={
@@ -81,7 +93,21 @@ def merge_inputs(robots: dict[str, RobotState]) -> MergeInputs:
             for n, s in robots.items()
             if s.pose is not None and s.pose_stamp is not None
         },
+        pose_pieces={n: s.pose_piece for n, s in robots.items()},
     )
+
+
+def keyframes_of(segments: FloatArray, keyframe_poses: FloatArray) -> list[Keyframe]:
+    """A map known only by its segments and keyframe poses (a saved map) as keyframes: the
+    first owns every segment, the others none (the merger then moves it as one rigid map,
+    the keyframes still its viewpoints)."""
+    poses = np.asarray(keyframe_poses, dtype=np.float64).reshape(-1, 3)
+    if len(poses) == 0:
+        poses = np.zeros((1, 3))
+    T_first_map = se2.invert(se2.matrix_from_pose(*poses[0]))
+    own = se2.transform_segments(T_first_map, np.asarray(segments, dtype=np.float64))
+    empty = np.zeros((0, 4))
+    return [Keyframe(k, 0.0, pose, own if k == 0 else empty) for k, pose in enumerate(poses)]
 
 
 def store_partial_map(
@@ -104,8 +130,10 @@ def store_partial_map(
         kept = keep_session(robots, state, keep_sessions)
         state.pose = None  # the old session's pose means nothing in the new map frame
         state.pose_stamp = None
+        state.pose_piece = 0
     state.segments = contents.segments
     state.keyframe_poses = contents.keyframe_poses
+    state.all_keyframes = list(contents.keyframes)
     state.session = contents.session
     state.map_stamp = contents.stamp
     state.map_frame = contents.frame_id or state.map_frame
@@ -128,6 +156,7 @@ def keep_session(
         name=kept,
         segments=state.segments,
         keyframe_poses=state.keyframe_poses,
+        all_keyframes=state.all_keyframes,
         map_stamp=state.map_stamp,
         map_frame=f"{state.map_frame or state.name + '/map'}_session{number}",
         version=1,
@@ -228,6 +257,7 @@ def restore_saved_map(
 def _fill(state: RobotState, entry: SavedRobot) -> None:
     state.segments = np.asarray(entry.segments, dtype=np.float64)
     state.keyframe_poses = np.asarray(entry.keyframe_poses, dtype=np.float64)
+    state.all_keyframes = []  # a saved map keeps no keyframes: merged as one rigid map
     state.session = entry.session
     state.map_frame = entry.map_frame
     state.map_stamp = (

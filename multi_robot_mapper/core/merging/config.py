@@ -245,6 +245,164 @@ class MergeConfig:
         minimum=0.0,
         exclusive_minimum=True,
     )
+    place_radius: float = param(
+        6.0,
+        unit="m",
+        doc="a place (what one link matches) is a keyframe and its robot's walls within this "
+        "distance: small enough that a map's drift across it is negligible, large enough to "
+        "hold more than one room's walls",
+        minimum=0.5,
+        maximum=100.0,
+    )
+    place_spacing: float = param(
+        3.0,
+        unit="m",
+        doc="places are keyframes at least this far apart (greedily, oldest first)",
+        minimum=0.1,
+        maximum=100.0,
+    )
+    place_min_length: float = param(
+        12.0,
+        unit="m",
+        doc="a place with less wall than this is never matched (too little to tell places "
+        "apart)",
+        minimum=0.0,
+    )
+    link_hypotheses: int = param(
+        4,
+        unit="",
+        doc="the best distinct placements of a place on another robot's map (map correlation) "
+        "verified by INTEGRATE; the best two become link candidates",
+        minimum=1,
+        maximum=20,
+    )
+    link_min_overlap: float = param(
+        0.25,
+        unit="",
+        doc="a place whose best correlation score is below this fraction of its wall length "
+        "is not verified (it lies nowhere on the other map)",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    link_confidence: float = param(
+        0.9,
+        unit="",
+        doc="a link between robots counts as confident when INTEGRATE's calibrated confidence "
+        "(P right within 0.30 m / 5 deg, its rival placements included) reaches this; chosen "
+        "from the precision/recall curve of bench/link_bench.py (README, 'Joint merging')",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    link_fit: float = param(
+        0.5,
+        unit="",
+        doc="a link candidate whose confidence without its rivals (how well the place fits "
+        "there at all) is below this is dropped; above it, an ambiguous link (a rival fits "
+        "about as well) is accepted only inside a consistent set of links",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    link_min_support: int = param(
+        3,
+        unit="places",
+        doc="a consistent set of links of one pair of maps with no confident link is accepted "
+        "when it links at least this many places",
+        minimum=1,
+        maximum=1000,
+    )
+    link_set_uniqueness: float = param(
+        2.0,
+        unit="",
+        doc="the accepted set of consistent links of a pair of maps must weigh (sum of link "
+        "fits) at least this many times the best set inconsistent with it: a building that "
+        "fits two ways is refused",
+        minimum=1.0,
+    )
+    link_pair_slack: float = param(
+        0.03,
+        unit="m/m",
+        doc="two links of one pair of maps agree when the cycle through both robots' maps "
+        "closes within 0.30 m and 5 deg plus this much per metre between the links' places "
+        "(each robot's own drift)",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    link_pair_angle_slack: float = param(
+        0.005,
+        unit="rad/m",
+        doc="see link_pair_slack, for the rotation",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    link_sigma: float = param(
+        0.05,
+        unit="m",
+        doc="no link between robots is trusted to better than this (and link_angle_sigma) in "
+        "the joint graph: places are fused maps, a little bent",
+        minimum=1e-4,
+        maximum=10.0,
+    )
+    link_angle_sigma: float = param(
+        0.01,
+        unit="rad",
+        doc="see link_sigma, for the rotation",
+        minimum=1e-5,
+        maximum=1.0,
+    )
+    link_robust_scale: float = param(
+        1.0,
+        unit="",
+        doc="Dynamic Covariance Scaling parameter of the links in the joint graph (squared "
+        "Mahalanobis units): a link whose error grows far beyond it is switched off",
+        minimum=0.0,
+    )
+    graph_sigma: float = param(
+        0.02,
+        unit="m",
+        doc="an edge between two keyframes of one robot's map (their published poses) has this "
+        "standard deviation, plus graph_drift per metre between them",
+        minimum=1e-4,
+        maximum=10.0,
+    )
+    graph_drift: float = param(
+        0.02,
+        unit="m/m",
+        doc="see graph_sigma: how much a robot's own map may bend per metre",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    graph_angle_sigma: float = param(
+        0.005,
+        unit="rad",
+        doc="rotation of an edge between two keyframes of one robot's map, plus "
+        "graph_angle_drift per metre",
+        minimum=1e-5,
+        maximum=1.0,
+    )
+    graph_angle_drift: float = param(
+        0.005,
+        unit="rad/m",
+        doc="see graph_angle_sigma",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    graph_radius: float = param(
+        2.0,
+        unit="m",
+        doc="besides consecutive keyframes, keyframes of one robot's map this close to each "
+        "other get an edge (the wire carries no loop closures: this keeps what the robot's own "
+        "closures made of its map)",
+        minimum=0.0,
+        maximum=100.0,
+    )
+    update_budget: float = param(
+        0.5,
+        unit="s",
+        doc="seconds of place matching per merge update (the node's; a replay matches "
+        "everything): the rest waits for the next update, new places first; 0: no limit",
+        minimum=0.0,
+        maximum=3600.0,
+    )
     integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
 
     def __post_init__(self) -> None:

@@ -195,8 +195,53 @@ def rotation_candidates(map_a: FloatArray, map_b: FloatArray, count: int) -> Flo
     return np.asarray(se2.wrap_angle(np.concatenate((theta, theta + np.pi))))
 
 
+@dataclasses.dataclass(frozen=True)
+class CorrelationTarget:
+    """Drawing a, transformed once for every drawing b up to ``reach`` metres from its middle
+    (a map matched against many places keeps its transforms)."""
+
+    grid: _Grid
+    shape: tuple[int, int]
+    walls: list[NDArray[np.complex64]]  # three wall-direction layers
+    free: NDArray[np.complex64]
+    sharp: NDArray[np.complex64]
+
+    @staticmethod
+    def of(a: Drawing, reach: float, cell: float, blur: float) -> CorrelationTarget:
+        """``reach``: the largest distance of any drawing b's point from b's middle (m)."""
+        grid = _Grid.around(a, cell)
+        cells = int(np.ceil(2.0 * reach / cell)) + 2
+        shape = (
+            sp_fft.next_fast_len(grid.shape[0] + cells, real=True),
+            sp_fft.next_fast_len(grid.shape[1] + cells, real=True),
+        )
+        return CorrelationTarget(
+            grid,
+            shape,
+            [_spectrum(layer, shape) for layer in _walls(a, grid, blur)],
+            _spectrum(grid.mark(a.free), shape),
+            _spectrum(grid.draw(a.walls, a.weight), shape),  # free space is sharp: walls too
+        )
+
+
+def _spectrum(layer: FloatArray, shape: tuple[int, int]) -> NDArray[np.complex64]:
+    # Single precision: scores are compared, not summed over many orders of magnitude, and
+    # the transforms take half the time.
+    return np.asarray(sp_fft.rfft2(layer.astype(np.float32), shape))
+
+
+def reach_of(b: Drawing) -> float:
+    """The largest distance of b's points (walls and free space) from its middle (m)."""
+    points = np.vstack((b.walls, b.free))
+    return float(np.hypot(*(points - b.centre()).T).max()) if len(points) else 0.0
+
+
 def correlation_peaks(
-    a: Drawing, b: Drawing, rotations: FloatArray, config: CorrelationConfig
+    a: Drawing,
+    b: Drawing,
+    rotations: FloatArray,
+    config: CorrelationConfig,
+    target: CorrelationTarget | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """The best placements of drawing b on drawing a: ``(N, 3)`` rows ``(theta, tx, ty)`` and
     their scores (metres: matched wall minus ``free_space_weight`` x wall in the other's free
@@ -204,31 +249,20 @@ def correlation_peaks(
 
     One FFT grid holds every shift of b over a (a's grid plus b's largest extent under any
     rotation, so the circular correlation never wraps a real overlap): a's five layers (three
-    wall directions, its sharp walls, its free space) are transformed once, b's five per
-    rotation, and the score needs one inverse transform (correlation is linear).
+    wall directions, its sharp walls, its free space) are transformed once (or come with
+    ``target``, whose reach must cover b), b's five per rotation, and the score needs one
+    inverse transform (correlation is linear).
     """
     cell, blur = config.cell, config.blur
     if len(a.walls) == 0 or len(b.walls) == 0:
         return np.zeros((0, 3)), np.zeros(0)
-    grid_a = _Grid.around(a, cell)
     # b turns about its own middle, so that its extent under any rotation is its diameter.
     middle = b.centre()
+    reach = reach_of(b)
+    if target is None or reach > target_reach(target, cell):
+        target = CorrelationTarget.of(a, reach, cell, blur)
     b = b.moved(se2.matrix_from_pose(-float(middle[0]), -float(middle[1]), 0.0), 0.0)
-    reach_b = int(np.ceil(2.0 * float(np.hypot(*np.vstack((b.walls, b.free)).T).max()) / cell))
-    reach_b += 2
-    shape = (
-        sp_fft.next_fast_len(grid_a.shape[0] + reach_b, real=True),
-        sp_fft.next_fast_len(grid_a.shape[1] + reach_b, real=True),
-    )
-
-    def spectrum(layer: FloatArray) -> NDArray[np.complex64]:
-        # Single precision: scores are compared, not summed over many orders of magnitude,
-        # and the transforms take half the time.
-        return np.asarray(sp_fft.rfft2(layer.astype(np.float32), shape))
-
-    walls_a = [spectrum(layer) for layer in _walls(a, grid_a, blur)]
-    free_a = spectrum(grid_a.mark(a.free))
-    sharp_a = spectrum(grid_a.draw(a.walls, a.weight))  # free space is sharp: walls too
+    grid_a, shape = target.grid, target.shape
     scale = 1.0 / _line_peak(cell, blur)
     window = 2 * max(1, round(config.separation / cell)) + 1
     rows: list[FloatArray] = []
@@ -237,29 +271,57 @@ def correlation_peaks(
         R = se2.matrix_from_pose(0.0, 0.0, float(theta))
         turned = b.moved(R, float(theta))
         grid_b = _Grid.around(turned, cell)
-        walls_b = [spectrum(layer) for layer in _walls(turned, grid_b, blur)]
-        free_b = spectrum(grid_b.mark(turned.free))
-        sharp_b = spectrum(grid_b.draw(turned.walls, turned.weight))
+        walls_b = [_spectrum(layer, shape) for layer in _walls(turned, grid_b, blur)]
+        free_b = _spectrum(grid_b.mark(turned.free), shape)
+        sharp_b = _spectrum(grid_b.draw(turned.walls, turned.weight), shape)
         # Circular cross-correlation: entry k puts b's cell (0, 0) on a's cell k (k - shape
         # past a's grid: a negative shift). ``through`` is metres of wall in free cells.
-        matched = sum(wa * np.conj(wb) for wa, wb in zip(walls_a, walls_b, strict=True))
-        through = free_a * np.conj(sharp_b) + sharp_a * np.conj(free_b)
+        matched = sum(wa * np.conj(wb) for wa, wb in zip(target.walls, walls_b, strict=True))
+        through = target.free * np.conj(sharp_b) + target.sharp * np.conj(free_b)
         score = sp_fft.irfft2(scale * matched - config.free_space_weight * through, shape)
-        best = score == ndimage.maximum_filter(score, size=window, mode="wrap")
-        peaks = np.argwhere(best & (score > 1e-3))  # metres; below: rounding, not overlap
-        values = score[peaks[:, 0], peaks[:, 1]]
-        keep = np.argsort(-values, kind="stable")[: config.per_rotation]
-        shift = peaks[keep]
+        shift, values = _peaks(score, window, config.per_rotation)
         shift = np.where(shift < np.array(grid_a.shape), shift, shift - np.array(shape))
         # b's point p lands at R (p - middle) + t' = R p + t: t = t' - R middle.
         t = grid_a.origin - grid_b.origin + shift * cell - R[:2, :2] @ middle
-        rows.append(np.column_stack((np.full(len(keep), theta), t)))
-        scores.append(values[keep])
+        rows.append(np.column_stack((np.full(len(values), theta), t)))
+        scores.append(values)
     if not rows:
         return np.zeros((0, 3)), np.zeros(0)
     all_rows, all_scores = np.vstack(rows), np.concatenate(scores)
     order = np.argsort(-all_scores, kind="stable")
     return all_rows[order], all_scores[order]
+
+
+# Cells looked at per rotation for its peaks, per peak wanted: the highest cells.
+_PEAK_POOL = 64
+
+
+def _peaks(score: FloatArray, window: int, count: int) -> tuple[NDArray[np.int64], FloatArray]:
+    """The ``count`` best local maxima of ``score`` (each the highest within ``window`` cells,
+    circular; above 1 mm: below is rounding, not overlap), best first, looked for among a
+    pool of the highest cells only (a maximum filter of the whole grid costs more than the
+    correlation)."""
+    flat = score.ravel()
+    pool = min(flat.size, _PEAK_POOL * count)
+    top = np.argpartition(-flat, pool - 1)[:pool] if pool < flat.size else np.arange(flat.size)
+    top = top[flat[top] > 1e-3]
+    rows, cols = np.unravel_index(top, score.shape)
+    half = window // 2
+    highest = np.full(len(top), True)
+    for dr in range(-half, half + 1):
+        for dc in range(-half, half + 1):
+            if dr or dc:
+                other = score[(rows + dr) % score.shape[0], (cols + dc) % score.shape[1]]
+                highest &= flat[top] >= other
+    order = np.argsort(-flat[top[highest]], kind="stable")[:count]
+    chosen = top[highest][order]
+    return np.column_stack(np.unravel_index(chosen, score.shape)), flat[chosen]
+
+
+def target_reach(target: CorrelationTarget, cell: float) -> float:
+    """The largest reach (m) of a drawing b that ``target``'s grid holds without wrapping."""
+    spare = min(target.shape[0] - target.grid.shape[0], target.shape[1] - target.grid.shape[1])
+    return 0.5 * (spare - 2) * cell
 
 
 def placement_scores(

@@ -49,6 +49,18 @@ class MergeResult:
     timings: dict[str, float]  # seconds: pairs_s, tree_s, fusion_s, total_s
     # pairs_computed, pairs_reused, integrate_calls, links_valid, cycle_conflicts
     stats: dict[str, int]
+    # The joint graph's (method pivot; empty when each robot was placed as one rigid map):
+    # robot -> (K, 3) T_map_keyframe of its merged keyframes, and their keyframe indices
+    keyframe_poses: dict[str, FloatArray] = dataclasses.field(default_factory=dict)
+    keyframe_index: dict[str, IntArray] = dataclasses.field(default_factory=dict)
+    # robot -> piece -> T_map_piece (piece 0: the robot's map frame, as ``placements``)
+    frames: dict[str, dict[int, Pose]] = dataclasses.field(default_factory=dict)
+    # (M,) the keyframe (index in its robot's map) owning each global map segment
+    segment_keyframe: IntArray | None = None
+    # what the next update reuses (joint graph: every place match), and each pair of maps'
+    # consistent links with the verdict on them
+    state: object | None = None
+    verdicts: dict[object, object] = dataclasses.field(default_factory=dict)
 
     @property
     def unmerged(self) -> list[str]:
@@ -59,6 +71,25 @@ class MergeResult:
         """T_map_robot as a 3x3 matrix, or None when the robot is unmerged."""
         pose = self.placements.get(robot)
         return None if pose is None else se2.matrix_from_pose(*pose)
+
+    def keyframe_maps(self, robot: str) -> list[tuple[int, FloatArray, FloatArray]]:
+        """Each merged keyframe of ``robot`` with ``T_map_keyframe`` (3,) and the global map
+        segments it owns, in its own frame (every keyframe the joint graph placed, those owning
+        no segment included; empty without keyframes in the result)."""
+        index = self.keyframe_index.get(robot)
+        if index is None or self.segment_keyframe is None:
+            return []
+        poses = self.keyframe_poses[robot]
+        mine = self.segment_robot == self.robots.index(robot)
+        owner = np.asarray(self.segment_keyframe)[mine]
+        rows = np.searchsorted(index, owner)
+        local = se2.inverse_transform_segments_each(poses[rows], self.segments[mine])
+        order = np.argsort(rows, kind="stable")
+        bounds = np.searchsorted(rows[order], np.arange(len(index) + 1))
+        return [
+            (int(k), poses[r], local[order[bounds[r] : bounds[r + 1]]])
+            for r, k in enumerate(index)
+        ]
 
 
 def pair_links(

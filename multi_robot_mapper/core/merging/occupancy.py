@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,7 +29,9 @@ from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.geometry import sample_segments
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import MapViews
-from multi_robot_mapper.core.merging.link_graph import MergeResult, merge
+from multi_robot_mapper.core.local_mapping import Keyframe
+from multi_robot_mapper.core.merging.joint import merge_joint
+from multi_robot_mapper.core.merging.link_graph import MergeResult
 
 FloatArray = NDArray[np.float64]
 CellArray = NDArray[np.int8]
@@ -123,9 +125,14 @@ def global_grid(
     merging: MergeConfig,
 ) -> OccupancyGrid:
     """The occupancy grid of a merge: ``result.segments`` occupied, each placed robot's views
-    (its map ``maps[robot]`` ray cast from ``viewpoints[robot]``, both in its own frame) free."""
+    free: the global map ray cast from its merged keyframes' poses in ``map`` (the joint
+    graph's), else its map ``maps[robot]`` ray cast from ``viewpoints[robot]``, both in its own
+    frame, moved by its placement."""
     placed_views = []
     for robot in result.robots:
+        if robot in result.keyframe_poses:
+            placed_views.append((result.segments, result.keyframe_poses[robot]))
+            continue
         T_map_robot = result.matrix(robot)
         poses = np.asarray(viewpoints.get(robot, np.zeros((0, 3))), dtype=np.float64)
         segments = np.asarray(maps.get(robot, np.zeros((0, 4))), dtype=np.float64)
@@ -293,15 +300,15 @@ def _mark_free(
 
 
 def merge_with_grid(
-    maps: Mapping[str, FloatArray],
+    keyframes: Mapping[str, Sequence[Keyframe]],
     config: MergeConfig,
     grid: GridConfig,
     previous: MergeResult | None = None,
-    viewpoints: Mapping[str, FloatArray] | None = None,
 ) -> tuple[MergeResult, OccupancyGrid | None]:
-    """:func:`merge` and, when ``grid.enabled``, the :func:`global_grid` of its result: what
-    ``map_merger`` computes in its worker process after each change of a partial map."""
-    result = merge(maps, config, previous=previous, viewpoints=viewpoints)
+    """:func:`merge_joint` (one merge update, within ``config.update_budget``) and, when
+    ``grid.enabled``, the :func:`global_grid` of its result: what ``map_merger`` computes in
+    its worker process after each change of a partial map."""
+    result = merge_joint(keyframes, config, previous=previous)
     if not grid.enabled:
         return result, None
-    return result, global_grid(result, maps, viewpoints or {}, grid, config)
+    return result, global_grid(result, {}, {}, grid, config)

@@ -1,0 +1,310 @@
+"""Links between robots judged against the reference (issue 13): how well the link confidence
+separates right from wrong links, and how many wrong links the joint merger accepts.
+
+Each CARMEN log is cut into K robots (``mrm import-carmen``), each robot mapped alone by the
+local mapper exactly as ``mrm replay --method local`` does (every piece of every robot kept:
+what its ``partial_map`` carries), then merged by the joint merger. The merger never sees the
+reference; this bench does: every keyframe's stamp has a reference pose, so every link
+candidate ``T_keyframe_centre`` can be compared with the reference relative pose of its two
+keyframes. A link is *right* within 0.30 m / 5 deg (the confidence's own tolerance).
+
+    .venv/bin/python bench/link_bench.py prepare [--logs ...] [--robots 2 4 8]
+        [--work bench_output/link_bench]     # local mapping, cached (slow: minutes per case)
+    .venv/bin/python bench/link_bench.py links [--logs ...] [--robots 2 4 8] [--set N=V ...]
+        [--json PATH] [--curve PATH.png]
+
+``links`` prints, over every candidate of every case: precision and recall of "confidence >=
+t" and of "fit >= t" for a range of thresholds (the curve the ``link_confidence`` and
+``link_fit`` defaults are chosen from), then per case the candidates, the links the merger
+accepted and how many of them are wrong, the robots (pieces) merged and the merge time.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import pickle  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from multi_robot_mapper.core import se2  # noqa: E402
+from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
+from multi_robot_mapper.core.extraction import ExtractionConfig  # noqa: E402
+from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE  # noqa: E402
+from multi_robot_mapper.core.merging import MergeConfig  # noqa: E402
+from multi_robot_mapper.core.pipeline import OfflineMap, TimedLaserScan, run_offline  # noqa: E402
+from multi_robot_mapper.io.bags import read_recordings, reference_poses  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data" / "carmen"
+LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079")
+
+
+def bag_of(name: str, robots: int, work: Path) -> Path:
+    """The log cut into ``robots`` runs (imported once with ``mrm import-carmen``)."""
+    bag = work / "bags" / f"{name}_{robots}"
+    if not bag.exists():
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "multi_robot_mapper.cli.main",
+                "import-carmen",
+                str(DATA / f"{name}.log.gz"),
+                "--robots",
+                str(robots),
+                "--out",
+                str(bag),
+            ],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
+    return bag
+
+
+def prepare(name: str, robots: int, work: Path) -> Path:
+    """Local mapping of one case, pickled with the reference poses of every scan."""
+    out = work / "cases" / f"{name}_{robots}.pkl"
+    if out.exists():
+        return out
+    recordings = read_recordings(bag_of(name, robots, work))
+    inputs: dict[str, list[TimedLaserScan]] = {}
+    reference: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for robot, rec in recordings.items():
+        stamps = np.array([s.stamp for s in rec.scans], dtype=np.float64)
+        poses, found = reference_poses(rec, stamps)
+        inputs[robot] = [
+            TimedLaserScan(s.stamp, s.scan, tuple(float(v) for v in p) if ok else None)  # type: ignore[arg-type]
+            for s, p, ok in zip(rec.scans, poses, found, strict=True)
+        ]
+        reference[robot] = (stamps[found], np.asarray(poses)[found])
+    started = time.perf_counter()
+    local = run_offline(inputs, "local", ExtractionConfig())
+    seconds = time.perf_counter() - started
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with out.open("wb") as file:
+        pickle.dump({"local": local, "reference": reference, "seconds": seconds}, file)
+    print(f"{name} {robots}: local mapping {seconds:.1f} s -> {out}", flush=True)
+    return out
+
+
+def load(name: str, robots: int, work: Path) -> tuple[OfflineMap, dict[str, Any]]:
+    with (work / "cases" / f"{name}_{robots}.pkl").open("rb") as file:
+        case = pickle.load(file)
+    return case["local"], case["reference"]
+
+
+class Truth:
+    """Reference pose of every keyframe (by its stamp)."""
+
+    def __init__(self, local: OfflineMap, reference: dict[str, Any]) -> None:
+        self.poses: dict[tuple[str, int], np.ndarray] = {}
+        for robot, frames in local.keyframes.items():
+            stamps, poses = reference[robot]
+            lookup = {float(s): p for s, p in zip(stamps, poses, strict=True)}
+            for kf in frames:
+                pose = lookup.get(float(kf.stamp))
+                if pose is not None:
+                    self.poses[(robot, kf.index)] = se2.matrix_from_pose(*pose)
+
+    def relative(self, a: tuple[str, int], b: tuple[str, int]) -> np.ndarray | None:
+        """T_a_b by the reference (None when a keyframe has no reference pose)."""
+        if a not in self.poses or b not in self.poses:
+            return None
+        return se2.invert(self.poses[a]) @ self.poses[b]
+
+    def error(self, a: tuple[str, int], b: tuple[str, int], T_a_b: tuple) -> tuple[float, float]:
+        """Translation (m) and rotation (rad) error of a relative pose against the reference."""
+        truth = self.relative(a, b)
+        if truth is None:
+            return (np.nan, np.nan)
+        dx, dy, dt = se2.pose_from_matrix(se2.invert(truth) @ se2.matrix_from_pose(*T_a_b))
+        return float(np.hypot(dx, dy)), abs(float(dt))
+
+
+def right(error: tuple[float, float]) -> bool:
+    return bool(error[0] < RIGHT_DISTANCE and error[1] < RIGHT_ANGLE)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("step", choices=("prepare", "links"))
+    parser.add_argument("--logs", nargs="+", default=list(LOGS))
+    parser.add_argument("--robots", nargs="+", type=int, default=[2, 4, 8])
+    parser.add_argument("--work", type=Path, default=REPO / "bench_output" / "link_bench")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--curve", type=Path, default=None)
+    args = parser.parse_args()
+    cases = [(name, k) for name in args.logs for k in args.robots]
+    missing = [name for name in args.logs if not (DATA / f"{name}.log.gz").exists()]
+    if missing:
+        print(f"note: skipping {', '.join(missing)} (no log in {DATA})", file=sys.stderr)
+        cases = [(n, k) for n, k in cases if n not in missing]
+    if args.step == "prepare":
+        for name, k in cases:
+            prepare(name, k, args.work)
+        return 0
+    overrides = dict(parse_override(item) for item in args.set)
+    config = config_from_flat(MergeConfig, overrides)
+    report(cases, args, config)
+    return 0
+
+
+THRESHOLDS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99)
+
+
+def curve(rows: list[dict[str, Any]], key: str) -> list[tuple[float, int, int, float, float]]:
+    """(threshold, accepted, wrong accepted, precision, recall) of "key >= threshold"."""
+    right = sum(r["right"] for r in rows)
+    out = []
+    for t in THRESHOLDS:
+        taken = [r for r in rows if r[key] >= t]
+        good = sum(r["right"] for r in taken)
+        precision = good / len(taken) if taken else float("nan")
+        out.append((t, len(taken), len(taken) - good, precision, good / right if right else 0.0))
+    return out
+
+
+def overlapping_truth(local: OfflineMap, truth: Truth, minimum: float = 15.0) -> int:
+    """The largest group of robots joined by pairs whose maps (every piece, at the reference
+    poses of their keyframes) share at least ``minimum`` metres of wall: what any merger could
+    link (as bench/merge_speed.py --split counts it)."""
+    from multi_robot_mapper.core.matching import IntegrateConfig, score_pairs, transform_values
+
+    maps = {}
+    for robot, frames in local.keyframes.items():
+        placed = [
+            se2.transform_segments(truth.poses[(robot, kf.index)], np.asarray(kf.segments))
+            for kf in frames
+            if (robot, kf.index) in truth.poses and len(kf.segments)
+        ]
+        maps[robot] = np.vstack(placed) if placed else np.zeros((0, 4))
+    robots = sorted(maps)
+    parent = {r: r for r in robots}
+
+    def root(r: str) -> str:
+        while parent[r] != r:
+            r = parent[r]
+        return r
+
+    config = IntegrateConfig()
+    for i, a in enumerate(robots):
+        for b in robots[i + 1 :]:
+            if not len(maps[a]) or not len(maps[b]):
+                continue
+            scores = score_pairs(maps[a], maps[b], np.zeros((1, 3)), config)
+            if float(transform_values(scores, 1)[0]) >= minimum:
+                parent[root(b)] = root(a)
+    sizes: dict[str, int] = {}
+    for r in robots:
+        sizes[root(r)] = sizes.get(root(r), 0) + 1
+    return max(sizes.values(), default=0)
+
+
+def report(cases: list[tuple[str, int]], args: argparse.Namespace, config: MergeConfig) -> None:
+    from multi_robot_mapper.core.merging.joint import merge_joint
+
+    rows: list[dict[str, Any]] = []
+    table = []
+    for name, k in cases:
+        if not (args.work / "cases" / f"{name}_{k}.pkl").exists():
+            print(f"note: {name} {k} not prepared (run the prepare step)", file=sys.stderr)
+            continue
+        local, reference = load(name, k, args.work)
+        truth = Truth(local, reference)
+        started = time.perf_counter()
+        result = merge_joint(local.keyframes, config, budget=0)
+        seconds = time.perf_counter() - started
+        state = result.state
+        for (source, centre, target), record in state.matches.items():
+            for c in record.candidates:
+                error = truth.error((c.target[0], c.keyframe), (c.source[0], c.centre), c.T_keyframe_centre)
+                if np.isnan(error[0]):
+                    continue
+                rows.append(
+                    {
+                        "case": f"{name}_{k}",
+                        "source": list(c.source),
+                        "centre": c.centre,
+                        "target": list(c.target),
+                        "keyframe": c.keyframe,
+                        "rank": c.rank,
+                        "confidence": c.confidence,
+                        "fit": c.fit,
+                        "value": c.value,
+                        "error_m": error[0],
+                        "error_rad": error[1],
+                        "right": right(error),
+                    }
+                )
+        wrong = [
+            c
+            for c in state.links
+            if not right(truth.error((c.target[0], c.keyframe), (c.source[0], c.centre), c.T_keyframe_centre))
+        ]
+        merged_robots = sorted({robot for robot in result.keyframe_index})
+        table.append(
+            {
+                "case": f"{name}_{k}",
+                "robots": k,
+                "robots_placed": len(merged_robots),
+                "overlapping_truth": overlapping_truth(local, truth),
+                "maps": result.stats["maps"],
+                "maps_merged": result.stats["maps_merged"],
+                "places": result.stats["places"],
+                "place_matches": result.stats["place_matches"],
+                "candidates": sum(len(r.candidates) for r in state.matches.values()),
+                "links_accepted": len(state.links),
+                "links_wrong": len(wrong),
+                "pairs_breaking_cycles": result.stats["pairs_breaking_cycles"],
+                "merge_s": seconds,
+                "timings": result.timings,
+            }
+        )
+        last = table[-1]
+        print(
+            f"{name} {k}: robots placed {last['robots_placed']}/{k} (overlapping at the truth "
+            f"{last['overlapping_truth']}), maps {last['maps_merged']}/{last['maps']}, places "
+            f"{last['places']}, candidates {last['candidates']}, links accepted "
+            f"{last['links_accepted']} (wrong {last['links_wrong']}), merge {seconds:.1f} s",
+            file=sys.stderr,
+            flush=True,
+        )
+    for key in ("confidence", "fit"):
+        for rank in (None, 0):
+            chosen = [r for r in rows if rank is None or r["rank"] == rank]
+            label = "all candidates" if rank is None else "best placements only"
+            total = len(chosen)
+            good = sum(r["right"] for r in chosen)
+            print(f"\n{key} >= t, {label} ({total} candidates, {good} right):")
+            print("| t | accepted | wrong | precision | recall |")
+            print("| --- | --- | --- | --- | --- |")
+            for t, n, bad, precision, recall in curve(chosen, key):
+                print(f"| {t:.2f} | {n} | {bad} | {precision:.3f} | {recall:.3f} |")
+    print("\n| case | robots placed | overlapping (truth) | maps merged | places | place matches | candidates | links accepted | wrong | merge (s) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for row in table:
+        print(
+            f"| {row['case']} | {row['robots_placed']}/{row['robots']} | {row['overlapping_truth']} | "
+            f"{row['maps_merged']}/{row['maps']} | {row['places']} | {row['place_matches']} | "
+            f"{row['candidates']} | {row['links_accepted']} | {row['links_wrong']} | {row['merge_s']:.1f} |"
+        )
+    out = args.json or args.work / "link_bench.json"
+    out.write_text(json.dumps({"candidates": rows, "cases": table}, indent=1))
+    print(f"-> {out}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

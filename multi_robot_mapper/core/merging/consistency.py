@@ -1,0 +1,300 @@
+"""Which links between robots to believe: pairwise consistency within each pair of maps
+(PCM), and cycles over the pairs.
+
+**Pairs of maps** (:func:`consistent_set`). Two links of the same two maps A and B agree when
+the cycle link 1, B's map from link 1's end to link 2's, link 2 backwards, A's map back to
+link 1's start closes: within the correctness tolerance (0.30 m, 5 deg) plus
+``link_pair_slack`` (and ``link_pair_angle_slack``) per metre that the cycle runs inside the
+two maps (their own drift). In the manner of pairwise consistency maximisation (Mangelson et
+al. 2018), the largest consistent set (by weight: the sum of the links' confidences) is kept, found by
+growing a clique from each link in turn. It is accepted when
+
+- it holds a *confident* link (``link_confidence``), or links ``link_min_support`` distinct
+  places: an ambiguous link (a corridor that fits at two places, each of low confidence) is
+  accepted when enough of the pair's other places agree with one of its placements (the aces
+  corridors), and
+- it is *unique*: it weighs ``link_set_uniqueness`` times as much as the best set of links that
+  contradicts it (a building that fits two ways is refused, however well it fits).
+
+**Cycles over pairs** (:func:`accept_pairs`). Pairs are taken by weight, best first (Kruskal).
+A pair joining two groups of maps joins them; a pair whose maps are already joined closes a
+cycle, and is accepted only when the cycle through its best link and the best links of the
+chain joining its maps closes within the same tolerance (per metre of the maps the cycle runs
+through): a link that breaks a cycle is refused. Three robots that see each other check each
+other.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
+from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.place_links import LinkCandidate
+from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+Pair = tuple[UnitKey, UnitKey]  # sorted
+
+
+@dataclasses.dataclass(frozen=True)
+class OrientedLink:
+    """A link read from map ``first`` to map ``second``: keyframe ``k_second`` of ``second``
+    lies at ``T`` in keyframe ``k_first``'s frame of ``first``."""
+
+    first: UnitKey
+    k_first: int
+    second: UnitKey
+    k_second: int
+    T: FloatArray  # (3, 3)
+    candidate: LinkCandidate
+
+
+def oriented(candidate: LinkCandidate, first: UnitKey) -> OrientedLink:
+    """The candidate read from map ``first`` (its target or its source)."""
+    T = se2.matrix_from_pose(*candidate.T_keyframe_centre)
+    if candidate.target == first:
+        return OrientedLink(
+            candidate.target, candidate.keyframe, candidate.source, candidate.centre, T, candidate
+        )
+    return OrientedLink(
+        candidate.source,
+        candidate.centre,
+        candidate.target,
+        candidate.keyframe,
+        se2.invert(T),
+        candidate,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class PairVerdict:
+    """What the links of one pair of maps say."""
+
+    pair: Pair
+    links: list[LinkCandidate]  # the consistent set (accepted or not)
+    weight: float  # sum of the set's fits
+    rival_weight: float  # weight of the best set contradicting it
+    places: int  # distinct places the set links
+    accepted: bool
+    reason: str  # why refused ("" when accepted)
+
+
+def _poses(unit: MapUnit, keyframes: Sequence[int]) -> FloatArray:
+    return np.asarray(unit.poses[np.searchsorted(unit.index, np.asarray(keyframes))])
+
+
+def consistency_matrix(
+    links: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit], config: MergeConfig
+) -> BoolArray:
+    """(n, n) which links of one pair of maps agree with each other (all read from the same
+    map ``first``). Two placements of the same place never agree (they are rivals)."""
+    n = len(links)
+    if n == 0:
+        return np.zeros((0, 0), dtype=bool)
+    first, second = units[links[0].first], units[links[0].second]
+    a = _poses(first, [lk.k_first for lk in links])
+    b = _poses(second, [lk.k_second for lk in links])
+    T = np.stack([lk.T for lk in links])
+    # Predicted link i from link j: T_ai_aj . T_j . T_bj_bi, against T_i (every i, j at once).
+    Ta = _matrices(a)
+    Tb = _matrices(b)
+    Ta_inv = np.linalg.inv(Ta)
+    Tb_inv = np.linalg.inv(Tb)
+    T_ai_aj = np.einsum("iab,jbc->ijac", Ta_inv, Ta)
+    T_bj_bi = np.einsum("jab,ibc->ijac", Tb_inv, Tb)
+    predicted = np.einsum("ijab,jbc,ijcd->ijad", T_ai_aj, T, T_bj_bi)
+    residual = np.einsum("iab,ijbc->ijac", np.linalg.inv(T), predicted)
+    shift = np.hypot(residual[..., 0, 2], residual[..., 1, 2])
+    turn = np.abs(np.arctan2(residual[..., 1, 0], residual[..., 0, 0]))
+    path = np.hypot(*(a[:, None, :2] - a[None, :, :2]).transpose(2, 0, 1)) + np.hypot(
+        *(b[:, None, :2] - b[None, :, :2]).transpose(2, 0, 1)
+    )
+    agree = (shift <= RIGHT_DISTANCE + config.link_pair_slack * path) & (
+        turn <= RIGHT_ANGLE + config.link_pair_angle_slack * path
+    )
+    place = [(lk.candidate.source, lk.candidate.centre) for lk in links]
+    for i in range(n):
+        for j in range(i + 1, n):
+            if place[i] == place[j]:
+                agree[i, j] = agree[j, i] = False
+    np.fill_diagonal(agree, True)
+    return np.asarray(agree & agree.T)
+
+
+def _matrices(poses: FloatArray) -> FloatArray:
+    """(n, 3, 3) matrices of (n, 3) poses."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    out = np.zeros((len(poses), 3, 3))
+    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = c, -s, poses[:, 0]
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = s, c, poses[:, 1]
+    out[:, 2, 2] = 1.0
+    return out
+
+
+def heaviest_clique(agree: BoolArray, weights: FloatArray, allowed: BoolArray | None = None) -> list[int]:
+    """A heavy set of mutually agreeing links: grown greedily (heaviest agreeing link first)
+    from every link in turn, the heaviest kept. ``allowed`` limits the links used."""
+    n = len(weights)
+    usable = np.ones(n, dtype=bool) if allowed is None else allowed.copy()
+    best: list[int] = []
+    best_weight = 0.0
+    order = np.argsort(-weights, kind="stable")
+    for seed in order:
+        if not usable[seed]:
+            continue
+        members = [int(seed)]
+        open_ = usable & agree[seed]
+        open_[seed] = False
+        while open_.any():
+            pick = int(order[np.argmax(open_[order])])
+            members.append(pick)
+            open_ &= agree[pick]
+            open_[pick] = False
+        total = float(weights[members].sum())
+        if total > best_weight:
+            best, best_weight = members, total
+    return sorted(best)
+
+
+def consistent_set(
+    pair: Pair,
+    candidates: Sequence[LinkCandidate],
+    units: Mapping[UnitKey, MapUnit],
+    config: MergeConfig,
+) -> PairVerdict:
+    """The pair's heaviest consistent set of links and whether to accept it (module doc)."""
+    usable = [c for c in candidates if c.fit >= config.link_fit]
+    if not usable:
+        return PairVerdict(pair, [], 0.0, 0.0, 0, False, "no link fits")
+    links = [oriented(c, pair[0]) for c in usable]
+    agree = consistency_matrix(links, units, config)
+    weights = np.array([c.confidence for c in usable])
+    chosen = heaviest_clique(agree, weights)
+    members = [usable[i] for i in chosen]
+    weight = float(weights[chosen].sum())
+    # Rivals: links that contradict some member; their heaviest consistent set.
+    contradicting = ~agree[chosen].all(axis=0)
+    rival = heaviest_clique(agree, weights, contradicting)
+    rival_weight = float(weights[rival].sum()) if rival else 0.0
+    places = len({(c.source, c.centre) for c in members})
+    confident = any(c.confidence >= config.link_confidence for c in members)
+    reason = ""
+    if not confident and places < config.link_min_support:
+        reason = "too few consistent places and no confident link"
+    elif weight < config.link_set_uniqueness * rival_weight:
+        reason = "ambiguous: a contradicting set of links weighs about as much"
+    return PairVerdict(pair, members, weight, rival_weight, places, not reason, reason)
+
+
+def cycle_error(
+    chain: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit]
+) -> tuple[float, float, float]:
+    """How far a cycle of links fails to close: (metres, radians, metres run inside the maps).
+    ``chain[i].second`` is ``chain[i + 1].first`` and the last link returns to the first map."""
+    T = np.eye(3)
+    entry = chain[-1].k_second  # where the cycle enters the first map
+    path = 0.0
+    for link in chain:
+        unit = units[link.first]
+        a, b = _poses(unit, [entry, link.k_first])
+        T = T @ se2.invert(se2.matrix_from_pose(*a)) @ se2.matrix_from_pose(*b) @ link.T
+        path += float(np.hypot(*(b[:2] - a[:2])))
+        entry = link.k_second
+    x, y, theta = se2.pose_from_matrix(T)
+    return float(np.hypot(x, y)), abs(theta), path
+
+
+def closes(chain: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit], config: MergeConfig) -> bool:
+    """Does a cycle of links close within the tolerance (per metre run inside the maps)?"""
+    shift, turn, path = cycle_error(chain, units)
+    return shift <= RIGHT_DISTANCE + config.link_pair_slack * path and turn <= (
+        RIGHT_ANGLE + config.link_pair_angle_slack * path
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class Accepted:
+    """The pairs accepted and the groups of maps they join."""
+
+    pairs: list[PairVerdict]  # accepted, in the order taken
+    refused: list[PairVerdict]  # consistent within the pair but breaking a cycle
+    groups: list[list[UnitKey]]  # connected maps, largest first
+    tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]]  # spanning tree adjacency
+
+
+def accept_pairs(
+    verdicts: Sequence[PairVerdict], units: Mapping[UnitKey, MapUnit], config: MergeConfig
+) -> Accepted:
+    """Pairs by weight, best first: a pair joining two groups joins them; one inside a group
+    must close the cycle through the group's tree (module doc)."""
+    order = sorted(
+        (v for v in verdicts if v.accepted), key=lambda v: (-v.weight, v.pair)
+    )
+    parent: dict[UnitKey, UnitKey] = {key: key for key in units}
+
+    def root(key: UnitKey) -> UnitKey:
+        while parent[key] != key:
+            parent[key] = parent[parent[key]]
+            key = parent[key]
+        return key
+
+    tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]] = {key: [] for key in units}
+    taken: list[PairVerdict] = []
+    refused: list[PairVerdict] = []
+    for verdict in order:
+        a, b = verdict.pair
+        if root(a) != root(b):
+            parent[root(b)] = root(a)
+            tree[a].append((b, verdict))
+            tree[b].append((a, verdict))
+            taken.append(verdict)
+            continue
+        chain = _tree_path(tree, b, a)  # b ... a through the tree, then the new link a -> b
+        links = [_best(v, x) for x, v in chain] + [_best(verdict, a)]
+        if closes(links, units, config):
+            taken.append(verdict)
+        else:
+            refused.append(dataclasses.replace(verdict, accepted=False, reason="breaks a cycle"))
+    groups: dict[UnitKey, list[UnitKey]] = {}
+    for key in units:
+        groups.setdefault(root(key), []).append(key)
+    ordered = sorted(
+        (sorted(g) for g in groups.values()),
+        key=lambda g: (-len({robot for robot, _ in g}), -sum(units[k].length for k in g), g),
+    )
+    return Accepted(taken, refused, ordered, tree)
+
+
+def _best(verdict: PairVerdict, first: UnitKey) -> OrientedLink:
+    """The set's best-fitting link, read from map ``first``."""
+    return oriented(max(verdict.links, key=lambda c: c.fit), first)
+
+
+def _tree_path(
+    tree: Mapping[UnitKey, list[tuple[UnitKey, PairVerdict]]], start: UnitKey, goal: UnitKey
+) -> list[tuple[UnitKey, PairVerdict]]:
+    """The tree's pairs from ``start`` to ``goal``: (the map each is read from, the pair)."""
+    previous: dict[UnitKey, tuple[UnitKey, PairVerdict] | None] = {start: None}
+    frontier = [start]
+    while frontier:
+        key = frontier.pop(0)
+        if key == goal:
+            break
+        for other, verdict in tree[key]:
+            if other not in previous:
+                previous[other] = (key, verdict)
+                frontier.append(other)
+    path: list[tuple[UnitKey, PairVerdict]] = []
+    key = goal
+    while previous[key] is not None:
+        before, verdict = previous[key]  # type: ignore[misc]
+        path.append((before, verdict))
+        key = before
+    return path[::-1]

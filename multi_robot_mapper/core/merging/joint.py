@@ -1,0 +1,568 @@
+"""One graph for all robots: the ``pivot`` method (issue 13).
+
+Input: every robot's keyframes as its ``partial_map`` carries them (pose in its piece's frame,
+segments in its own frame). Each piece of each robot is a map of its own (a
+:class:`~multi_robot_mapper.core.merging.places.MapUnit`). One merge update
+(:func:`merge_joint`):
+
+1. **places** of every map (a keyframe and its map around it, ``place_*``);
+2. **links**: each place of the smaller map of every pair searched for on the larger map
+   (:func:`~multi_robot_mapper.core.merging.place_links.match_place`), results kept from one
+   update to the next: a place is matched again only when its keyframes or segments changed,
+   or the other map grew by ``reuse_*``; at most ``update_budget`` seconds per update, places
+   never matched first (the rest waits, and the node merges again);
+3. **consistency** (:mod:`~multi_robot_mapper.core.merging.consistency`): per pair of maps the
+   heaviest set of mutually consistent links (PCM), accepted when confident or supported by
+   enough places and unique; pairs taken best first, a pair closing a cycle only when the
+   cycle closes;
+4. **one graph** (:class:`~multi_robot_mapper.core.pose_graph.PoseGraph`, gtsam) of every
+   keyframe of the maps joined to the reference: edges between a map's keyframes from their
+   published poses (consecutive keyframes, and keyframes within ``graph_radius``: the wire
+   carries no loop closures, so these keep what the robot's own closures made of its map),
+   with a standard deviation growing with their distance; every accepted link between
+   keyframes of two maps, under the DCS robust kernel. Solved in one batch from the maps
+   placed rigidly along the accepted pairs;
+5. **output**: every merged keyframe's pose in ``map`` (the reference robot's map frame),
+   each map's ``T_map_piece`` as the rigid fit of its keyframes, and the global map: every
+   merged keyframe's segments at its optimised pose, fused (Amigoni Alg. 5), each fused
+   segment owned by one keyframe.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections import OrderedDict
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.local_mapping import Keyframe
+from multi_robot_mapper.core.merging.compose import fuse_maps
+from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.consistency import (
+    Accepted,
+    PairVerdict,
+    accept_pairs,
+    consistent_set,
+    oriented,
+)
+from multi_robot_mapper.core.merging.link_graph import MergeResult
+from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
+from multi_robot_mapper.core.merging.place_links import (
+    LinkCandidate,
+    Target,
+    match_place,
+    place_drawing,
+)
+from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, places_of, units_of
+from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+Pose = tuple[float, float, float]
+MatchKey = tuple[UnitKey, int, UnitKey]  # (source map, place centre keyframe, target map)
+
+
+@dataclasses.dataclass(frozen=True)
+class MatchRecord:
+    """One place searched for on one map, and what the search was made on."""
+
+    place: str  # the place's digest
+    target: MapSignature  # the target map's
+    candidates: list[LinkCandidate]
+
+
+@dataclasses.dataclass
+class JointState:
+    """What one update leaves to the next: every place match made so far."""
+
+    matches: dict[MatchKey, MatchRecord] = dataclasses.field(default_factory=dict)
+    links: list[LinkCandidate] = dataclasses.field(default_factory=list)  # in the graph
+
+
+# Targets (a map transformed for the correlation) of the maps matched most recently: building
+# one costs more than a place match, and a merger process matches the same maps for many
+# updates. Keyed by map, content and the settings they were built with.
+_TARGETS: OrderedDict[tuple[UnitKey, str, MergeConfig], Target] = OrderedDict()
+_TARGETS_KEPT = 32
+
+
+def _target(unit: MapUnit, config: MergeConfig) -> Target:
+    key = (unit.key, MapSignature.of(unit.segments).digest, config)
+    found = _TARGETS.get(key)
+    if found is None:
+        found = Target.of(unit, config)
+        _TARGETS[key] = found
+        if len(_TARGETS) > _TARGETS_KEPT:
+            _TARGETS.popitem(last=False)
+    else:
+        _TARGETS.move_to_end(key)
+    return found
+
+
+def merge_joint(
+    keyframes: Mapping[str, Sequence[Keyframe]],
+    config: MergeConfig | None = None,
+    previous: MergeResult | None = None,
+    reference: str | None = None,
+    budget: float | None = None,
+) -> MergeResult:
+    """Merge the robots' keyframe maps (module doc). ``budget``: seconds of place matching
+    (default ``config.update_budget``; 0 or None with a config of 0: every place is matched).
+    ``reference`` (or ``config.reference``) names the robot whose map frame is ``map``; by
+    default the previous update's is kept while it is in the largest group."""
+    config = config if config is not None else MergeConfig()
+    started = time.perf_counter()
+    robots = sorted(str(r) for r in keyframes)
+    chosen = reference if reference is not None else (config.reference or None)
+    if chosen is not None and chosen not in robots:
+        raise ValueError(f"reference robot {chosen!r} has no map; robots: {', '.join(robots)}")
+    units = units_of(keyframes)
+    state = previous.state if previous is not None and isinstance(previous.state, JointState) else None
+    matches, counts = _match_places(units, config, state, config.update_budget if budget is None else budget)
+    matched = time.perf_counter()
+    verdicts = _verdicts(units, matches, config)
+    accepted = accept_pairs(list(verdicts.values()), units, config)
+    checked = time.perf_counter()
+    previous_reference = None if previous is None else previous.reference
+    group, ref_unit = _reference(accepted, units, chosen, previous_reference)
+    warm = previous if previous is not None and ref_unit is not None and previous.reference == ref_unit[0] else None
+    solved = _solve(units, group, ref_unit, accepted, config, warm)
+    optimised = time.perf_counter()
+    result = _result(robots, units, accepted, verdicts, solved, ref_unit, config)
+    finished = time.perf_counter()
+    result.state = JointState(matches, solved.accepted)
+    result.timings = {
+        "matching_s": matched - started,
+        "consistency_s": checked - matched,
+        "graph_s": optimised - checked,
+        "fusion_s": finished - optimised,
+        "total_s": finished - started,
+    }
+    result.stats.update(counts)
+    return result
+
+
+# --- links --------------------------------------------------------------------------------
+
+
+def _direction(a: MapUnit, b: MapUnit) -> tuple[MapUnit, MapUnit]:
+    """(source, target) of a pair: the smaller map's places are searched on the larger."""
+    return (a, b) if (a.length, a.key) <= (b.length, b.key) else (b, a)
+
+
+def _match_places(
+    units: Mapping[UnitKey, MapUnit],
+    config: MergeConfig,
+    state: JointState | None,
+    budget: float | None,
+) -> tuple[dict[MatchKey, MatchRecord], dict[str, int]]:
+    """Every place of every pair's smaller map searched on the larger one: results kept while
+    the place and the target map are unchanged, the rest matched within ``budget`` seconds,
+    places never matched first, then changed places, then places of grown targets; each pair's
+    k-th place before any pair's (k+1)-th."""
+    old = state.matches if state is not None else {}
+    keys = sorted(k for k, u in units.items() if u.length >= config.place_min_length)
+    places = {key: places_of(units[key], config) for key in keys}
+    signatures = {key: MapSignature.of(units[key].segments) for key in keys}
+    records: dict[MatchKey, MatchRecord] = {}
+    work: list[tuple[int, int, int, MatchKey, Place]] = []
+    for i, a in enumerate(keys):
+        for b in keys[i + 1 :]:
+            source, target = _direction(units[a], units[b])
+            for rank, place in enumerate(places[source.key]):
+                key = (source.key, place.centre, target.key)
+                record = old.get(key)
+                if record is None:
+                    priority = 0
+                elif record.place != place.digest:
+                    priority = 1
+                elif not signatures[target.key].close_to(record.target, config):
+                    priority = 2
+                else:
+                    records[key] = record  # fresh
+                    continue
+                if record is not None:
+                    records[key] = record  # kept until matched again
+                work.append((priority, rank, len(work), key, place))
+    work.sort(key=lambda item: item[:3])
+    started = time.perf_counter()
+    computed = 0
+    drawings: dict[str, object] = {}
+    for _, _, _, key, place in work:
+        if budget and time.perf_counter() - started >= budget:
+            break
+        target = _target(units[key[2]], config)
+        drawing = drawings.get(place.digest)
+        if drawing is None:
+            drawing = drawings[place.digest] = place_drawing(place, config)
+        found = match_place(place, target, config, drawing)  # type: ignore[arg-type]
+        records[key] = MatchRecord(place.digest, signatures[key[2]], found)
+        computed += 1
+    counts = {
+        "maps": len(units),
+        "places": sum(len(p) for p in places.values()),
+        "place_matches": len({w[3] for w in work} | set(records)),
+        "matches_computed": computed,
+        "matches_pending": len(work) - computed,
+    }
+    return records, counts
+
+
+def _verdicts(
+    units: Mapping[UnitKey, MapUnit],
+    records: Mapping[MatchKey, MatchRecord],
+    config: MergeConfig,
+) -> dict[tuple[UnitKey, UnitKey], PairVerdict]:
+    """Every pair of maps' consistent set of links (candidates of keyframes that still
+    exist)."""
+    by_pair: dict[tuple[UnitKey, UnitKey], list[LinkCandidate]] = {}
+    for (source, centre, target), record in records.items():
+        if source not in units or target not in units:
+            continue
+        for candidate in record.candidates:
+            if not (_has(units[source], candidate.centre) and _has(units[target], candidate.keyframe)):
+                continue
+            pair = (min(source, target), max(source, target))
+            by_pair.setdefault(pair, []).append(candidate)
+    return {pair: consistent_set(pair, found, units, config) for pair, found in by_pair.items()}
+
+
+def _has(unit: MapUnit, keyframe: int) -> bool:
+    row = int(np.searchsorted(unit.index, keyframe))
+    return row < len(unit.index) and int(unit.index[row]) == keyframe
+
+
+# --- the graph ----------------------------------------------------------------------------
+
+
+def _reference(
+    accepted: Accepted,
+    units: Mapping[UnitKey, MapUnit],
+    chosen: str | None,
+    previous: str | None,
+) -> tuple[list[UnitKey], UnitKey | None]:
+    """The group of maps placed in ``map`` and its reference map: the chosen robot's (its
+    group), else the previous reference's while its group is as large as any, else the
+    largest group; within it a robot's main frame (piece 0), longest first."""
+    if not accepted.groups:
+        return [], None
+
+    def robots_in(group: list[UnitKey]) -> int:
+        return len({robot for robot, _ in group})
+
+    size = robots_in(accepted.groups[0])
+    group = accepted.groups[0]
+    for wanted, must in ((chosen, True), (previous, False)):
+        if wanted is None:
+            continue
+        holding = [g for g in accepted.groups if (wanted, 0) in g]
+        if holding and (must or robots_in(holding[0]) == size):
+            return holding[0], (wanted, 0)
+    mains = [key for key in group if key[1] == 0]
+    pool = mains or group
+    return group, max(pool, key=lambda key: (units[key].length, [-ord(c) for c in key[0]]))
+
+
+@dataclasses.dataclass
+class _Solution:
+    """Optimised keyframe poses and fitted frames of the maps placed in ``map``."""
+
+    poses: dict[UnitKey, FloatArray]  # (K, 3) T_map_keyframe, rows as in the unit
+    frames: dict[UnitKey, FloatArray]  # 3x3 T_map_unit (rigid fit of its keyframes)
+    order: list[UnitKey]  # placing order (the reference first)
+    accepted: list[LinkCandidate] = dataclasses.field(default_factory=list)  # in the graph
+    nodes: int = 0
+    edges: int = 0
+    iterations: int = 0
+
+
+def _solve(
+    units: Mapping[UnitKey, MapUnit],
+    group: list[UnitKey],
+    ref_unit: UnitKey | None,
+    accepted: Accepted,
+    config: MergeConfig,
+    warm: MergeResult | None = None,
+) -> _Solution:
+    """The graph of every keyframe of the maps joined to ``ref_unit``, solved (module doc),
+    from the previous update's poses where it has them (``warm``, of the same reference),
+    else from the maps placed rigidly along the accepted pairs."""
+    if ref_unit is None:
+        return _Solution({}, {}, [])
+    rigid = _rigid_placements(ref_unit, accepted, units)
+    order = list(rigid)
+    offsets: dict[UnitKey, int] = {}
+    total = 0
+    for key in order:
+        offsets[key] = total
+        total += len(units[key].index)
+    graph = PoseGraph(robust_scale=config.link_robust_scale, kernel="dcs")
+    for key in order:
+        unit = units[key]
+        start = _initial(unit, rigid[key], warm)
+        for row, placed in enumerate(start):
+            anchored = key == ref_unit and row == 0
+            graph.add_node(offsets[key] + row, tuple(float(v) for v in placed), anchored=anchored)
+        for first, second in _intra_pairs(unit, config.graph_radius):
+            graph.add_edge(_intra_edge(unit, first, second, offsets[key], config))
+    accepted_links: list[LinkCandidate] = []
+    placed_units = set(order)
+    for verdict in accepted.pairs:
+        for candidate in verdict.links:
+            if candidate.source not in placed_units or candidate.target not in placed_units:
+                continue
+            target, source = units[candidate.target], units[candidate.source]
+            graph.add_edge(
+                Edge(
+                    offsets[candidate.target] + target.row(candidate.keyframe),
+                    offsets[candidate.source] + source.row(candidate.centre),
+                    candidate.T_keyframe_centre,
+                    candidate.information,
+                    robust=True,
+                )
+            )
+            accepted_links.append(candidate)
+    iterations = graph.solve() if accepted_links else 0
+    estimate = graph.poses()
+    poses = {
+        key: np.array([estimate[offsets[key] + row] for row in range(len(units[key].index))])
+        for key in order
+    }
+    frames = {key: se2.rigid_fit(units[key].poses, poses[key]) for key in order}
+    # ``map`` is the reference map's frame exactly: its fitted frame is the identity.
+    T_fix = se2.invert(frames[ref_unit])
+    for key in order:
+        frames[key] = T_fix @ frames[key]
+        poses[key] = np.array([se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in poses[key]])
+    return _Solution(
+        poses, frames, order, accepted_links, total, len(graph.edges), iterations
+    )
+
+
+def _initial(unit: MapUnit, rigid: FloatArray, warm: MergeResult | None) -> FloatArray:
+    """(K, 3) starting poses of a map's keyframes: where the previous update (``warm``) put
+    those it placed, the others moved with them (the rigid fit of the placed ones), or, with
+    none placed before, the map placed rigidly (``rigid``)."""
+    T = rigid
+    start = None
+    index = None if warm is None else warm.keyframe_index.get(unit.robot)
+    if warm is not None and index is not None and len(index):
+        rows = np.minimum(np.searchsorted(index, unit.index), len(index) - 1)
+        known = index[rows] == unit.index
+        if known.any():
+            before = warm.keyframe_poses[unit.robot][rows[known]]
+            T = se2.rigid_fit(unit.poses[known], before)
+            start = (known, before)
+    moved = np.array([se2.pose_from_matrix(T @ se2.matrix_from_pose(*p)) for p in unit.poses])
+    if start is not None:
+        moved[start[0]] = start[1]
+    return moved.reshape(-1, 3)
+
+
+def _rigid_placements(
+    ref_unit: UnitKey, accepted: Accepted, units: Mapping[UnitKey, MapUnit]
+) -> dict[UnitKey, FloatArray]:
+    """Each map joined to the reference placed rigidly through the accepted pairs' best links
+    (breadth first: the placing order)."""
+    placed: dict[UnitKey, FloatArray] = {ref_unit: np.eye(3)}
+    queue = [ref_unit]
+    while queue:
+        key = queue.pop(0)
+        for other, verdict in sorted(accepted.tree[key], key=lambda item: item[0]):
+            if other in placed:
+                continue
+            link = oriented(max(verdict.links, key=lambda c: c.fit), key)
+            first, second = units[link.first], units[link.second]
+            T_first_k = se2.matrix_from_pose(*first.poses[first.row(link.k_first)])
+            T_second_k = se2.matrix_from_pose(*second.poses[second.row(link.k_second)])
+            placed[other] = placed[key] @ T_first_k @ link.T @ se2.invert(T_second_k)
+            queue.append(other)
+    return placed
+
+
+def _intra_pairs(unit: MapUnit, radius: float) -> list[tuple[int, int]]:
+    """Rows of a map's keyframes joined by an edge: consecutive ones, and each keyframe with up
+    to three earlier ones within ``radius`` (not already consecutive)."""
+    pairs = [(row, row + 1) for row in range(len(unit.index) - 1)]
+    if radius > 0.0 and len(unit.index) > 2:
+        xy = unit.poses[:, :2]
+        for row in range(2, len(xy)):
+            gap = np.hypot(*(xy[: row - 1] - xy[row]).T)
+            near = np.flatnonzero(gap <= radius)
+            for other in near[np.argsort(gap[near], kind="stable")][:3]:
+                pairs.append((int(other), row))
+    return pairs
+
+
+def _intra_edge(unit: MapUnit, first: int, second: int, offset: int, config: MergeConfig) -> Edge:
+    """An edge between two keyframes of one map, from their published poses."""
+    a, b = unit.poses[first], unit.poses[second]
+    T = se2.between(a, b)
+    distance = float(np.hypot(*(b[:2] - a[:2])))
+    sigma = config.graph_sigma + config.graph_drift * distance
+    angle = config.graph_angle_sigma + config.graph_angle_drift * distance
+    information = np.diag([sigma**-2, sigma**-2, angle**-2])
+    return Edge(offset + first, offset + second, T, information, robust=False)
+
+
+# --- the result ---------------------------------------------------------------------------
+
+
+def _result(
+    robots: list[str],
+    units: Mapping[UnitKey, MapUnit],
+    accepted: Accepted,
+    verdicts: Mapping[tuple[UnitKey, UnitKey], PairVerdict],
+    solved: _Solution,
+    ref_unit: UnitKey | None,
+    config: MergeConfig,
+) -> MergeResult:
+    """The merge as a :class:`MergeResult`: frames, keyframe poses, links, global map."""
+    frames: dict[str, dict[int, Pose]] = {}
+    for key, T in solved.frames.items():
+        frames.setdefault(key[0], {})[key[1]] = se2.pose_from_matrix(T)
+    placements: dict[str, Pose | None] = {r: frames.get(r, {}).get(0) for r in robots}
+    keyframe_poses: dict[str, FloatArray] = {}
+    keyframe_index: dict[str, IntArray] = {}
+    for robot in robots:
+        keys = [key for key in solved.order if key[0] == robot]
+        if not keys:
+            continue
+        index = np.concatenate([units[key].index for key in keys])
+        poses = np.vstack([solved.poses[key] for key in keys])
+        order = np.argsort(index, kind="stable")
+        keyframe_index[robot], keyframe_poses[robot] = index[order], poses[order]
+    segments, owner_robot, owner_keyframe = _global_map(robots, units, solved, config)
+    links = _robot_links(accepted, solved, units)
+    pairs = _robot_pairs(verdicts, units)
+    result = MergeResult(
+        robots=robots,
+        placements=placements,
+        reference=None if ref_unit is None else ref_unit[0],
+        links=links,
+        pairs=pairs,
+        segments=segments,
+        segment_robot=owner_robot,
+        timings={},
+        stats={
+            "maps_merged": len(solved.order),
+            "pairs_linked": len(accepted.pairs),
+            "pairs_consistent": sum(v.accepted for v in verdicts.values()),
+            "pairs_breaking_cycles": len(accepted.refused),
+            "links_accepted": len(solved.accepted),
+            "link_candidates": sum(len(v.links) for v in verdicts.values()),
+            "graph_nodes": solved.nodes,
+            "graph_edges": solved.edges,
+            "graph_iterations": solved.iterations,
+        },
+        keyframe_poses=keyframe_poses,
+        keyframe_index=keyframe_index,
+        frames=frames,
+        segment_keyframe=owner_keyframe,
+    )
+    result.verdicts = dict(verdicts)
+    return result
+
+
+def _global_map(
+    robots: list[str],
+    units: Mapping[UnitKey, MapUnit],
+    solved: _Solution,
+    config: MergeConfig,
+) -> tuple[FloatArray, IntArray, IntArray]:
+    """Every merged keyframe's segments at its optimised pose, fused map by map in placing
+    order; each fused segment's robot (index into ``robots``) and owning keyframe."""
+    segments = np.zeros((0, 4))
+    owner = np.zeros(0, dtype=np.int64)
+    base: list[tuple[int, int]] = []  # global owner id -> (robot index, keyframe index)
+    for key in solved.order:
+        unit = units[key]
+        if len(unit.segments) == 0:
+            continue
+        stacked = np.vstack(unit.local)
+        moved = se2.transform_segments_each(solved.poses[key][unit.owner], stacked)
+        ids = len(base) + unit.owner
+        base += [(robots.index(key[0]), int(k)) for k in unit.index]
+        segments, owner = fuse_maps(segments, owner, moved, ids.astype(np.int64), config)
+    table = np.array(base, dtype=np.int64).reshape(-1, 2)
+    if len(owner) == 0:
+        return segments.reshape(-1, 4), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    return segments, table[owner, 0], table[owner, 1]
+
+
+def _robot_links(
+    accepted: Accepted, solved: _Solution, units: Mapping[UnitKey, MapUnit]
+) -> list[Link]:
+    """The accepted pairs between the placed maps of two different robots, as one link per pair
+    of robots (``T_a_b`` between their fitted frames, ``value`` the matched wall of its links)
+    for the diagnostics."""
+    by_robots: dict[tuple[str, str], Link] = {}
+    for verdict in accepted.pairs:
+        a, b = verdict.pair
+        if a[0] == b[0] or a not in solved.frames or b not in solved.frames:
+            continue
+        (ra, ka), (rb, kb) = sorted((a, b))
+        T_a_b = se2.invert(solved.frames[(ra, ka)]) @ solved.frames[(rb, kb)]
+        value = float(sum(c.value for c in verdict.links))
+        link = Link(
+            ra,
+            rb,
+            se2.pose_from_matrix(T_a_b),
+            value,
+            0.0,
+            True,
+            uniqueness=verdict.weight / verdict.rival_weight if verdict.rival_weight else np.inf,
+        )
+        if (ra, rb) not in by_robots or by_robots[(ra, rb)].value < value:
+            by_robots[(ra, rb)] = link
+    return sorted(by_robots.values(), key=lambda lk: (lk.robot_a, lk.robot_b))
+
+
+def _robot_pairs(
+    verdicts: Mapping[tuple[UnitKey, UnitKey], PairVerdict], units: Mapping[UnitKey, MapUnit]
+) -> dict[tuple[str, str], PairRecord]:
+    """Every pair of robots' strongest pair of maps (its consistent set's matched wall, valid
+    when accepted), for the diagnostics' best value with any robot."""
+    out: dict[tuple[str, str], PairRecord] = {}
+    for (a, b), verdict in verdicts.items():
+        if a[0] == b[0]:
+            continue
+        ra, rb = sorted((a[0], b[0]))
+        value = float(sum(c.value for c in verdict.links))
+        if (ra, rb) in out and out[(ra, rb)].link.value >= value:
+            continue
+        link = Link(ra, rb, (0.0, 0.0, 0.0), value, 0.0, verdict.accepted)
+        signature_a = MapSignature.of(units[a].segments)
+        signature_b = MapSignature.of(units[b].segments)
+        out[(ra, rb)] = PairRecord(link, signature_a, signature_b, False)
+    return out
+
+
+def place_scans(
+    result: MergeResult, robot: str, anchors: tuple[FloatArray, IntArray, FloatArray]
+) -> tuple[FloatArray, FloatArray] | None:
+    """The scans of ``robot`` placed in ``map`` through their keyframes' optimised poses
+    (``anchors``: stamps, keyframe of each scan, ``T_keyframe_scan``; LocalMapper.anchors):
+    stamps and (N, 3) poses, by stamp, of the scans whose keyframe was merged. None when no
+    keyframe of the robot was merged."""
+    index = result.keyframe_index.get(robot)
+    if index is None or len(index) == 0:
+        return None
+    stamps, keyframe, T_keyframe_scan = anchors
+    row = np.searchsorted(index, keyframe)
+    row = np.minimum(row, len(index) - 1)
+    merged = index[row] == keyframe
+    poses = result.keyframe_poses[robot][row[merged]]
+    placed = np.array(
+        [
+            se2.compose(p, s)
+            for p, s in zip(poses, np.asarray(T_keyframe_scan)[merged], strict=True)
+        ]
+    ).reshape(-1, 3)
+    chosen = np.asarray(stamps)[merged]
+    order = np.argsort(chosen, kind="stable")
+    return chosen[order], placed[order]

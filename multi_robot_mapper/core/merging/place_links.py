@@ -1,0 +1,315 @@
+"""Links between robots: where a place of one map lies on another map, and how sure that is.
+
+A place (:class:`~multi_robot_mapper.core.merging.places.Place`) is searched for on the whole of
+another map with no guess, in two steps:
+
+1. **search**: the map correlation (:mod:`~multi_robot_mapper.core.merging.correlation`)
+   scores every translation of the place for each rotation the wall directions allow, walls
+   lying in the other robot's free space counting against; the ``link_hypotheses`` best
+   distinct placements are kept. The other map is transformed once for all its places
+   (:class:`Target`);
+2. **verification**: INTEGRATE evaluates and refines those placements on the other map's walls
+   around them, with both sides' synthetic beams (:func:`places.viewpoints`), and returns its
+   calibrated confidence (:mod:`core.matching.confidence`): the probability that the placement
+   is right within 0.30 m / 5 deg, low when a rival placement fits about as well. The best
+   placement and its best rival become :class:`LinkCandidate`\\ s, each also with its *fit*:
+   the same confidence with the rival evidence left out (how well the place fits there at
+   all). A corridor that fits at two places gives two candidates of good fit and low
+   confidence; consistency with the pair's other links decides between them
+   (:mod:`~multi_robot_mapper.core.merging.consistency`).
+
+A candidate links the place's centre keyframe with the other map's keyframe nearest to where
+the centre lands, by ``T_keyframe_centre``: relative to keyframes, a link stays valid when
+either map moves its keyframes (its own loop closures).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.geometry import point_segment_distance
+from multi_robot_mapper.core.matching import IntegrateConfig, MatchResult, integrate
+from multi_robot_mapper.core.matching.beams import BeamAgreement, Viewpoint
+from multi_robot_mapper.core.matching.confidence import MatchEvidence, confidence
+from multi_robot_mapper.core.matching.integrate import match_evidence
+from multi_robot_mapper.core.matching.refine import match_information
+from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.correlation import (
+    CorrelationTarget,
+    Drawing,
+    correlation_peaks,
+    rotation_candidates,
+)
+from multi_robot_mapper.core.merging.free_space import MapViews
+from multi_robot_mapper.core.merging.pairwise import MapSignature, draw_map, longest
+from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, thin, viewpoints
+
+FloatArray = NDArray[np.float64]
+Pose = tuple[float, float, float]
+
+# Placements farther apart than this (or turned more) are different answers (rivals).
+_DISTINCT_SHIFT = 1.0  # m
+_DISTINCT_TURN = float(np.radians(10.0))
+# The other map's walls within this much beyond place_radius of a placed centre are verified,
+# the longest this many of them and of the place's (short pieces add cost, not evidence).
+_CROP_MARGIN = 1.0  # m
+_VERIFY_SEGMENTS = 120
+
+
+@dataclasses.dataclass(frozen=True)
+class LinkCandidate:
+    """A place of one map found on another: keyframe ``centre`` of ``source`` lies at
+    ``T_keyframe_centre`` in keyframe ``keyframe``'s frame of ``target``."""
+
+    source: UnitKey
+    centre: int
+    target: UnitKey
+    keyframe: int
+    T_keyframe_centre: Pose  # x, y, theta
+    T_target_centre: Pose  # the same placement in the target map's frame (when matched)
+    confidence: float  # P(right), the rival placements included
+    fit: float  # P(right) as if no rival placement existed
+    value: float  # matched wall (m)
+    rank: int  # 0: the best placement of the place on that map, 1: its best rival
+    information: FloatArray  # (3, 3) of the keyframe-to-keyframe edge, gtsam's tangent order
+
+
+@dataclasses.dataclass(frozen=True)
+class Target:
+    """A map prepared to be searched for places: its drawing for the correlation (transformed
+    once), and its keyframe poses (the viewpoints of the verification)."""
+
+    unit: MapUnit
+    signature: MapSignature
+    drawing: Drawing
+    correlation: CorrelationTarget
+    view_poses: FloatArray  # (V, 3) keyframe poses thinned to view_spacing
+
+    @staticmethod
+    def of(unit: MapUnit, config: MergeConfig) -> Target:
+        views = MapViews.of(unit.segments, unit.poses, config) if len(unit.poses) else None
+        drawing = draw_map(unit.segments, views, config)
+        correlation = config.correlation()
+        # A place (walls and free space) reaches place_radius from its centre: the grid must
+        # hold it without wrapping round (its middle may lie off its centre).
+        reach = 2.0 * config.place_radius
+        prepared = CorrelationTarget.of(drawing, reach, correlation.cell, correlation.blur)
+        poses = unit.poses[thin(unit.poses, config.view_spacing)]
+        return Target(unit, MapSignature.of(unit.segments), drawing, prepared, poses)
+
+
+def place_drawing(place: Place, config: MergeConfig) -> Drawing:
+    """A place drawn for the correlation, with its free space (within ``place_radius`` of its
+    centre, like its walls: the place is a disk)."""
+    cell = config.correlation_cell
+    free = place.views.free_points(config, cell)
+    free = free[np.hypot(free[:, 0], free[:, 1]) <= config.place_radius]
+    return Drawing.of(place.segments, free, cell)
+
+
+def place_config(config: MergeConfig) -> IntegrateConfig:
+    """INTEGRATE's settings for verifying placements of places: its matching tolerances,
+    every hypothesis given evaluated and refined, no slide along corridors (the correlation
+    has tried every translation already)."""
+    return dataclasses.replace(
+        config.integrate,
+        max_hypotheses=max(config.link_hypotheses, 1),
+        refine_candidates=config.link_hypotheses,
+        slide_range=0.0,
+    )
+
+
+# Viewpoints per side of a verification, at least this far apart: the beams' evidence is
+# about the place, and a few views of it say what many do (the cost grows with each).
+_VERIFY_VIEWS = 6
+_VERIFY_SPACING = 2.0  # m
+
+
+def _verify_views(views: MapViews, config: MergeConfig) -> list[Viewpoint]:
+    """A map's views thinned for a verification (:data:`_VERIFY_VIEWS`)."""
+    rows = thin(views.poses, _VERIFY_SPACING)
+    if len(rows) > _VERIFY_VIEWS:
+        rows = rows[np.linspace(0, len(rows) - 1, _VERIFY_VIEWS).astype(int)]
+    kept = MapViews(views.poses[rows], views.ranges[rows], views.angle_min, views.angle_increment)
+    return viewpoints(kept, config)
+
+
+def match_place(
+    place: Place, target: Target, config: MergeConfig, drawing: Drawing | None = None
+) -> list[LinkCandidate]:
+    """The place searched for on the target map: its best placement and best rival as link
+    candidates (none when it lies nowhere there)."""
+    unit = target.unit
+    if len(unit.segments) == 0 or len(place.segments) == 0:
+        return []
+    drawn = drawing if drawing is not None else place_drawing(place, config)
+    correlation = config.correlation()
+    rotations = rotation_candidates(unit.segments, place.segments, correlation.rotations)
+    peaks, scores = correlation_peaks(
+        target.drawing, drawn, rotations, correlation, target.correlation
+    )
+    if len(peaks) == 0 or scores[0] < config.link_min_overlap * place.length:
+        return []
+    chosen = _distinct(peaks, config.link_hypotheses)
+    hypotheses = peaks[chosen]
+    # The target's walls and viewpoints around every placement tried, in the target's frame.
+    crop = longest(
+        _near(unit.segments, hypotheses[:, 1:], config.place_radius + _CROP_MARGIN),
+        _VERIFY_SEGMENTS,
+    )
+    own = longest(place.segments, _VERIFY_SEGMENTS)
+    if len(crop) == 0:
+        return []
+    poses = target.view_poses
+    near = _close_to_any(poses[:, :2], hypotheses[:, 1:], config.place_radius)
+    views = MapViews.of(crop, poses[near], config)
+    settings = place_config(config)
+    sides = (_verify_views(views, config) or None, _verify_views(place.views, config) or None)
+    best = integrate(
+        crop,
+        own,
+        settings,
+        heuristics=(),
+        ordered=(False, False),
+        extra_hypotheses=hypotheses,
+        views=sides,
+    )
+    if best.value <= 0.0 or best.evidence is None:
+        return []
+    found = [_candidate(place, own, unit, crop, best, 0, config)]
+    # The best rival: the same verification without the hypotheses at the best placement;
+    # its confidence is then judged with the best placement as *its* rival (a tie leaves both
+    # unsure, a clear winner leaves the rival none).
+    others = np.array([_differs(row, best.T_1_2) for row in hypotheses], dtype=bool)
+    if others.any():
+        rival = integrate(
+            crop,
+            own,
+            settings,
+            heuristics=(),
+            ordered=(False, False),
+            extra_hypotheses=hypotheses[others],
+            views=sides,
+        )
+        if rival.value > 0.0 and rival.evidence is not None and _differs(rival.T_1_2, best.T_1_2):
+            evidence = match_evidence(
+                crop,
+                own,
+                rival.T_1_2,
+                sides,
+                settings,
+                score=rival.evidence.score,
+                rival_score=best.evidence.score,
+                rival_T=best.T_1_2,
+                support=rival.evidence.support,
+                fraction=rival.evidence.fraction,
+            )
+            judged = dataclasses.replace(rival, confidence=confidence(evidence.features()))
+            found.append(_candidate(place, own, unit, crop, judged, 1, config))
+    return found
+
+
+def _fit(evidence: MatchEvidence) -> float:
+    """The confidence of a placement as if it had no rival: how well it fits at all."""
+    alone = dataclasses.replace(evidence, rival_score=0.0, rival=BeamAgreement.nothing())
+    return confidence(alone.features())
+
+
+def _candidate(
+    place: Place,
+    own: FloatArray,
+    unit: MapUnit,
+    crop: FloatArray,
+    match: MatchResult,
+    rank: int,
+    config: MergeConfig,
+) -> LinkCandidate:
+    """The link of a verified placement of the place in the target map: to the target keyframe
+    nearest the placed centre, with the information of the match."""
+    T_row = match.T_1_2
+    T_target_centre = se2.matrix_from_pose(float(T_row[1]), float(T_row[2]), float(T_row[0]))
+    spot = T_target_centre[:2, 2]
+    row = int(np.argmin(np.hypot(*(unit.poses[:, :2] - spot).T)))
+    T_target_keyframe = se2.matrix_from_pose(*unit.poses[row])
+    T_keyframe_centre = se2.invert(T_target_keyframe) @ T_target_centre
+    x, y, theta = se2.pose_from_matrix(T_keyframe_centre)
+    information = match_information(
+        se2.transform_segments(se2.invert(T_target_keyframe), crop),
+        own,
+        np.array([theta, x, y]),
+        config.integrate,
+        config.link_sigma,
+        (config.link_sigma, config.link_angle_sigma),
+        (10.0, 1.0),
+    )
+    return LinkCandidate(
+        source=place.unit,
+        centre=place.centre,
+        target=unit.key,
+        keyframe=int(unit.index[row]),
+        T_keyframe_centre=(x, y, theta),
+        T_target_centre=se2.pose_from_matrix(T_target_centre),
+        confidence=float(match.confidence),
+        fit=_fit(match.evidence) if match.evidence is not None else 0.0,
+        value=float(match.value),
+        rank=rank,
+        information=information,
+    )
+
+
+def _differs(row: FloatArray, other: FloatArray) -> bool:
+    """Are two (theta, tx, ty) placements different answers?"""
+    turn = abs(float(se2.wrap_angle(row[0] - other[0])))
+    return bool(float(np.hypot(row[1] - other[1], row[2] - other[2])) > _DISTINCT_SHIFT) or (
+        turn > _DISTINCT_TURN
+    )
+
+
+def _distinct(peaks: FloatArray, count: int) -> list[int]:
+    """Indices of the best ``count`` mutually distinct placements (peaks sorted best first)."""
+    kept: list[int] = []
+    for k in range(len(peaks)):
+        if len(kept) == count:
+            break
+        if all(_differs(peaks[k], peaks[j]) for j in kept):
+            kept.append(k)
+    return kept
+
+
+def _close_to_any(points: FloatArray, centres: FloatArray, radius: float) -> NDArray[np.bool_]:
+    """Which points lie within ``radius`` of any centre."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=bool)
+    gap = np.hypot(
+        points[:, None, 0] - centres[None, :, 0], points[:, None, 1] - centres[None, :, 1]
+    )
+    return np.asarray((gap <= radius).any(axis=1))
+
+
+def _near(segments: FloatArray, centres: FloatArray, radius: float) -> FloatArray:
+    """Segments passing within ``radius`` of any centre."""
+    if len(segments) == 0:
+        return segments.reshape(0, 4)
+    distance = point_segment_distance(
+        centres[None, :, 0],
+        centres[None, :, 1],
+        segments[:, None, 0],
+        segments[:, None, 1],
+        segments[:, None, 2],
+        segments[:, None, 3],
+    )
+    return np.asarray(segments[(distance <= radius).any(axis=1)])
+
+
+def timed_match(
+    place: Place, target: Target, config: MergeConfig, drawing: Drawing | None = None
+) -> tuple[list[LinkCandidate], float]:
+    """:func:`match_place` and the seconds it took."""
+    started = time.perf_counter()
+    found = match_place(place, target, config, drawing)
+    return found, time.perf_counter() - started
