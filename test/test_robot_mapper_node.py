@@ -334,6 +334,8 @@ def test_an_error_inside_the_local_mapper_is_logged_and_the_map_kept(
     h = fast_map_harness
     send_drive(h)
     local = h.mapper.mapper
+    # The back end works on its own thread: the state compared is the one it leaves.
+    assert spin_until(h.executor, lambda: local.idle, timeout=30.0)
     before = local.keyframes()
     state = (local.version, local.pose, local.stamp, local.scans_accepted)
 

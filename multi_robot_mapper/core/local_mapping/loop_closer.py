@@ -63,12 +63,12 @@ T = TypeVar("T")
 # lost near, and T_keyframe_piece by its best match.
 LostFrom = tuple[int, Pose]
 
+# Pieces followed back along the chain of losses when joining (a piece lost from a piece
+# lost from a third ...).
+_CHAIN = 3
 # Keyframes per window matched for loop closures and joins: the keyframe and its nearest
 # neighbours in time (the confidence is calibrated on windows of three scans).
 _WINDOW = 3
-# Heading allowance of the join gate around the front end's guess: this much, plus two
-# keyframe turns (the robot turned while lost), plus loop_radius_growth / 10 rad per metre.
-_GATE_ANGLE = 0.2
 # The loop-closure gate (chi-square, 3 degrees of freedom, 99.9 %) on the graph's marginal
 # covariances inflated this many times (drift the graph does not model: biased matches).
 _CHI2_3DOF_999 = 16.27
@@ -423,67 +423,91 @@ class LoopCloser:
         """Join the new keyframe's piece to the piece the robot was lost from.
 
         The front end's best match of the piece's first scan (not confident enough to
-        integrate) is a guess of where the piece lies in the other piece's frame. Each new
-        keyframe of the piece is matched, with no guess, with the other piece's keyframes near
-        where the guess puts it. A match of another scan pair that **agrees with the guess**,
-        both more likely right than wrong (``LIKELY``), corroborates it; otherwise a match
-        needs ``loop_confidence`` and must lie within a search region around the guess that
-        allows for a wrong guess (the robot does not jump: its last placed scan was near).
-        The younger piece then moves into the older one's frame."""
-        config = self.config
+        integrate) is a guess of where the piece lies in the other piece's frame. While the
+        piece is young, the window of its first keyframe (growing with the keyframes after it)
+        is matched with the window of the keyframe the robot was lost near: the end of one
+        stretch against the start of the next, the most overlap there is. Then each new
+        keyframe's window is matched with the other piece's keyframes near where the guess
+        puts it. Matches are searched with no guess (the guess one more hypothesis), so a
+        guess that fits a symmetric corridor turned round as well as the right way has a
+        rival. A confident match that **agrees with the guess** joins (two matches of
+        different scans found the same placement); one that does not waits, within a region
+        around the guess (the robot does not jump: its last placed scan was near), for a
+        second one from another keyframe that puts the piece at the same place (any heading:
+        a guess that was not confident may be turned round). The younger piece then moves
+        into the older one's frame."""
         piece = self.keyframes.piece(index)
-        lost = self._lost_from.get(piece)
-        if lost is None:
-            return []
-        keyframe, T_keyframe_piece = lost
+        # The pieces the robot was lost from, one after the other (a piece of one scan, lost
+        # again at once, never grows to join by itself): each with the guess of this piece's
+        # frame in its frame, composed along the chain.
+        chain: list[tuple[int, Pose, int]] = []  # (lost-from keyframe, T_other_piece, depth)
+        T_piece_here: Pose = (0.0, 0.0, 0.0)
+        current = piece
+        while current in self._lost_from and len(chain) < _CHAIN:
+            keyframe, T_keyframe_current = self._lost_from[current]
+            other = self.keyframes.piece(keyframe)
+            if other == piece:
+                break  # joined already (through another keyframe)
+            T_other_current = se2.compose(self.keyframes.pose(keyframe), T_keyframe_current)
+            T_piece_here = se2.compose(T_other_current, T_piece_here)
+            chain.append((keyframe, T_piece_here, len(chain)))
+            current = other
+        for keyframe, T_other_piece, depth in chain:
+            joined = self._join_through_guess(index, piece, keyframe, T_other_piece, depth)
+            if joined:
+                return joined
+        return []
+
+    def _join_through_guess(
+        self, index: int, piece: int, keyframe: int, T_other_piece: Pose, depth: int
+    ) -> list[tuple[int, int, FloatArray]]:
+        """One attempt of :meth:`_joins` against the piece of ``keyframe`` (the robot was lost
+        near it), where the guess puts this piece at ``T_other_piece``."""
+        config = self.config
         other_piece = self.keyframes.piece(keyframe)
-        if other_piece == piece:  # joined already (through another keyframe)
-            return []
-        # The new keyframe in the other piece's frame, as guessed.
-        T_other_piece = se2.compose(self.keyframes.pose(keyframe), T_keyframe_piece)
-        guess = se2.compose(T_other_piece, self.keyframes.pose(index))
         path = self._path_since_closure.get(piece, 0.0)
         radius = config.loop_radius + 2.0 * config.keyframe_distance
         radius += config.loop_radius_growth * path
-        turn = _GATE_ANGLE + 2.0 * config.keyframe_angle + config.loop_radius_growth / 10.0 * path
-        candidates = self.keyframes.near(guess, other_piece, radius)
-        for other in candidates[: config.loop_candidates]:
-            first = int(other)
-            if (first, index) == (keyframe, piece):
-                continue  # the guess itself
-            predicted = se2.between(self.keyframes.pose(first), guess)
-            # The windows matched with no guess (the guess one more hypothesis): a search
-            # weighs every placement, so a guess that fits a symmetric corridor turned round
-            # as well as it fits the right way has a rival. A confident match agreeing with
-            # the guess joins (two matches of different scans found the same placement); one
-            # that does not waits, within a region around the guess (the robot does not
-            # jump), for a second one from another keyframe that puts the piece at the same
-            # place.
-            result = self._match_windows(first, index, predicted)
+        pairs: list[tuple[int, int]] = []  # (keyframe of this piece, of the other)
+        young = len(self.keyframes.members(piece))
+        if 1 < young <= _WINDOW and depth == 0:
+            # Where the robot was lost: near the keyframe it was last placed by, whatever the
+            # guess's heading (a guess that is not confident may be turned round).
+            lost_at = self.keyframes.pose(keyframe)
+            around = self.keyframes.near(lost_at, other_piece, config.loop_radius)
+            pairs += [(piece, int(k)) for k in around[: config.loop_candidates]]
+        guess = se2.compose(T_other_piece, self.keyframes.pose(index))
+        near = self.keyframes.near(guess, other_piece, radius)
+        pairs += [(index, int(k)) for k in near[: config.loop_candidates] if index != piece]
+        for mine, first in pairs:
+            predicted = se2.between(
+                self.keyframes.pose(first),
+                se2.compose(T_other_piece, self.keyframes.pose(mine)),
+            )
+            result = self._match_windows(first, mine, predicted)
             found = _pose(result.T_1_2)
             if (
                 _close(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE)
                 and result.confidence >= config.integrate_confidence
             ):
-                return [self._join(first, index, found, result.confidence)]
+                return [self._join(first, mine, found, result.confidence)]
             if result.confidence < config.loop_confidence:
                 self._refuse("confidence (join)")
                 continue
-            if not _close(found, predicted, radius, turn):
+            if not _close(found, predicted, radius, np.pi):
                 self._refuse("far from the guess (join)")
                 continue
-            T_other_piece = se2.compose(
+            T_found = se2.compose(
                 se2.compose(self.keyframes.pose(first), found),
-                se2.between(self.keyframes.pose(index), (0.0, 0.0, 0.0)),
+                se2.between(self.keyframes.pose(mine), (0.0, 0.0, 0.0)),
             )
             earlier = self._join_candidates.setdefault(piece, [])
             if not any(
-                k != index and _close(T, T_other_piece, RIGHT_DISTANCE, RIGHT_ANGLE)
-                for k, T in earlier
+                k != mine and _close(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE) for k, T in earlier
             ):
-                earlier.append((index, T_other_piece))
+                earlier.append((mine, T_found))
                 continue
-            return [self._join(first, index, found, result.confidence)]
+            return [self._join(first, mine, found, result.confidence)]
         return []
 
     def _join(

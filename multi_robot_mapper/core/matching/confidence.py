@@ -121,14 +121,14 @@ class MatchEvidence:
 
 
 def _beam_margin(best: BeamAgreement, rival: BeamAgreement) -> float:
-    """How much better the beams explain the best placement than its best rival: (confirmed
-    - seen through) of the best minus that of the rival, per metre of returns, within +-1. A
-    slide along a bare corridor, or a room that fits turned round, explains them as well: a
-    tie however much agrees."""
-    if best.total <= 0.0:
+    """How much better the beams judge the best placement than its best rival: the share of
+    judged returns they confirm (:func:`_agreement`) for the best, less that for the rival
+    (0 without a rival). Returns the beams cannot judge (occluded, out of range) are no
+    evidence either way: a slide along a bare corridor, or a room that fits turned round,
+    is a tie however much agrees."""
+    if rival.total <= 0.0:
         return 0.0
-    margin = (best.confirmed - best.seen_through) - (rival.confirmed - rival.seen_through)
-    return float(np.clip(margin / best.total, -1.0, 1.0))
+    return _agreement(best) - _agreement(rival)
 
 
 def _agreement(agreement: BeamAgreement) -> float:

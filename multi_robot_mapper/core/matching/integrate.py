@@ -46,6 +46,10 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
+# How far (m) the best placement is slid either way along its least constrained direction to
+# probe for a rival: twice the correctness tolerance, so that the probe is a wrong answer.
+SLIDE_PROBE = 2.0 * RIGHT_DISTANCE
+
 # A refined slid hypothesis replaces the slid one unless its net score is this much lower (m):
 # the slide grid is coarse, the refinement is the precise answer.
 _POLISH_TOLERANCE = 0.25
@@ -182,7 +186,7 @@ def integrate(
     through, _ = seen_through_many(segments1, segments2, best_T[None, :], views, config)
     best_score = best_value - config.free_space_weight * float(through[0])
     fraction = best_score / shorter
-    best_support = cross_support(segments1, segments2, best_T, config)
+    best_support, slide = _support_and_slide(segments1, segments2, best_T, config)
     valid = (
         best_score >= config.min_match_value
         and fraction >= config.min_match_fraction
@@ -202,6 +206,7 @@ def integrate(
         rival_T=refined[rivals][int(np.argmax(scores[rivals]))] if rivals.any() else None,
         support=best_support,
         fraction=fraction,
+        slide=slide,
     )
     probability = confidence(evidence.features())
     clock.lap("confidence")
@@ -231,6 +236,16 @@ class _StageClock:
         self._last = now
 
 
+def _support_and_slide(
+    segments1: FloatArray, segments2: FloatArray, T_1_2: FloatArray, config: IntegrateConfig
+) -> tuple[float, FloatArray]:
+    """The cross support of ``T_1_2`` and its least constrained direction (a unit vector in
+    S1's frame): along a corridor, the way the placement could slide."""
+    scores = score_pairs(segments1, segments2, T_1_2.reshape(1, 3), config)
+    support, direction = information(segments1, scores, 1)
+    return float(support[0]), np.asarray(direction[0], dtype=np.float64)
+
+
 def _distinct_from(transforms: FloatArray, T: FloatArray) -> BoolArray:
     """Rows farther from ``T`` (theta, tx, ty) than the correctness tolerance: rival answers."""
     turn = np.abs(se2.wrap_angle(transforms[:, 0] - T[0]))
@@ -250,11 +265,15 @@ def match_evidence(
     support: float,
     fraction: float,
     rival_T: FloatArray | None = None,
+    slide: FloatArray | None = None,
 ) -> MatchEvidence:
     """The evidence for the placement ``T_1_2`` (theta, tx, ty) of S2 in S1: each side's
     returns (points along its segments when its views are unknown) judged by the other side's
     beams, with the score, the rival's, the fit's spread, and how the beams judge the best
-    rival placement ``rival_T`` (a slide along a bare corridor explains them as well)."""
+    rival placement: ``rival_T``, or the placement slid by :data:`SLIDE_PROBE` either way
+    along ``slide`` (the least constrained direction) where the beams like that better. A
+    slide along a bare corridor explains the beams as well as the best placement, and the
+    hypotheses need not contain it (they come from where segments end)."""
     cap = config.view_point_length
     sides = [viewpoints_of(v) for v in views]
     returns = [
@@ -279,11 +298,22 @@ def match_evidence(
         ]
 
     judged = judge(T_1_2)
+    rivals = [] if rival_T is None else [np.asarray(rival_T, dtype=np.float64)]
+    if slide is not None:
+        step = SLIDE_PROBE * np.asarray(slide, dtype=np.float64)
+        rivals += [T_1_2 + np.array([0.0, sign * step[0], sign * step[1]]) for sign in (-1, 1)]
     rival = BeamAgreement.nothing()
-    if rival_T is not None:
-        rival_judged = judge(rival_T)
-        rival = rival_judged[0] + rival_judged[1]
+    for row in rivals:
+        pair = judge(row)
+        candidate = pair[0] + pair[1]
+        if rival.total <= 0.0 or _explained(candidate) > _explained(rival):
+            rival = candidate
     return MatchEvidence(judged[0], judged[1], score, rival_score, support, fraction, rival)
+
+
+def _explained(agreement: BeamAgreement) -> float:
+    """Metres of returns the beams confirm, less those they see through."""
+    return agreement.confirmed - agreement.seen_through
 
 
 def _segment_returns(segments: FloatArray, spacing: float) -> tuple[FloatArray, FloatArray]:
