@@ -106,14 +106,14 @@ def test_simulate_replay_pivot_evaluate_merges_the_robots(capsys, tmp_path: Path
     assert metrics["robots_merged"] == metrics["robots_total"] == 2
     assert metrics["ate_rmse_m"] < 0.15
     assert metrics["map_precision"] > 0.9
-    # The merging parameters come from config/map_merger.yaml and --set merge.*: a validity
+    # The merging parameters come from config/map_merger.yaml and --set merge.*: a link
     # threshold no link can reach leaves the second robot unmerged, reported as such.
     strict = tmp_path / "strict"
     shipped = Path(__file__).resolve().parents[1] / "config" / "map_merger.yaml"
     code, _, err = mrm(
         capsys,
         *("replay", bag, "--out", strict, "--method", "pivot", "--merger-config", shipped),
-        *("--set", "merge.link_min_value=1e6", "--set", "local_mapping.keyframe_distance=0.5"),
+        *("--set", "merge.link_min_wall=1e6", "--set", "local_mapping.keyframe_distance=0.5"),
     )
     assert code == 0, err
     frames = json.loads((strict / "robots.json").read_text())

@@ -8,9 +8,10 @@ front end (scan -> segments), then a placement method. Methods:
 - ``local``: odometry-free local mapping only (:class:`LocalMapper`, one per robot). Every
   robot's trajectory and partial map are in its own map frame and every robot frame is
   reported ``"unmerged"``: no placement between robots is claimed.
-- ``pivot``: ``local``, then the partial maps merged with no pose information
-  (:func:`multi_robot_mapper.core.merging.merge`: INTEGRATE on every pair, valid links only,
-  maximum-value spanning tree); a robot with no valid link stays ``"unmerged"``.
+- ``pivot``: ``local``, then the robots' keyframes merged with no pose information in one
+  graph (:func:`multi_robot_mapper.core.merging.joint.merge_joint`: places of each map
+  searched on the others, consistent links only, every keyframe optimised together); a robot
+  whose map was linked to no other stays ``"unmerged"``.
 - ``ffs``: its own issue; until it exists it raises :class:`MethodNotImplementedError`.
 """
 
@@ -27,6 +28,7 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import ExtractionConfig, SegmentScan, extract_scan
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalMapperConfig
 from multi_robot_mapper.core.merging import MergeConfig, merge
+from multi_robot_mapper.core.merging.joint import merge_joint, place_scans
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
 
 FloatArray = NDArray[np.float64]
@@ -293,7 +295,11 @@ def _run_local(
 
 
 def _merged(local: OfflineMap, config: MergeConfig) -> OfflineMap:
-    """Place the robots of a ``local`` run in one ``map`` frame (the merging stage)."""
+    """Place the robots of a ``local`` run in one ``map`` frame (the merging stage): the joint
+    graph of every robot's keyframes (:func:`merge_joint`, every place matched), or, for maps
+    without keyframes, every map moved as one rigid body (:func:`merge`)."""
+    if local.keyframes:
+        return _merged_joint(local, config)
     started = time.perf_counter()
     maps = {
         robot: local.map_segments[local.segment_robot == index]
@@ -339,4 +345,55 @@ def _merged(local: OfflineMap, config: MergeConfig) -> OfflineMap:
         dict(result.placements),
         stats,
         local.keyframe_poses,
+    )
+
+
+def _merged_joint(local: OfflineMap, config: MergeConfig) -> OfflineMap:
+    """The joint merge of a ``local`` run: every place matched (no time budget), then one more
+    update with nothing changed (what a merger pays per update once its matches are made).
+    A merged robot's trajectory is every scan whose keyframe was merged, placed through its
+    keyframe's optimised pose; an unmerged robot keeps its own frame."""
+    started = time.perf_counter()
+    result = merge_joint(local.keyframes, config, budget=0.0)
+    first_s = time.perf_counter() - started
+    again = time.perf_counter()
+    merge_joint(local.keyframes, config, previous=result, budget=0.0)
+    update_s = time.perf_counter() - again
+    trajectories = {}
+    for robot, own in local.trajectories.items():
+        placed = None
+        if result.placements.get(robot) is not None and robot in local.anchors:
+            placed = place_scans(result, robot, local.anchors[robot])
+        trajectories[robot] = own if placed is None else placed
+    assert result.robots == local.robots
+    stats = dict(local.stats)
+    stats.update(
+        {
+            "method": "pivot",
+            "segments": len(result.segments),
+            "merge_reference": result.reference,
+            "merge_links": [
+                {"a": link.robot_a, "b": link.robot_b, "value": round(link.value, 3)}
+                for link in result.links
+            ],
+            "merge_links_valid": result.stats["links_accepted"],
+            "merge_pairs": len(result.pairs),
+            "merge_s": round(first_s, 4),
+            "merge_update_s": round(update_s, 4),
+            "merge_timings": {k: round(v, 4) for k, v in result.timings.items()},
+            "merge_stats": dict(result.stats),
+            "robots_unmerged": result.unmerged,
+        }
+    )
+    stats["total_s"] = round(float(str(stats["total_s"])) + first_s, 4)
+    return OfflineMap(
+        local.robots,
+        result.segments,
+        np.asarray(result.segment_robot, dtype=np.int64).reshape(-1),
+        trajectories,
+        dict(result.placements),
+        stats,
+        local.keyframe_poses,
+        local.keyframes,
+        local.anchors,
     )

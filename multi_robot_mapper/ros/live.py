@@ -25,6 +25,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
+from multi_robot_mapper.core import se2
 from multi_robot_mapper.io.bags import TimedScan
 from multi_robot_mapper.io.messages import (
     partial_map_contents,
@@ -35,6 +36,7 @@ from multi_robot_mapper.io.messages import (
     stamp_from_seconds,
 )
 from multi_robot_mapper.ros.map_merger import LATCHED_QOS, POSE_QOS
+from multi_robot_mapper.ros.markers import GLOBAL_MAP_NAMESPACE
 
 FloatArray = np.typing.NDArray[np.float64]
 Timeline = Iterable[tuple[float, str, LaserScan]]  # (stamp s, robot, message), by stamp
@@ -137,15 +139,19 @@ class GlobalMapView:
 
 
 def global_map_view(msg: MarkerArray, received_s: float) -> GlobalMapView:
-    """The segments and robot poses a ``global_map`` MarkerArray shows, by robot name (the
-    robot of a line list is the TEXT marker with the same id)."""
+    """The segments and robot poses a ``global_map`` MarkerArray shows, by robot name: its
+    line lists are one per keyframe (namespace ``global_map/<robot>``), each placed in ``map``
+    by its marker pose."""
     shown = [m for m in msg.markers if m.action == Marker.ADD]
     names = {m.id: m.text for m in shown if m.type == Marker.TEXT_VIEW_FACING}
-    segments = {
-        names.get(m.id, f"robot #{m.id}"): segments_from_marker(m)
-        for m in shown
-        if m.type == Marker.LINE_LIST and m.ns == "global_map"
-    }
+    pieces: dict[str, list[FloatArray]] = {}
+    prefix = GLOBAL_MAP_NAMESPACE + "/"
+    for m in shown:
+        if m.type == Marker.LINE_LIST and m.ns.startswith(prefix):
+            T_map_marker = se2.matrix_from_pose(*pose_from_msg(m.pose))
+            placed = se2.transform_segments(T_map_marker, segments_from_marker(m))
+            pieces.setdefault(m.ns[len(prefix) :], []).append(placed)
+    segments = {robot: np.vstack(parts) for robot, parts in pieces.items()}
     poses = {
         names.get(m.id, f"robot #{m.id}"): pose_from_msg(m.pose)
         for m in shown

@@ -88,8 +88,8 @@ from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.markers import (
     MarkerCache,
     MarkerKey,
-    frame_transform,
     frame_matrix,
+    frame_transform,
     global_map_markers,
     newest,
     occupancy_grid_msg,

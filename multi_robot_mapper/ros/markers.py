@@ -88,9 +88,12 @@ MarkerCache = dict[MarkerKey, tuple[bytes, Marker]]
 WHOLE_MAP_ID = -1  # a robot merged without keyframes (a saved map): its segments in one marker
 
 
+GLOBAL_MAP_NAMESPACE = "global_map"
+
+
 def map_namespace(robot: str) -> str:
     """The namespace of a robot's keyframe markers in ``global_map``."""
-    return f"global_map/{robot}"
+    return f"{GLOBAL_MAP_NAMESPACE}/{robot}"
 
 
 def global_map_markers(
@@ -122,7 +125,9 @@ def global_map_markers(
         if keyframes:
             for keyframe, pose, segments in keyframes:
                 markers.append(
-                    _keyframe_marker(namespace, keyframe, pose, segments, header, width, color, cache)
+                    _keyframe_marker(
+                        namespace, keyframe, pose, segments, header, width, color, cache
+                    )
                 )
             continue
         own = result.segments[result.segment_robot == index]
@@ -133,9 +138,7 @@ def global_map_markers(
         if T_map_robot is None and robot not in shown:
             continue
         where = (
-            shown[robot][0]
-            if robot in shown
-            else np.array(se2.pose_from_matrix(T_map_robot))  # type: ignore[arg-type]
+            shown[robot][0] if robot in shown else np.array(se2.pose_from_matrix(T_map_robot))  # type: ignore[arg-type]
         )
         color = ColorRGBA(**dict(zip("rgba", robot_color(index), strict=True)))
         if robot in shown:

@@ -264,8 +264,7 @@ class MergeConfig:
     place_min_length: float = param(
         12.0,
         unit="m",
-        doc="a place with less wall than this is never matched (too little to tell places "
-        "apart)",
+        doc="a place with less wall than this is never matched (too little to tell places apart)",
         minimum=0.0,
     )
     link_hypotheses: int = param(
@@ -283,6 +282,13 @@ class MergeConfig:
         "is not verified (it lies nowhere on the other map)",
         minimum=0.0,
         maximum=1.0,
+    )
+    link_min_wall: float = param(
+        5.0,
+        unit="m",
+        doc="a link candidate (a place found on another robot's map) must match at least this "
+        "length of wall (link_min_value is for whole maps)",
+        minimum=0.0,
     )
     link_confidence: float = param(
         0.9,
@@ -307,6 +313,15 @@ class MergeConfig:
         unit="places",
         doc="a consistent set of links of one pair of maps with no confident link is accepted "
         "when it links at least this many places",
+        minimum=1,
+        maximum=1000,
+    )
+    link_confident_support: int = param(
+        2,
+        unit="places",
+        doc="a consistent set of links of one pair of maps holding a confident link is accepted "
+        "when it links at least this many places: one place that fits well can still be a "
+        "look-alike of another building",
         minimum=1,
         maximum=1000,
     )

@@ -9,8 +9,9 @@ two maps (their own drift). In the manner of pairwise consistency maximisation (
 al. 2018), the largest consistent set (by weight: the sum of the links' confidences) is kept, found by
 growing a clique from each link in turn. It is accepted when
 
-- it holds a *confident* link (``link_confidence``), or links ``link_min_support`` distinct
-  places: an ambiguous link (a corridor that fits at two places, each of low confidence) is
+- it holds a *confident* link (``link_confidence``) and links ``link_confident_support``
+  distinct places (one place that fits well may be a look-alike), or links
+  ``link_min_support`` distinct places: an ambiguous link (a corridor that fits at two places, each of low confidence) is
   accepted when enough of the pair's other places agree with one of its placements (the aces
   corridors), and
 - it is *unique*: it weighs ``link_set_uniqueness`` times as much as the best set of links that
@@ -138,7 +139,9 @@ def _matrices(poses: FloatArray) -> FloatArray:
     return out
 
 
-def heaviest_clique(agree: BoolArray, weights: FloatArray, allowed: BoolArray | None = None) -> list[int]:
+def heaviest_clique(
+    agree: BoolArray, weights: FloatArray, allowed: BoolArray | None = None
+) -> list[int]:
     """A heavy set of mutually agreeing links: grown greedily (heaviest agreeing link first)
     from every link in turn, the heaviest kept. ``allowed`` limits the links used."""
     n = len(weights)
@@ -170,7 +173,7 @@ def consistent_set(
     config: MergeConfig,
 ) -> PairVerdict:
     """The pair's heaviest consistent set of links and whether to accept it (module doc)."""
-    usable = [c for c in candidates if c.fit >= config.link_fit]
+    usable = [c for c in candidates if c.fit >= config.link_fit and c.value >= config.link_min_wall]
     if not usable:
         return PairVerdict(pair, [], 0.0, 0.0, 0, False, "no link fits")
     links = [oriented(c, pair[0]) for c in usable]
@@ -186,7 +189,9 @@ def consistent_set(
     places = len({(c.source, c.centre) for c in members})
     confident = any(c.confidence >= config.link_confidence for c in members)
     reason = ""
-    if not confident and places < config.link_min_support:
+    if confident and places < config.link_confident_support:
+        reason = "too few consistent places"
+    elif not confident and places < config.link_min_support:
         reason = "too few consistent places and no confident link"
     elif weight < config.link_set_uniqueness * rival_weight:
         reason = "ambiguous: a contradicting set of links weighs about as much"
@@ -211,7 +216,9 @@ def cycle_error(
     return float(np.hypot(x, y)), abs(theta), path
 
 
-def closes(chain: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit], config: MergeConfig) -> bool:
+def closes(
+    chain: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit], config: MergeConfig
+) -> bool:
     """Does a cycle of links close within the tolerance (per metre run inside the maps)?"""
     shift, turn, path = cycle_error(chain, units)
     return shift <= RIGHT_DISTANCE + config.link_pair_slack * path and turn <= (
@@ -234,9 +241,7 @@ def accept_pairs(
 ) -> Accepted:
     """Pairs by weight, best first: a pair joining two groups joins them; one inside a group
     must close the cycle through the group's tree (module doc)."""
-    order = sorted(
-        (v for v in verdicts if v.accepted), key=lambda v: (-v.weight, v.pair)
-    )
+    order = sorted((v for v in verdicts if v.accepted), key=lambda v: (-v.weight, v.pair))
     parent: dict[UnitKey, UnitKey] = {key: key for key in units}
 
     def root(key: UnitKey) -> UnitKey:

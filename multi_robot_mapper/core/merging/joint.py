@@ -121,15 +121,23 @@ def merge_joint(
     if chosen is not None and chosen not in robots:
         raise ValueError(f"reference robot {chosen!r} has no map; robots: {', '.join(robots)}")
     units = units_of(keyframes)
-    state = previous.state if previous is not None and isinstance(previous.state, JointState) else None
-    matches, counts = _match_places(units, config, state, config.update_budget if budget is None else budget)
+    state = (
+        previous.state if previous is not None and isinstance(previous.state, JointState) else None
+    )
+    matches, counts = _match_places(
+        units, config, state, config.update_budget if budget is None else budget
+    )
     matched = time.perf_counter()
     verdicts = _verdicts(units, matches, config)
     accepted = accept_pairs(list(verdicts.values()), units, config)
     checked = time.perf_counter()
     previous_reference = None if previous is None else previous.reference
     group, ref_unit = _reference(accepted, units, chosen, previous_reference)
-    warm = previous if previous is not None and ref_unit is not None and previous.reference == ref_unit[0] else None
+    warm = (
+        previous
+        if previous is not None and ref_unit is not None and previous.reference == ref_unit[0]
+        else None
+    )
     solved = _solve(units, group, ref_unit, accepted, config, warm)
     optimised = time.perf_counter()
     result = _result(robots, units, accepted, verdicts, solved, ref_unit, config)
@@ -224,7 +232,9 @@ def _verdicts(
         if source not in units or target not in units:
             continue
         for candidate in record.candidates:
-            if not (_has(units[source], candidate.centre) and _has(units[target], candidate.keyframe)):
+            if not (
+                _has(units[source], candidate.centre) and _has(units[target], candidate.keyframe)
+            ):
                 continue
             pair = (min(source, target), max(source, target))
             by_pair.setdefault(pair, []).append(candidate)
@@ -247,7 +257,8 @@ def _reference(
 ) -> tuple[list[UnitKey], UnitKey | None]:
     """The group of maps placed in ``map`` and its reference map: the chosen robot's (its
     group), else the previous reference's while its group is as large as any, else the
-    largest group; within it a robot's main frame (piece 0), longest first."""
+    largest group (with no two robots linked, the first robot's main map by name); within it
+    a robot's main frame (piece 0), longest first."""
     if not accepted.groups:
         return [], None
 
@@ -262,6 +273,11 @@ def _reference(
         holding = [g for g in accepted.groups if (wanted, 0) in g]
         if holding and (must or robots_in(holding[0]) == size):
             return holding[0], (wanted, 0)
+    if size == 1:
+        # No two robots linked: the first robot by name (its main map) is ``map``, whatever
+        # the lengths of the maps so far, so that ``map`` does not jump as they grow.
+        first = (sorted(key for key in units if key[1] == 0) or sorted(units))[0]
+        return next(g for g in accepted.groups if first in g), first
     mains = [key for key in group if key[1] == 0]
     pool = mains or group
     return group, max(pool, key=lambda key: (units[key].length, [-ord(c) for c in key[0]]))
@@ -336,11 +352,11 @@ def _solve(
     # ``map`` is the reference map's frame exactly: its fitted frame is the identity.
     T_fix = se2.invert(frames[ref_unit])
     for key in order:
-        frames[key] = T_fix @ frames[key]
-        poses[key] = np.array([se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in poses[key]])
-    return _Solution(
-        poses, frames, order, accepted_links, total, len(graph.edges), iterations
-    )
+        frames[key] = np.eye(3) if key == ref_unit else T_fix @ frames[key]
+        poses[key] = np.array(
+            [se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in poses[key]]
+        )
+    return _Solution(poses, frames, order, accepted_links, total, len(graph.edges), iterations)
 
 
 def _initial(unit: MapUnit, rigid: FloatArray, warm: MergeResult | None) -> FloatArray:
@@ -558,10 +574,7 @@ def place_scans(
     merged = index[row] == keyframe
     poses = result.keyframe_poses[robot][row[merged]]
     placed = np.array(
-        [
-            se2.compose(p, s)
-            for p, s in zip(poses, np.asarray(T_keyframe_scan)[merged], strict=True)
-        ]
+        [se2.compose(p, s) for p, s in zip(poses, np.asarray(T_keyframe_scan)[merged], strict=True)]
     ).reshape(-1, 3)
     chosen = np.asarray(stamps)[merged]
     order = np.argsort(chosen, kind="stable")

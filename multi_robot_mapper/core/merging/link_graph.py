@@ -87,8 +87,7 @@ class MergeResult:
         order = np.argsort(rows, kind="stable")
         bounds = np.searchsorted(rows[order], np.arange(len(index) + 1))
         return [
-            (int(k), poses[r], local[order[bounds[r] : bounds[r + 1]]])
-            for r, k in enumerate(index)
+            (int(k), poses[r], local[order[bounds[r] : bounds[r + 1]]]) for r, k in enumerate(index)
         ]
 
 

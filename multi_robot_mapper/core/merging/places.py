@@ -184,7 +184,10 @@ def places_of(unit: MapUnit, config: MergeConfig) -> list[Place]:
         rows = np.flatnonzero(near)
         rows = rows[thin(unit.poses[rows], config.view_spacing)]
         view_poses = np.array(
-            [se2.pose_from_matrix(T_centre_unit @ se2.matrix_from_pose(*unit.poses[r])) for r in rows]
+            [
+                se2.pose_from_matrix(T_centre_unit @ se2.matrix_from_pose(*unit.poses[r]))
+                for r in rows
+            ]
         ).reshape(-1, 3)
         digest = hashlib.sha1(
             np.round(segments, 3).tobytes() + np.round(view_poses, 3).tobytes()
