@@ -34,10 +34,8 @@ from multi_robot_mapper.core.simulation import (
     SIM_START_S,
     LaserModel,
     SimulatedRobot,
-    arc,
     drive_path,
     office_world,
-    polygon,
     simulate_robots,
     simulate_scan,
 )
@@ -69,22 +67,15 @@ TIME_LIMIT = 45.0  # s from the first scan until every office robot is merged
 
 
 def stranger_run(duration: float, seed: int) -> SimulatedRobot:
-    """A drive through another building: a slanted hall with a round end, a pillar, crates.
+    """A drive through another building (test_merging's ``stranger_walls``).
 
     Not the built-in ``rooms`` or ``corridors`` worlds: those are drawn on the same grid of
     right angles as the office, where segment overlap alone links look-alike places and only
     the free-space test separates them (test_merging's look-alike test covers that case).
     """
-    walls = np.vstack(
-        (
-            polygon([(0.0, 0.0), (9.0, -2.0), (14.0, 3.0)], closed=False),
-            arc((11.0, 7.0), 5.0, -0.93, 2.2, pieces=20),
-            polygon([(8.0, 11.2), (1.5, 9.0), (-1.0, 4.5), (0.0, 0.0)], closed=False),
-            arc((6.0, 4.0), 0.5, 0.0, 2 * np.pi, pieces=10),
-            polygon([(2.0, 2.0), (3.2, 1.4), (3.7, 2.4), (2.5, 3.0)]),
-            polygon([(9.0, 6.0), (10.5, 7.1), (9.8, 8.0), (8.3, 6.9)]),
-        )
-    )
+    from test_merging import stranger_walls
+
+    walls = stranger_walls()
     laser = LaserModel()
     route = np.array([(2.5, 5.5), (5.0, 6.5), (8.0, 5.0), (11.0, 3.5)])
     poses = drive_path(route, 0.8, laser.rate, duration)
@@ -286,7 +277,8 @@ def test_the_global_map_shows_one_marker_per_keyframe_poses_and_names(outcome: O
     for name in OFFICE_ROBOTS:
         mine = [m for m in lines if m.ns == f"global_map/{name}"]
         assert sorted(m.id for m in mine) == result.keyframe_index[name].tolist()
-        poses = dict(zip(result.keyframe_index[name].tolist(), result.keyframe_poses[name]))
+        index = result.keyframe_index[name].tolist()
+        poses = dict(zip(index, result.keyframe_poses[name], strict=True))
         for marker in mine:
             np.testing.assert_allclose(pose_from_msg(marker.pose), poses[marker.id], atol=1e-6)
     segments = np.vstack(

@@ -157,15 +157,14 @@ def clip(segments: np.ndarray, box: tuple[float, float, float, float]) -> np.nda
 OFFICE = WORLDS["office"]()
 
 
-@functools.cache
-def stranger_map() -> np.ndarray:
-    """A partial map of another building: a slanted hall with a round end, a pillar, crates.
+def stranger_walls() -> np.ndarray:
+    """Another building: a slanted hall with a round end, a pillar, crates.
 
     Not of the office's grid of right angles: two unrelated rectilinear buildings do look
     alike to segment overlap, which no threshold on it can tell; that case needs the robots'
     viewpoints (the look-alike test below).
     """
-    walls = np.vstack(
+    return np.vstack(
         (
             polygon([(0.0, 0.0), (9.0, -2.0), (14.0, 3.0)], closed=False),
             arc((11.0, 7.0), 5.0, -0.93, 2.2, pieces=20),
@@ -175,8 +174,13 @@ def stranger_map() -> np.ndarray:
             polygon([(9.0, 6.0), (10.5, 7.1), (9.8, 8.0), (8.3, 6.9)]),
         )
     )
+
+
+@functools.cache
+def stranger_map() -> np.ndarray:
+    """A partial map of the other building (:func:`stranger_walls`)."""
     poses = np.array([[3.0, 5.0, 0.2], [6.0, 6.5, 1.0], [9.0, 3.0, 2.5], [4.0, 7.5, -2.0]])
-    return fused_map(walls, poses, np.random.default_rng(9))
+    return fused_map(stranger_walls(), poses, np.random.default_rng(9))
 
 
 # --- Unknown order -------------------------------------------------------------------------

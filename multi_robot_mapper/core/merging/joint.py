@@ -201,8 +201,8 @@ def _match_places(
     computed = 0
     drawings: dict[str, object] = {}
     for _, _, _, key, place in work:
-        if budget and time.perf_counter() - started >= budget:
-            break
+        if budget and computed and time.perf_counter() - started >= budget:
+            break  # out of time (after one match at least: every update makes progress)
         target = _target(units[key[2]], config)
         drawing = drawings.get(place.digest)
         if drawing is None:

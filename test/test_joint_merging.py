@@ -1,0 +1,321 @@
+"""The joint merger (issue 13) with known answers: robots' keyframes in one graph.
+
+Keyframes are built the way a robot's ``partial_map`` carries them: simulated scans at the true
+laser poses along a route, fused, each fused segment owned by the keyframe whose scan brought
+it and stored in that keyframe's frame; each robot's keyframe poses are then expressed in a map
+frame at a random pose, so every true ``T_map_robotmap`` (and every keyframe's true pose in
+``map``) is known. The link-level rules (pairwise consistency, cycles) are checked on links
+made by hand from known poses.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+from test_merging import LASER, random_frames, stranger_walls
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.fusion import fuse
+from multi_robot_mapper.core.local_mapping import Keyframe
+from multi_robot_mapper.core.matching import IntegrateConfig
+from multi_robot_mapper.core.merging import MergeConfig, MergeResult
+from multi_robot_mapper.core.merging.consistency import (
+    PairVerdict,
+    accept_pairs,
+    consistent_set,
+)
+from multi_robot_mapper.core.merging.joint import merge_joint
+from multi_robot_mapper.core.merging.place_links import LinkCandidate
+from multi_robot_mapper.core.merging.places import MapUnit, units_of
+from multi_robot_mapper.core.simulation import (
+    ROUTES,
+    WORLDS,
+    drive_path,
+    plan_paths,
+    simulate_scan,
+)
+
+CONFIG = MergeConfig()
+DISTANCE = 40.0  # m driven per robot
+TOLERANCE_M, TOLERANCE_RAD = 0.10, np.radians(1.0)
+
+
+def keyframes_along(walls: np.ndarray, poses: np.ndarray, seed: int) -> list[Keyframe]:
+    """Keyframes at ``poses`` (world frame; a robot whose map frame is the world): each pose's
+    scan fused into the map, each fused segment owned by one keyframe, in its frame."""
+    rng = np.random.default_rng(seed)
+    segments, owner = np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
+    for k, pose in enumerate(poses):
+        data = simulate_scan(walls, (pose[0], pose[1], pose[2]), LASER, rng)
+        found = extract_scan(data, ExtractionConfig())[0].segments
+        placed = se2.transform_segments(se2.matrix_from_pose(*pose), found)
+        own = np.full(len(placed), k, dtype=np.int64)
+        segments, owner = fuse(segments, owner, placed, own, IntegrateConfig(), 0.02)
+    return [
+        Keyframe(
+            k,
+            float(k),
+            np.asarray(pose, dtype=np.float64),
+            se2.transform_segments(
+                se2.invert(se2.matrix_from_pose(*pose)), segments[owner == k]
+            ),
+        )
+        for k, pose in enumerate(poses)
+    ]
+
+
+def moved(keyframes: list[Keyframe], T_world_robotmap: np.ndarray) -> list[Keyframe]:
+    """The keyframes with their poses in a map frame at ``T_world_robotmap``."""
+    T = se2.invert(T_world_robotmap)
+    return [
+        Keyframe(
+            kf.index,
+            kf.stamp,
+            np.array(se2.pose_from_matrix(T @ se2.matrix_from_pose(*kf.T_robotmap_keyframe))),
+            kf.segments,
+        )
+        for kf in keyframes
+    ]
+
+
+@functools.cache
+def drives(world: str, robots: int) -> tuple[tuple[np.ndarray, ...], tuple[list[Keyframe], ...]]:
+    """(laser poses, keyframes), world frame, of robots driving overlapping stretches of the
+    world's route (neighbours share 30 % of their stretch), a keyframe every 0.8 m."""
+    paths = plan_paths(ROUTES[world], robots, DISTANCE, overlap=0.3)
+    poses = tuple(drive_path(w, 0.8, 1.0, DISTANCE / 0.8) for w in paths)
+    walls = WORLDS[world]()
+    return poses, tuple(keyframes_along(walls, p, seed=k) for k, p in enumerate(poses))
+
+
+@functools.cache
+def stranger_keyframes() -> list[Keyframe]:
+    """Keyframes of a drive through another building (test_merging's ``stranger_walls``)."""
+    route = np.array([(2.5, 5.5), (5.0, 6.5), (8.0, 5.0), (11.0, 3.5)])
+    return keyframes_along(stranger_walls(), drive_path(route, 0.8, 1.0, 12.0), seed=7)
+
+
+def assert_at_truth(
+    result: MergeResult, frames: dict[str, np.ndarray], world: dict[str, list[Keyframe]]
+) -> None:
+    """Every robot of ``frames`` placed where the truth puts it, relative to the reference;
+    every one of its merged keyframes too (``world``: its keyframes in the world frame)."""
+    assert result.reference is not None
+    T_world_map = frames[result.reference]
+    for name, T_world_robot in frames.items():
+        got = result.placements[name]
+        assert got is not None, name
+        want = se2.pose_from_matrix(se2.invert(T_world_map) @ T_world_robot)
+        assert np.hypot(got[0] - want[0], got[1] - want[1]) < TOLERANCE_M, (name, got, want)
+        assert abs(float(se2.wrap_angle(got[2] - want[2]))) < TOLERANCE_RAD, name
+        truth = np.array(
+            [
+                se2.pose_from_matrix(
+                    se2.invert(T_world_map) @ se2.matrix_from_pose(*kf.T_robotmap_keyframe)
+                )
+                for kf in world[name]
+            ]
+        )
+        index = result.keyframe_index[name]
+        assert index.tolist() == [kf.index for kf in world[name]]
+        poses = result.keyframe_poses[name]
+        assert np.hypot(*(poses[:, :2] - truth[:, :2]).T).max() < 2 * TOLERANCE_M, name
+
+
+def merged(
+    world: dict[str, list[Keyframe]], seed: int, **settings: object
+) -> tuple[MergeResult, dict[str, np.ndarray]]:
+    """The robots' keyframes (world frame) moved into map frames anywhere and merged (every
+    place matched); their true ``T_world_robotmap``."""
+    names = sorted(world)
+    frames = dict(zip(names, random_frames(len(names), seed=seed), strict=True))
+    keyframes = {name: moved(world[name], frames[name]) for name in names}
+    return merge_joint(keyframes, MergeConfig(**settings), budget=0.0), frames  # type: ignore[arg-type]
+
+
+# --- End to end on simulated worlds --------------------------------------------------------
+
+
+def test_a_robot_whose_map_never_overlaps_stays_unmerged() -> None:
+    _, office = drives("office", 3)
+    world = {"r1": office[0], "r2": office[1], "r3": office[2], "stranger": stranger_keyframes()}
+    result, frames = merged(world, seed=2)
+    assert result.placements["stranger"] is None
+    assert result.unmerged == ["stranger"]
+    assert "stranger" not in result.keyframe_poses
+    assert not any("stranger" in (link.robot_a, link.robot_b) for link in result.links)
+    assert 3 not in set(result.segment_robot.tolist())  # its segments are not in the map
+    office_frames = {name: frames[name] for name in ("r1", "r2", "r3")}
+    assert_at_truth(result, office_frames, world)
+    assert result.stats["maps_merged"] == 3 and result.stats["matches_pending"] == 0
+
+
+def test_a_look_alike_building_is_refused() -> None:
+    # The corridors world is drawn on the office's grid of right angles: its places fit
+    # office places (some with a confident link), but no two of them agree on one placement.
+    _, office = drives("office", 3)
+    _, corridors = drives("corridors", 2)
+    world = {"r1": office[0], "r2": office[1], "r3": office[2], "lookalike": corridors[1]}
+    result, frames = merged(world, seed=4)
+    assert result.unmerged == ["lookalike"]
+    refused = [v for pair, v in result.verdicts.items() if "lookalike" in {k[0] for k in pair}]  # type: ignore[union-attr]
+    assert refused and not any(v.accepted for v in refused)  # type: ignore[attr-defined]
+    assert any(v.links for v in refused)  # type: ignore[attr-defined]  # it did fit somewhere
+    assert_at_truth(result, {n: frames[n] for n in ("r1", "r2", "r3")}, world)
+
+
+def test_a_corridor_is_merged_through_a_consistent_set_of_links() -> None:
+    _, corridors = drives("corridors", 2)
+    world = {"a": corridors[0], "b": corridors[1]}
+    result, frames = merged(world, seed=6)
+    assert result.unmerged == []
+    assert_at_truth(result, frames, world)
+    (verdict,) = [v for v in result.verdicts.values() if v.accepted]  # type: ignore[attr-defined]
+    assert verdict.places >= CONFIG.link_confident_support
+    # Every accepted link is right: its two keyframes are where the truth puts them.
+    for link in verdict.links:
+        source = world[link.source[0]][link.centre].T_robotmap_keyframe
+        target = world[link.target[0]][link.keyframe].T_robotmap_keyframe
+        want = se2.between(target, source)
+        got = link.T_keyframe_centre
+        assert np.hypot(got[0] - want[0], got[1] - want[1]) < 0.3
+        assert abs(float(se2.wrap_angle(got[2] - want[2]))) < np.radians(5.0)
+    # The next update with nothing changed matches nothing again and places the same.
+    keyframes = {n: moved(world[n], frames[n]) for n in world}
+    again = merge_joint(keyframes, CONFIG, previous=result, budget=0.0)
+    assert again.stats["matches_computed"] == 0
+    for name in world:
+        np.testing.assert_allclose(again.placements[name], result.placements[name], atol=1e-6)  # type: ignore[arg-type]
+
+
+def test_a_time_budget_leaves_places_for_the_next_update() -> None:
+    _, corridors = drives("corridors", 2)
+    world = {"a": corridors[0], "b": corridors[1]}
+    frames = dict(zip(world, random_frames(2, seed=6), strict=True))
+    keyframes = {n: moved(world[n], frames[n]) for n in world}
+    first = merge_joint(keyframes, CONFIG, budget=1e-9)  # one place match, then out of time
+    assert first.stats["matches_computed"] == 1 and first.stats["matches_pending"] > 0
+    result = first
+    for _ in range(first.stats["matches_pending"] + 1):
+        if result.stats["matches_pending"] == 0:
+            break
+        result = merge_joint(keyframes, CONFIG, previous=result, budget=1e-9)
+    assert result.stats["matches_pending"] == 0
+    everything = merge_joint(keyframes, CONFIG, budget=0.0)
+    for name in world:
+        np.testing.assert_allclose(result.placements[name], everything.placements[name], atol=1e-3)  # type: ignore[arg-type]
+
+
+# --- Links made by hand from known poses -----------------------------------------------------
+
+
+def line_units(names: list[str], frames: list[np.ndarray]) -> dict[str, list[Keyframe]]:
+    """Robots driving the same straight corridor (world x axis, keyframes every metre),
+    each robot's keyframe poses in its map frame at ``frames[i]`` (T_world_robotmap)."""
+    wall = np.array([[-0.5, 1.0, 0.5, 1.0], [-0.5, -1.0, 0.5, -1.0]])
+    world = [Keyframe(k, float(k), np.array([float(k), 0.0, 0.0]), wall) for k in range(20)]
+    return {name: moved(world, T) for name, T in zip(names, frames, strict=True)}
+
+
+def link(
+    units: dict[tuple[str, int], MapUnit],
+    frames: dict[str, np.ndarray],
+    source: str,
+    centre: int,
+    target: str,
+    keyframe: int,
+    confidence: float,
+    error: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    rank: int = 0,
+) -> LinkCandidate:
+    """The link of ``source``'s keyframe ``centre`` to ``target``'s keyframe ``keyframe`` as
+    the truth has it, then moved by ``error`` (x, y, theta in the target keyframe's frame)."""
+    T_world_centre = frames[source] @ se2.matrix_from_pose(*units[(source, 0)].poses[centre])
+    T_world_keyframe = frames[target] @ se2.matrix_from_pose(*units[(target, 0)].poses[keyframe])
+    T = se2.matrix_from_pose(*error) @ se2.invert(T_world_keyframe) @ T_world_centre
+    T_target_centre = se2.matrix_from_pose(*units[(target, 0)].poses[keyframe]) @ T
+    return LinkCandidate(
+        source=(source, 0),
+        centre=centre,
+        target=(target, 0),
+        keyframe=keyframe,
+        T_keyframe_centre=se2.pose_from_matrix(T),
+        T_target_centre=se2.pose_from_matrix(T_target_centre),
+        confidence=confidence,
+        fit=0.95,
+        value=20.0,
+        rank=rank,
+        information=np.diag([400.0, 400.0, 1e4]),
+    )
+
+
+def test_an_ambiguous_link_is_accepted_when_consistent_links_support_one_placement() -> None:
+    # A corridor: each place of b fits a's corridor at its true place and at another (each
+    # placement unsure, confidence 0.4-0.45). The true placements agree with each other; the
+    # rivals agree with nothing (each is off by another amount along the corridor).
+    frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.5, 0.2)}
+    units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
+    right = [link(units, frames, "b", k, "a", k + 3, 0.45) for k in (2, 7, 12)]
+    rivals = [
+        link(units, frames, "b", k, "a", k + 3, 0.4, (shift, 0.0, 0.0), rank=1)
+        for k, shift in ((2, 4.0), (7, -6.0), (12, 9.0))
+    ]
+    verdict = consistent_set((("a", 0), ("b", 0)), right + rivals, units, CONFIG)
+    assert verdict.accepted, verdict.reason
+    assert sorted(c.centre for c in verdict.links) == [2, 7, 12]
+    assert all(c.rank == 0 for c in verdict.links)
+    # With only two places the unsure links are too few; one unsure place alone, too.
+    two = consistent_set((("a", 0), ("b", 0)), right[:2] + rivals[:2], units, CONFIG)
+    assert not two.accepted and "too few" in two.reason
+    # A confident link alone is not enough either (a look-alike can fit one place well).
+    sure = dataclasses.replace(right[0], confidence=0.99)
+    alone = consistent_set((("a", 0), ("b", 0)), [sure], units, CONFIG)
+    assert not alone.accepted and "too few" in alone.reason
+
+
+def test_a_building_that_fits_two_ways_is_refused() -> None:
+    # Every place of b fits a at the truth and 5 m further along, each set consistent in
+    # itself: the two sets weigh about the same, and the pair is refused as ambiguous.
+    frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.5, 0.2)}
+    units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
+    right = [link(units, frames, "b", k, "a", k + 3, 0.95) for k in (2, 7, 12)]
+    shifted = [
+        link(units, frames, "b", k, "a", k + 3, 0.9, (5.0, 0.0, 0.0), rank=1) for k in (2, 7, 12)
+    ]
+    verdict = consistent_set((("a", 0), ("b", 0)), right + shifted, units, CONFIG)
+    assert not verdict.accepted and "ambiguous" in verdict.reason
+    assert consistent_set((("a", 0), ("b", 0)), right, units, CONFIG).accepted
+
+
+def test_a_link_that_breaks_a_cycle_is_refused() -> None:
+    # Three robots in one corridor, each pair linked by a consistent set of two places. a-b
+    # and b-c are right; a-c is 2 m off (consistent in itself: both its links are off alike)
+    # and lighter, so it comes last and closes a cycle that does not close.
+    names = ["a", "b", "c"]
+    poses = [(0.0, 0.0, 0.0), (2.0, 0.3, 0.1), (4.0, -0.2, -0.1)]
+    frames = {n: se2.matrix_from_pose(*p) for n, p in zip(names, poses, strict=True)}
+    units = units_of(line_units(names, [frames[n] for n in names]))
+
+    def verdict(source: str, target: str, weight: float, error: float) -> PairVerdict:
+        links = [
+            link(units, frames, source, k, target, k + 1, weight / 2, (error, 0.0, 0.0))
+            for k in (3, 9)
+        ]
+        pair = ((target, 0), (source, 0))
+        return consistent_set(pair, links, units, CONFIG)
+
+    ab, bc = verdict("b", "a", 1.9, 0.0), verdict("c", "b", 1.9, 0.0)
+    wrong = verdict("c", "a", 1.8, 2.0)
+    assert ab.accepted and bc.accepted and wrong.accepted  # each pair alone believes its set
+    accepted = accept_pairs([ab, bc, wrong], units, CONFIG)
+    assert [v.pair for v in accepted.pairs] == [ab.pair, bc.pair]
+    assert [v.pair for v in accepted.refused] == [wrong.pair]
+    assert accepted.refused[0].reason == "breaks a cycle"
+    assert accepted.groups == [[("a", 0), ("b", 0), ("c", 0)]]
+    # The right a-c link closes the cycle and is taken.
+    right = verdict("c", "a", 1.8, 0.0)
+    closed = accept_pairs([ab, bc, right], units, CONFIG)
+    assert len(closed.pairs) == 3 and closed.refused == []
