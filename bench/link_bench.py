@@ -228,9 +228,11 @@ def report(cases: list[tuple[str, int]], args: argparse.Namespace, config: Merge
         result = merge_joint(local.keyframes, config, budget=0)
         seconds = time.perf_counter() - started
         state = result.state
-        for (source, centre, target), record in state.matches.items():
+        for record in state.matches.values():
             for c in record.candidates:
-                error = truth.error((c.target[0], c.keyframe), (c.source[0], c.centre), c.T_keyframe_centre)
+                error = truth.error(
+                    (c.target[0], c.keyframe), (c.source[0], c.centre), c.T_keyframe_centre
+                )
                 if np.isnan(error[0]):
                     continue
                 rows.append(
@@ -252,7 +254,9 @@ def report(cases: list[tuple[str, int]], args: argparse.Namespace, config: Merge
         wrong = [
             c
             for c in state.links
-            if not right(truth.error((c.target[0], c.keyframe), (c.source[0], c.centre), c.T_keyframe_centre))
+            if not right(
+                truth.error((c.target[0], c.keyframe), (c.source[0], c.centre), c.T_keyframe_centre)
+            )
         ]
         merged_robots = sorted({robot for robot in result.keyframe_index})
         table.append(
@@ -293,13 +297,17 @@ def report(cases: list[tuple[str, int]], args: argparse.Namespace, config: Merge
             print("| --- | --- | --- | --- | --- |")
             for t, n, bad, precision, recall in curve(chosen, key):
                 print(f"| {t:.2f} | {n} | {bad} | {precision:.3f} | {recall:.3f} |")
-    print("\n| case | robots placed | overlapping (truth) | maps merged | places | place matches | candidates | links accepted | wrong | merge (s) |")
+    print(
+        "\n| case | robots placed | overlapping (truth) | maps merged | places | place matches "
+        "| candidates | links accepted | wrong | merge (s) |"
+    )
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for row in table:
         print(
-            f"| {row['case']} | {row['robots_placed']}/{row['robots']} | {row['overlapping_truth']} | "
-            f"{row['maps_merged']}/{row['maps']} | {row['places']} | {row['place_matches']} | "
-            f"{row['candidates']} | {row['links_accepted']} | {row['links_wrong']} | {row['merge_s']:.1f} |"
+            f"| {row['case']} | {row['robots_placed']}/{row['robots']} | "
+            f"{row['overlapping_truth']} | {row['maps_merged']}/{row['maps']} | {row['places']} "
+            f"| {row['place_matches']} | {row['candidates']} | {row['links_accepted']} | "
+            f"{row['links_wrong']} | {row['merge_s']:.1f} |"
         )
     out = args.json or args.work / "link_bench.json"
     out.write_text(json.dumps({"candidates": rows, "cases": table}, indent=1))

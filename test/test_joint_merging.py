@@ -59,9 +59,7 @@ def keyframes_along(walls: np.ndarray, poses: np.ndarray, seed: int) -> list[Key
             k,
             float(k),
             np.asarray(pose, dtype=np.float64),
-            se2.transform_segments(
-                se2.invert(se2.matrix_from_pose(*pose)), segments[owner == k]
-            ),
+            se2.transform_segments(se2.invert(se2.matrix_from_pose(*pose)), segments[owner == k]),
         )
         for k, pose in enumerate(poses)
     ]

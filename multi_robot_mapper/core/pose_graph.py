@@ -186,8 +186,8 @@ class PoseGraph:
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
         values = optimizer.optimize()
         for key in self._estimate:
-            pose = values.atPose2(key)
-            self._estimate[key] = (float(pose.x()), float(pose.y()), float(pose.theta()))
+            solved = values.atPose2(key)
+            self._estimate[key] = (float(solved.x()), float(solved.y()), float(solved.theta()))
         self._restart()
         return int(optimizer.iterations())
 

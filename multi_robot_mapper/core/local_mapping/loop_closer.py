@@ -46,7 +46,6 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap, KeyframeScan
-from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
 from multi_robot_mapper.core.matching.beams import Viewpoint
 from multi_robot_mapper.core.matching.confidence import (
@@ -55,6 +54,7 @@ from multi_robot_mapper.core.matching.confidence import (
     TRACK_TURNS,
 )
 from multi_robot_mapper.core.matching.refine import match_information
+from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
 
 FloatArray = NDArray[np.float64]
 Pose = tuple[float, float, float]

@@ -46,7 +46,6 @@ from multi_robot_mapper.core.local_mapping.loop_closer import (
     LoopCloser,
     LostFrom,
 )
-from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
 from multi_robot_mapper.core.matching.confidence import (
     LIKELY,
@@ -55,6 +54,7 @@ from multi_robot_mapper.core.matching.confidence import (
     TRACK_TURNS,
 )
 from multi_robot_mapper.core.matching.refine import match_information
+from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = NDArray[np.float64]

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 

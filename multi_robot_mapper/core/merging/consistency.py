@@ -6,14 +6,14 @@ the cycle link 1, B's map from link 1's end to link 2's, link 2 backwards, A's m
 link 1's start closes: within the correctness tolerance (0.30 m, 5 deg) plus
 ``link_pair_slack`` (and ``link_pair_angle_slack``) per metre that the cycle runs inside the
 two maps (their own drift). In the manner of pairwise consistency maximisation (Mangelson et
-al. 2018), the largest consistent set (by weight: the sum of the links' confidences) is kept, found by
-growing a clique from each link in turn. It is accepted when
+al. 2018), the largest consistent set (by weight: the sum of the links' confidences) is
+kept, found by growing a clique from each link in turn. It is accepted when
 
 - it holds a *confident* link (``link_confidence``) and links ``link_confident_support``
   distinct places (one place that fits well may be a look-alike), or links
-  ``link_min_support`` distinct places: an ambiguous link (a corridor that fits at two places, each of low confidence) is
-  accepted when enough of the pair's other places agree with one of its placements (the aces
-  corridors), and
+  ``link_min_support`` distinct places: an ambiguous link (a corridor that fits at two
+  places, each of low confidence) is accepted when enough of the pair's other places agree
+  with one of its placements (the aces corridors), and
 - it is *unique*: it weighs ``link_set_uniqueness`` times as much as the best set of links that
   contradicts it (a building that fits two ways is refused, however well it fits).
 
@@ -183,7 +183,7 @@ def consistent_set(
     members = [usable[i] for i in chosen]
     weight = float(weights[chosen].sum())
     # Rivals: links that contradict some member; their heaviest consistent set.
-    contradicting = ~agree[chosen].all(axis=0)
+    contradicting = np.asarray(~agree[chosen].all(axis=0), dtype=bool)
     rival = heaviest_clique(agree, weights, contradicting)
     rival_weight = float(weights[rival].sum()) if rival else 0.0
     places = len({(c.source, c.centre) for c in members})

@@ -49,6 +49,7 @@ from multi_robot_mapper.core.merging.consistency import (
     consistent_set,
     oriented,
 )
+from multi_robot_mapper.core.merging.correlation import Drawing
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
 from multi_robot_mapper.core.merging.place_links import (
@@ -199,15 +200,14 @@ def _match_places(
     work.sort(key=lambda item: item[:3])
     started = time.perf_counter()
     computed = 0
-    drawings: dict[str, object] = {}
+    drawings: dict[str, Drawing] = {}
     for _, _, _, key, place in work:
         if budget and computed and time.perf_counter() - started >= budget:
             break  # out of time (after one match at least: every update makes progress)
-        target = _target(units[key[2]], config)
         drawing = drawings.get(place.digest)
         if drawing is None:
             drawing = drawings[place.digest] = place_drawing(place, config)
-        found = match_place(place, target, config, drawing)  # type: ignore[arg-type]
+        found = match_place(place, _target(units[key[2]], config), config, drawing)
         records[key] = MatchRecord(place.digest, signatures[key[2]], found)
         computed += 1
     counts = {
@@ -228,7 +228,7 @@ def _verdicts(
     """Every pair of maps' consistent set of links (candidates of keyframes that still
     exist)."""
     by_pair: dict[tuple[UnitKey, UnitKey], list[LinkCandidate]] = {}
-    for (source, centre, target), record in records.items():
+    for (source, _, target), record in records.items():
         if source not in units or target not in units:
             continue
         for candidate in record.candidates:
@@ -322,7 +322,8 @@ def _solve(
         start = _initial(unit, rigid[key], warm)
         for row, placed in enumerate(start):
             anchored = key == ref_unit and row == 0
-            graph.add_node(offsets[key] + row, tuple(float(v) for v in placed), anchored=anchored)
+            x, y, theta = (float(v) for v in placed)
+            graph.add_node(offsets[key] + row, (x, y, theta), anchored=anchored)
         for first, second in _intra_pairs(unit, config.graph_radius):
             graph.add_edge(_intra_edge(unit, first, second, offsets[key], config))
     accepted_links: list[LinkCandidate] = []

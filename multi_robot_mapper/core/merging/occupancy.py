@@ -27,9 +27,9 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.geometry import sample_segments
+from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import MapViews
-from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 

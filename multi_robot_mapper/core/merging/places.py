@@ -8,12 +8,12 @@ the merger treats every piece as a map of its own: a :class:`MapUnit`.
 A :class:`Place` is a keyframe and the unit's map around it: every segment of the unit within
 ``place_radius`` of the keyframe (clipped there), in the keyframe's frame, with the unit's
 keyframes near it as viewpoints. Links between robots are matches of places: a place is small
-enough that the drift of a robot's map across it is negligible (a bent map is placed place
-by place), and a robot pair gets as many links as it has places in common. A place's
-viewpoints carry *synthetic* beams: the place's own walls ray cast from each keyframe pose. The merger has no scans, but what a robot's map says it saw from where
-it stood is the same evidence INTEGRATE's confidence weighs (walls of the other map lying in
-free space, returns confirmed), and a bearing on which the map has no wall claims nothing
-(:func:`viewpoints`).
+enough that the drift of a robot's map across it is negligible (a bent map is placed place by
+place), and a robot pair gets as many links as it has places in common. A place's viewpoints
+carry *synthetic* beams: the place's own walls ray cast from each keyframe pose. The merger has
+no scans, but what a robot's map says it saw from where it stood is the same evidence
+INTEGRATE's confidence weighs (walls of the other map lying in free space, returns confirmed),
+and a bearing on which the map has no wall claims nothing (:func:`viewpoints`).
 """
 
 from __future__ import annotations
