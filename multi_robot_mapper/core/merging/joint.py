@@ -134,12 +134,7 @@ def merge_joint(
     checked = time.perf_counter()
     previous_reference = None if previous is None else previous.reference
     group, ref_unit = _reference(accepted, units, chosen, previous_reference)
-    warm = (
-        previous
-        if previous is not None and ref_unit is not None and previous.reference == ref_unit[0]
-        else None
-    )
-    solved = _solve(units, group, ref_unit, accepted, config, warm)
+    solved = _solve(units, group, ref_unit, accepted, config)
     optimised = time.perf_counter()
     result = _result(robots, units, accepted, verdicts, solved, ref_unit, config)
     finished = time.perf_counter()
@@ -302,11 +297,11 @@ def _solve(
     ref_unit: UnitKey | None,
     accepted: Accepted,
     config: MergeConfig,
-    warm: MergeResult | None = None,
 ) -> _Solution:
-    """The graph of every keyframe of the maps joined to ``ref_unit``, solved (module doc),
-    from the previous update's poses where it has them (``warm``, of the same reference),
-    else from the maps placed rigidly along the accepted pairs."""
+    """The graph of every keyframe of the maps joined to ``ref_unit``, solved (module doc)
+    from the maps placed rigidly along the accepted pairs: never from the previous update's
+    poses, so that the merge is a function of its inputs and matches (a merger started again
+    on the same maps puts every robot in the same place)."""
     if ref_unit is None:
         return _Solution({}, {}, [])
     rigid = _rigid_placements(ref_unit, accepted, units)
@@ -319,7 +314,7 @@ def _solve(
     graph = PoseGraph(robust_scale=config.link_robust_scale, kernel="dcs")
     for key in order:
         unit = units[key]
-        start = _initial(unit, rigid[key], warm)
+        start = [se2.pose_from_matrix(rigid[key] @ se2.matrix_from_pose(*p)) for p in unit.poses]
         for row, placed in enumerate(start):
             anchored = key == ref_unit and row == 0
             x, y, theta = (float(v) for v in placed)
@@ -358,26 +353,6 @@ def _solve(
             [se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in poses[key]]
         )
     return _Solution(poses, frames, order, accepted_links, total, len(graph.edges), iterations)
-
-
-def _initial(unit: MapUnit, rigid: FloatArray, warm: MergeResult | None) -> FloatArray:
-    """(K, 3) starting poses of a map's keyframes: where the previous update (``warm``) put
-    those it placed, the others moved with them (the rigid fit of the placed ones), or, with
-    none placed before, the map placed rigidly (``rigid``)."""
-    T = rigid
-    start = None
-    index = None if warm is None else warm.keyframe_index.get(unit.robot)
-    if warm is not None and index is not None and len(index):
-        rows = np.minimum(np.searchsorted(index, unit.index), len(index) - 1)
-        known = index[rows] == unit.index
-        if known.any():
-            before = warm.keyframe_poses[unit.robot][rows[known]]
-            T = se2.rigid_fit(unit.poses[known], before)
-            start = (known, before)
-    moved = np.array([se2.pose_from_matrix(T @ se2.matrix_from_pose(*p)) for p in unit.poses])
-    if start is not None:
-        moved[start[0]] = start[1]
-    return moved.reshape(-1, 3)
 
 
 def _rigid_placements(
