@@ -28,7 +28,7 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import ExtractionConfig, SegmentScan, extract_scan
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalMapperConfig
 from multi_robot_mapper.core.merging import MergeConfig, merge
-from multi_robot_mapper.core.merging.joint import merge_joint, place_scans
+from multi_robot_mapper.core.merging.joint import JointState, merge_joint, place_scans
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
 
 FloatArray = NDArray[np.float64]
@@ -366,11 +366,25 @@ def _merged_joint(local: OfflineMap, config: MergeConfig) -> OfflineMap:
             placed = place_scans(result, robot, local.anchors[robot])
         trajectories[robot] = own if placed is None else placed
     assert result.robots == local.robots
+    stamp = {(r, kf.index): kf.stamp for r, frames in local.keyframes.items() for kf in frames}
+    graph_links = result.state.links if isinstance(result.state, JointState) else []
     stats = dict(local.stats)
     stats.update(
         {
             "method": "pivot",
             "segments": len(result.segments),
+            # Every link in the joint graph: keyframe (robot, stamp) a, keyframe b and T_a_b,
+            # so that a bench holding the reference can judge each one.
+            "merge_graph_links": [
+                [
+                    link.target[0],
+                    stamp[(link.target[0], link.keyframe)],
+                    link.source[0],
+                    stamp[(link.source[0], link.centre)],
+                    *(round(float(v), 5) for v in link.T_keyframe_centre),
+                ]
+                for link in graph_links
+            ],
             "merge_reference": result.reference,
             "merge_links": [
                 {"a": link.robot_a, "b": link.robot_b, "value": round(link.value, 3)}
