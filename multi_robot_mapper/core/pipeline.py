@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import ExtractionConfig, SegmentScan, extract_scan
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalMapperConfig
-from multi_robot_mapper.core.merging import MergeConfig, merge
+from multi_robot_mapper.core.merging import MergeConfig, MergeResult, merge
 from multi_robot_mapper.core.merging.joint import JointState, merge_joint, place_scans
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
 
@@ -320,23 +320,7 @@ def _merged(local: OfflineMap, config: MergeConfig) -> OfflineMap:
     # Both robot lists are sorted names: merge's owner indices are ours (asserted, not assumed).
     assert result.robots == local.robots
     segment_robot = np.asarray(result.segment_robot, dtype=np.int64)
-    stats = dict(local.stats)
-    stats.update(
-        {
-            "method": "pivot",
-            "segments": len(result.segments),
-            "merge_reference": result.reference,
-            "merge_links": [
-                {"a": link.robot_a, "b": link.robot_b, "value": round(link.value, 3)}
-                for link in result.links
-            ],
-            "merge_links_valid": result.stats["links_valid"],
-            "merge_pairs": len(result.pairs),
-            "merge_s": round(time.perf_counter() - started, 4),
-            "robots_unmerged": result.unmerged,
-        }
-    )
-    stats["total_s"] = round(float(str(stats["total_s"])) + float(str(stats["merge_s"])), 4)
+    stats = _merge_stats(local, result, time.perf_counter() - started, result.stats["links_valid"])
     return OfflineMap(
         local.robots,
         result.segments,
@@ -368,11 +352,9 @@ def _merged_joint(local: OfflineMap, config: MergeConfig) -> OfflineMap:
     assert result.robots == local.robots
     stamp = {(r, kf.index): kf.stamp for r, frames in local.keyframes.items() for kf in frames}
     graph_links = result.state.links if isinstance(result.state, JointState) else []
-    stats = dict(local.stats)
+    stats = _merge_stats(local, result, first_s, result.stats["links_accepted"])
     stats.update(
         {
-            "method": "pivot",
-            "segments": len(result.segments),
             # Every link in the joint graph: keyframe (robot, stamp) a, keyframe b and T_a_b,
             # so that a bench holding the reference can judge each one.
             "merge_graph_links": [
@@ -385,21 +367,11 @@ def _merged_joint(local: OfflineMap, config: MergeConfig) -> OfflineMap:
                 ]
                 for link in graph_links
             ],
-            "merge_reference": result.reference,
-            "merge_links": [
-                {"a": link.robot_a, "b": link.robot_b, "value": round(link.value, 3)}
-                for link in result.links
-            ],
-            "merge_links_valid": result.stats["links_accepted"],
-            "merge_pairs": len(result.pairs),
-            "merge_s": round(first_s, 4),
             "merge_update_s": round(update_s, 4),
             "merge_timings": {k: round(v, 4) for k, v in result.timings.items()},
             "merge_stats": dict(result.stats),
-            "robots_unmerged": result.unmerged,
         }
     )
-    stats["total_s"] = round(float(str(stats["total_s"])) + first_s, 4)
     return OfflineMap(
         local.robots,
         result.segments,
@@ -411,3 +383,27 @@ def _merged_joint(local: OfflineMap, config: MergeConfig) -> OfflineMap:
         local.keyframes,
         local.anchors,
     )
+
+
+def _merge_stats(
+    local: OfflineMap, result: MergeResult, seconds: float, links: int
+) -> dict[str, object]:
+    """The ``local`` run's stats with the merge's (``seconds`` it took, ``links`` it used)."""
+    stats = dict(local.stats)
+    stats.update(
+        {
+            "method": "pivot",
+            "segments": len(result.segments),
+            "merge_reference": result.reference,
+            "merge_links": [
+                {"a": link.robot_a, "b": link.robot_b, "value": round(link.value, 3)}
+                for link in result.links
+            ],
+            "merge_links_valid": links,
+            "merge_pairs": len(result.pairs),
+            "merge_s": round(seconds, 4),
+            "robots_unmerged": result.unmerged,
+        }
+    )
+    stats["total_s"] = round(float(str(stats["total_s"])) + seconds, 4)
+    return stats
