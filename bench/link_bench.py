@@ -12,6 +12,9 @@ keyframes. A link is *right* within 0.30 m / 5 deg (the confidence's own toleran
         [--work bench_output/link_bench]     # local mapping, cached (slow: minutes per case)
     .venv/bin/python bench/link_bench.py links [--logs ...] [--robots 2 4 8] [--set N=V ...]
         [--json PATH] [--curve PATH.png]
+    .venv/bin/python bench/link_bench.py updates [--logs ...] [--robots 2 4 8] [--every 30]
+        # the node's regime: growing maps, one update per --every s of log, within the
+        # update_budget; prints | case | keyframes | updates | median | p90 | max (s) | placed |
 
 ``links`` prints, over every candidate of every case: precision and recall of "confidence >=
 t" and of "fit >= t" for a range of thresholds (the curve the ``link_confidence`` and
@@ -139,7 +142,10 @@ def right(error: tuple[float, float]) -> bool:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("step", choices=("prepare", "links"))
+    parser.add_argument("step", choices=("prepare", "links", "updates"))
+    parser.add_argument(
+        "--every", type=float, default=30.0, help="updates: seconds of log between updates"
+    )
     parser.add_argument("--logs", nargs="+", default=list(LOGS))
     parser.add_argument("--robots", nargs="+", type=int, default=[2, 4, 8])
     parser.add_argument("--work", type=Path, default=REPO / "bench_output" / "link_bench")
@@ -158,8 +164,50 @@ def main() -> int:
         return 0
     overrides = dict(parse_override(item) for item in args.set)
     config = config_from_flat(MergeConfig, overrides)
-    report(cases, args, config)
+    if args.step == "updates":
+        updates(cases, args, config)
+    else:
+        report(cases, args, config)
     return 0
+
+
+def updates(cases: list[tuple[str, int]], args: argparse.Namespace, config: MergeConfig) -> None:
+    """The node's regime: every ``--every`` seconds of log, the keyframes made so far (at
+    their final poses in their pieces) merged with the previous update, place matching within
+    ``update_budget``; then updates with nothing new until no match is pending. Per case: the
+    updates' times (median, 90th percentile, largest), their count, and what the last placed."""
+    from multi_robot_mapper.core.merging.joint import merge_joint
+
+    for name, k in cases:
+        if not (args.work / "cases" / f"{name}_{k}.pkl").exists():
+            print(f"note: {name} {k} not prepared (run the prepare step)", file=sys.stderr)
+            continue
+        local, _ = load(name, k, args.work)
+        stamps = [kf.stamp for frames in local.keyframes.values() for kf in frames]
+        start, stop = min(stamps), max(stamps)
+        times: list[float] = []
+        result = None
+        clock = start
+        while True:
+            clock = min(clock + args.every, stop)
+            shown = {
+                robot: [kf for kf in frames if kf.stamp <= clock]
+                for robot, frames in local.keyframes.items()
+            }
+            shown = {robot: frames for robot, frames in shown.items() if frames}
+            began = time.perf_counter()
+            result = merge_joint(shown, config, previous=result)
+            times.append(time.perf_counter() - began)
+            if clock >= stop and result.stats["matches_pending"] == 0:
+                break
+        keyframes = sum(len(frames) for frames in local.keyframes.values())
+        spread = np.percentile(times, [50, 90, 100])
+        placed = sum(p is not None for p in result.placements.values())
+        print(
+            f"| {name}_{k} | {keyframes} | {len(times)} | {spread[0]:.2f} | {spread[1]:.2f} | "
+            f"{spread[2]:.2f} | {placed}/{k} |",
+            flush=True,
+        )
 
 
 THRESHOLDS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99)
