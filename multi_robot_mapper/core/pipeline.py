@@ -343,10 +343,13 @@ def _merged_joint(local: OfflineMap, config: MergeConfig) -> OfflineMap:
     again = time.perf_counter()
     merge_joint(local.keyframes, config, previous=result, budget=0.0)
     update_s = time.perf_counter() - again
+    # A robot's frame is its main piece's (local mapping's trajectory and map are in it).
+    frames: dict[str, Pose | None] = {}
     trajectories = {}
     for robot, own in local.trajectories.items():
+        frames[robot] = result.frames.get(robot, {}).get(_main_piece(local, robot))
         placed = None
-        if result.placements.get(robot) is not None and robot in local.anchors:
+        if frames[robot] is not None and robot in local.anchors:
             placed = place_scans(result, robot, local.anchors[robot])
         trajectories[robot] = own if placed is None else placed
     assert result.robots == local.robots
@@ -355,6 +358,7 @@ def _merged_joint(local: OfflineMap, config: MergeConfig) -> OfflineMap:
     stats = _merge_stats(local, result, first_s, result.stats["links_accepted"])
     stats.update(
         {
+            "robots_unmerged": [robot for robot in local.robots if frames.get(robot) is None],
             # Every link in the joint graph: keyframe (robot, stamp) a, keyframe b and T_a_b,
             # so that a bench holding the reference can judge each one.
             "merge_graph_links": [
@@ -377,12 +381,24 @@ def _merged_joint(local: OfflineMap, config: MergeConfig) -> OfflineMap:
         result.segments,
         np.asarray(result.segment_robot, dtype=np.int64).reshape(-1),
         trajectories,
-        dict(result.placements),
+        frames,
         stats,
         local.keyframe_poses,
         local.keyframes,
         local.anchors,
     )
+
+
+def _main_piece(local: OfflineMap, robot: str) -> int:
+    """The piece of ``robot``'s map holding the most placed scans (ties: the oldest), as
+    :meth:`LocalMapper.main_piece` chose it."""
+    piece_of = {kf.index: kf.piece for kf in local.keyframes.get(robot, [])}
+    anchors = local.anchors.get(robot)
+    if anchors is None or not piece_of:
+        return 0
+    pieces = np.array([piece_of.get(int(k), -1) for k in anchors[1]], dtype=np.int64)
+    found, counts = np.unique(pieces[pieces >= 0], return_counts=True)
+    return int(found[np.argmax(counts)]) if len(found) else 0
 
 
 def _merge_stats(
