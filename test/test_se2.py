@@ -33,3 +33,20 @@ def test_transform_segments_moves_both_ends() -> None:
     np.testing.assert_allclose(
         se2.transform_segments(T, np.array([[0.0, 0, 1, 0]])), [[0, 1, 1, 1]]
     )
+
+
+def test_matrices_from_poses_are_matrix_from_pose_each() -> None:
+    poses = np.array([[1.0, -2.0, 0.3], [0.0, 0.0, -3.0], [5.5, 2.0, 3.1]])
+    stacked = se2.matrices_from_poses(poses)
+    for pose, T in zip(poses, stacked, strict=True):
+        np.testing.assert_allclose(T, se2.matrix_from_pose(*pose), atol=1e-12)
+    assert se2.matrices_from_poses(np.zeros((0, 3))).shape == (0, 3, 3)
+
+
+def test_rigid_fit_recovers_the_motion_between_two_frames() -> None:
+    T_to_from = se2.matrix_from_pose(3.0, -1.0, 2.5)
+    poses = np.array([[0.0, 0.0, 0.1], [2.0, 1.0, 0.5], [4.0, -3.0, -1.0], [1.0, 5.0, 3.0]])
+    moved = np.array([se2.pose_from_matrix(T_to_from @ se2.matrix_from_pose(*p)) for p in poses])
+    np.testing.assert_allclose(se2.rigid_fit(poses, moved), T_to_from, atol=1e-9)
+    # One pose (or all at one point): exactly onto it, heading included.
+    np.testing.assert_allclose(se2.rigid_fit(poses[:1], moved[:1]), T_to_from, atol=1e-9)

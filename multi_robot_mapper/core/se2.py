@@ -24,6 +24,17 @@ def matrix_from_pose(x: float, y: float, theta: float) -> FloatArray:
     return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
 
 
+def matrices_from_poses(poses: ArrayLike) -> FloatArray:
+    """``(n, 3, 3)`` matrices of ``(n, 3)`` poses ``(x, y, theta)`` (all at once)."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    out = np.zeros((len(p), 3, 3))
+    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = c, -s, p[:, 0]
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = s, c, p[:, 1]
+    out[:, 2, 2] = 1.0
+    return out
+
+
 def pose_from_matrix(T: FloatArray) -> tuple[float, float, float]:
     """Inverse of :func:`matrix_from_pose`."""
     return float(T[0, 2]), float(T[1, 2]), float(np.arctan2(T[1, 0], T[0, 0]))

@@ -104,8 +104,8 @@ def consistency_matrix(
     b = _poses(second, [lk.k_second for lk in links])
     T = np.stack([lk.T for lk in links])
     # Predicted link i from link j: T_ai_aj . T_j . T_bj_bi, against T_i (every i, j at once).
-    Ta = _matrices(a)
-    Tb = _matrices(b)
+    Ta = se2.matrices_from_poses(a)
+    Tb = se2.matrices_from_poses(b)
     Ta_inv = np.linalg.inv(Ta)
     Tb_inv = np.linalg.inv(Tb)
     T_ai_aj = np.einsum("iab,jbc->ijac", Ta_inv, Ta)
@@ -127,16 +127,6 @@ def consistency_matrix(
                 agree[i, j] = agree[j, i] = False
     np.fill_diagonal(agree, True)
     return np.asarray(agree & agree.T)
-
-
-def _matrices(poses: FloatArray) -> FloatArray:
-    """(n, 3, 3) matrices of (n, 3) poses."""
-    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    out = np.zeros((len(poses), 3, 3))
-    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = c, -s, poses[:, 0]
-    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = s, c, poses[:, 1]
-    out[:, 2, 2] = 1.0
-    return out
 
 
 def heaviest_clique(
