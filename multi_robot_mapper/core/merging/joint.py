@@ -31,9 +31,11 @@ segments in its own frame). Each piece of each robot is a map of its own (a
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import time
 from collections import OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -84,24 +86,35 @@ class JointState:
     links: list[LinkCandidate] = dataclasses.field(default_factory=list)  # in the graph
 
 
-# Targets (a map transformed for the correlation) of the maps matched most recently: building
-# one costs more than a place match, and a merger process matches the same maps for many
-# updates. Keyed by map, content and the settings they were built with.
+# Targets (a map transformed for the correlation) and places of the maps seen most recently:
+# building them costs more than a place match, and a merger process sees the same maps for
+# many updates (one robot's map changes at a time). Keyed by map, content and settings.
 _TARGETS: OrderedDict[tuple[UnitKey, str, MergeConfig], Target] = OrderedDict()
-_TARGETS_KEPT = 32
+_PLACES: OrderedDict[tuple[UnitKey, str, MergeConfig], list[Place]] = OrderedDict()
+_KEPT = 32
+
+
+def _cached(store: OrderedDict[Any, Any], key: Any, make: Callable[[], Any]) -> Any:
+    """``store[key]``, made (and the oldest entry beyond :data:`_KEPT` dropped) if absent."""
+    found = store.get(key)
+    if found is None:
+        found = store[key] = make()
+        if len(store) > _KEPT:
+            store.popitem(last=False)
+    else:
+        store.move_to_end(key)
+    return found
 
 
 def _target(unit: MapUnit, config: MergeConfig) -> Target:
     key = (unit.key, MapSignature.of(unit.segments).digest, config)
-    found = _TARGETS.get(key)
-    if found is None:
-        found = Target.of(unit, config)
-        _TARGETS[key] = found
-        if len(_TARGETS) > _TARGETS_KEPT:
-            _TARGETS.popitem(last=False)
-    else:
-        _TARGETS.move_to_end(key)
-    return found
+    return cast(Target, _cached(_TARGETS, key, lambda: Target.of(unit, config)))
+
+
+def _places(unit: MapUnit, config: MergeConfig) -> list[Place]:
+    content = hashlib.sha1(unit.poses.tobytes() + unit.segments.tobytes()).hexdigest()
+    key = (unit.key, content, config)
+    return cast(list[Place], _cached(_PLACES, key, lambda: places_of(unit, config)))
 
 
 def merge_joint(
@@ -170,7 +183,7 @@ def _match_places(
     k-th place before any pair's (k+1)-th."""
     old = state.matches if state is not None else {}
     keys = sorted(k for k, u in units.items() if u.length >= config.place_min_length)
-    places = {key: places_of(units[key], config) for key in keys}
+    places = {key: _places(units[key], config) for key in keys}
     signatures = {key: MapSignature.of(units[key].segments) for key in keys}
     records: dict[MatchKey, MatchRecord] = {}
     work: list[tuple[int, int, int, MatchKey, Place]] = []
