@@ -13,7 +13,7 @@ Prints the median time per merge over the repeats (every repeat recomputes: no r
 split of that time (pairs/INTEGRATE, tree, fusion) and the error against the reference.
 Target: under 100 ms (the paper: 12.8 s for 108 x 103 segments on a 1 GHz Pentium III).
 
-    .venv/bin/python bench/merge_speed.py --split 2 4 8 [--logs intel aces fhw csail]
+    .venv/bin/python bench/merge_speed.py --split 2 4 8 [--logs intel aces fhw csail] [--joint]
 
 instead cuts each whole log into K contiguous runs (each starting ``--overlap`` scans before
 its predecessor ends; every second scan), builds each run's partial map from its
@@ -44,6 +44,7 @@ from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
 from multi_robot_mapper.core.fusion import fuse  # noqa: E402
+from multi_robot_mapper.core.local_mapping import Keyframe  # noqa: E402
 from multi_robot_mapper.core.matching import IntegrateConfig  # noqa: E402
 from multi_robot_mapper.core.merging import MergeConfig, longest, merge  # noqa: E402
 from multi_robot_mapper.io.carmen import CarmenScan, carmen_scan_data, read_carmen  # noqa: E402
@@ -116,6 +117,97 @@ def split_runs(name: str, robots: int, overlap: int, use_views: bool, config: Me
     )
 
 
+def reference_keyframes(scans: list[CarmenScan], spacing: float, turn: float) -> list[Keyframe]:
+    """A run's keyframes as a robot's ``partial_map`` carries them, built at the reference
+    poses: a keyframe where the laser moved ``spacing`` or turned ``turn`` since the last (the
+    local mapper's keyframe rule), every scan fused, each fused segment owned by the keyframe
+    of its scan and stored in that keyframe's frame; poses in the run's first scan's frame."""
+    T_robot_world = se2.invert(se2.matrix_from_pose(*scans[0].reference_pose))
+    world = np.zeros((0, 4))
+    owner = np.zeros(0, dtype=np.int64)
+    poses: list[np.ndarray] = []
+    stamps: list[float] = []
+    config = IntegrateConfig()
+    for scan in scans:
+        pose = np.asarray(scan.reference_pose, dtype=np.float64)
+        if not poses or (
+            np.hypot(*(pose[:2] - poses[-1][:2])) >= spacing
+            or abs(float(se2.wrap_angle(pose[2] - poses[-1][2]))) >= turn
+        ):
+            poses.append(pose)
+            stamps.append(scan.timestamp)
+        found = extract_scan(carmen_scan_data(scan), ExtractionConfig())[0].segments
+        placed = se2.transform_segments(se2.matrix_from_pose(*pose), found)
+        own = np.full(len(placed), len(poses) - 1, dtype=np.int64)
+        world, owner = fuse(world, owner, placed, own, config, 0.02)
+    keyframes = []
+    for k, pose in enumerate(poses):
+        T_world_keyframe = se2.matrix_from_pose(*pose)
+        segments = se2.transform_segments(se2.invert(T_world_keyframe), world[owner == k])
+        T_robot_keyframe = np.array(se2.pose_from_matrix(T_robot_world @ T_world_keyframe))
+        keyframes.append(Keyframe(k, stamps[k], T_robot_keyframe, segments))
+    return keyframes
+
+
+def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> None:
+    """``split_runs`` for the joint merger: each run's keyframes built at the reference poses,
+    merged with ``merge_joint`` (every place matched); one line: robots placed, worst
+    placement error, worst keyframe error in ``map``, links in the graph and how many are
+    wrong (> 0.30 m or 5 deg from the reference), merge time."""
+    from multi_robot_mapper.core.merging.joint import merge_joint
+
+    path = DATA / f"{name}.log.gz"
+    if not path.is_file():
+        print(f"{name}: skipped, {path} not found")
+        return
+    scans = list(read_carmen(path))
+    size = len(scans) // robots
+    frames, keyframes, world = {}, {}, {}
+    for k in range(robots):
+        run = scans[max(0, k * size - overlap) : (k + 1) * size]
+        robot = f"robot{k}"
+        frames[robot] = se2.matrix_from_pose(*run[0].reference_pose)
+        keyframes[robot] = reference_keyframes(run, 0.5, 0.35)
+        world[robot] = {
+            kf.index: frames[robot] @ se2.matrix_from_pose(*kf.T_robotmap_keyframe)
+            for kf in keyframes[robot]
+        }
+    started = time.perf_counter()
+    result = merge_joint(keyframes, config, budget=0.0)
+    elapsed = time.perf_counter() - started
+    assert result.reference is not None
+    T_map_world = se2.invert(frames[result.reference])
+    worst = worst_keyframe = 0.0
+    for robot, pose in result.placements.items():
+        if pose is None:
+            continue
+        truth = T_map_world @ frames[robot]
+        dx, dy, _ = se2.pose_from_matrix(se2.invert(truth) @ se2.matrix_from_pose(*pose))
+        worst = max(worst, float(np.hypot(dx, dy)))
+        for index, placed in zip(
+            result.keyframe_index[robot], result.keyframe_poses[robot], strict=True
+        ):
+            gap = (T_map_world @ world[robot][int(index)])[:2, 2] - placed[:2]
+            worst_keyframe = max(worst_keyframe, float(np.hypot(*gap)))
+    wrong = 0
+    links = result.state.links if result.state is not None else []  # type: ignore[attr-defined]
+    for link in links:
+        truth = (
+            se2.invert(world[link.target[0]][link.keyframe]) @ world[link.source[0]][link.centre]
+        )
+        dx, dy, dt = se2.pose_from_matrix(
+            se2.invert(truth) @ se2.matrix_from_pose(*link.T_keyframe_centre)
+        )
+        wrong += bool(np.hypot(dx, dy) > 0.3 or abs(dt) > np.radians(5.0))
+    placed = sum(pose is not None for pose in result.placements.values())
+    count = sum(len(k) for k in keyframes.values())
+    print(
+        f"| {name} | {robots} | {placed}/{robots} | {worst * 100:.1f} cm | "
+        f"{worst_keyframe * 100:.1f} cm | {len(links)} | {wrong} | {elapsed:.1f} | {count} |",
+        flush=True,
+    )
+
+
 def overlapping(frames: dict[str, np.ndarray], maps: dict[str, np.ndarray], shared: float) -> int:
     """The largest group of robots joined by pairs whose maps, placed at the truth, share at
     least ``shared`` metres of wall (within 10 cm): the most any merger could link."""
@@ -146,6 +238,13 @@ def main() -> None:
     parser.add_argument("--segments", type=int, default=100)
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--split", type=int, nargs="*", default=[])
+    parser.add_argument(
+        "--joint",
+        action="store_true",
+        help="--split with the joint merger: keyframes built at the reference poses, merged "
+        "in one graph; prints | log | robots | placed | worst placement | worst keyframe | "
+        "links | wrong | merge (s) | keyframes |",
+    )
     parser.add_argument("--logs", nargs="*", default=["intel", "aces", "fhw", "csail"])
     parser.add_argument(
         "--no-views",
@@ -165,7 +264,10 @@ def main() -> None:
     if args.split:
         for name in args.logs:
             for robots in args.split:
-                split_runs(name, robots, args.overlap, not args.no_views, base)
+                if args.joint:
+                    split_joint(name, robots, args.overlap, base)
+                else:
+                    split_runs(name, robots, args.overlap, not args.no_views, base)
         return
     path = DATA / f"{args.log}.log.gz"
     if not path.is_file():
