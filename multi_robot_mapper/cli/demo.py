@@ -35,6 +35,8 @@ from multi_robot_mapper.io.messages import scan_to_msg, segments_from_marker, st
 from multi_robot_mapper.ros.robot_mapper import RobotMapper
 from multi_robot_mapper.ros.testing import isolated_context, spin_until
 
+PICTURE = "demo_segments.png"
+
 
 @dataclass
 class DemoResult:
@@ -132,6 +134,6 @@ def run_demo(out_dir: Path, world: str = "office", seed: int = 0, every: int = 4
         f"scan {pick} in the laser frame: {len(local)} segments",
         pictures.segments_extent([local.segments]),
     )
-    picture = pictures.save_figure(fig, out_dir / "demo_segments.png")
+    picture = pictures.save_figure(fig, out_dir / PICTURE)
     counts = [len(received[k]) for k in keys if k in received]
     return DemoResult(len(keys), len(counts), counts, latency, picture)

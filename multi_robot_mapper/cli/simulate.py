@@ -12,7 +12,12 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from multi_robot_mapper.cli.common import CliError
+from multi_robot_mapper.cli.common import (
+    MAX_SIMULATED_READINGS,
+    CliError,
+    check_limits,
+    check_output,
+)
 from multi_robot_mapper.core.extraction import ExtractionConfig
 from multi_robot_mapper.core.simulation import ROUTES, LaserModel, simulate_robots
 from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan
@@ -60,21 +65,18 @@ def register(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from multi_robot_mapper.io.bags import write_recordings
 
-    if args.robots < 1:
-        raise CliError(f"--robots must be at least 1, got {args.robots}")
+    check_limits(args, "robots", "seed", "rate", "beams", "noise", "duration")
     if args.world not in ROUTES:
         raise CliError(f"unknown world {args.world!r}; known: {', '.join(ROUTES)}")
-    if not args.rate > 0.0:
-        raise CliError(f"--rate must be > 0 Hz, got {args.rate}")
-    if not 2 <= args.beams <= MAX_BEAMS:
-        raise CliError(f"--beams must be in 2..{MAX_BEAMS}, got {args.beams}")
-    if not args.noise >= 0.0:
-        raise CliError(f"--noise must be >= 0 m, got {args.noise}")
-    if not args.duration > 0.0:
-        raise CliError(f"--duration must be > 0 s, got {args.duration}")
-    out = Path(args.out)
-    if out.exists():
-        raise CliError(f"{out} already exists; not overwriting it")
+    if args.beams > MAX_BEAMS:
+        raise CliError(f"--beams must be in [2, {MAX_BEAMS}] (the front end's max_beams)")
+    readings = args.robots * args.rate * args.duration * args.beams
+    if readings > MAX_SIMULATED_READINGS:
+        raise CliError(
+            f"--robots x --rate x --duration x --beams = {readings:.3g} readings, more than "
+            f"{MAX_SIMULATED_READINGS:.0e} (about 1 GB in memory); simulate less"
+        )
+    out = check_output(Path(args.out), kind="new")
 
     laser = LaserModel(beams=args.beams, range_noise=args.noise, rate=args.rate)
     runs = simulate_robots(

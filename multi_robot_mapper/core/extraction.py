@@ -73,21 +73,22 @@ class ExtractionConfig:
         0.20,
         unit="m",
         doc="tau: consecutive points farther apart start a new cluster (Amigoni III-D, Wolter 3.1)",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.01,
+        maximum=10.0,
     )
     split_tolerance: float = param(
         0.025,
         unit="m",
         doc="kappa: recursive split stops when every point is this close to its segment",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.001,
+        maximum=1.0,
     )
     min_cluster_points: int = param(
         2,
         unit="points",
         doc="clusters with fewer points are dropped (a lone return cannot make a segment)",
         minimum=2,
+        maximum=1000,
     )
     simplifier: str = param(
         "split",
@@ -99,14 +100,15 @@ class ExtractionConfig:
         0.005,
         unit="m",
         doc="DCE removes vertices while the least relevance K(u,v,w) (Wolter eq. 1) is below this",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.0001,
+        maximum=1.0,
     )
     max_beams: int = param(
         100_000,
         unit="beams",
         doc="scans with more beams are refused as corrupt",
         minimum=1,
+        maximum=1_000_000,
     )
 
     def __post_init__(self) -> None:

@@ -21,21 +21,21 @@ class RobotMapperConfig:
         unit="s",
         doc="the same kind of bad-scan warning is logged at most once per this period",
         minimum=0.0,
+        maximum=3600.0,
     )
     segment_marker_width: float = param(
         0.03,
         unit="m",
         doc="line width of the segment markers (visualisation only)",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.001,
+        maximum=10.0,
     )
     partial_map_period: float = param(
         1.0,
         unit="s",
         doc="the whole partial map is republished at most once per this period, when it changed",
-        minimum=0.0,
+        minimum=0.05,
         maximum=3600.0,
-        exclusive_minimum=True,
     )
     map_frame: str = param(
         "",

@@ -27,17 +27,15 @@ class MapMergerConfig:
         unit="s",
         doc="how often the topic list is searched for new '<namespace>/partial_map' topics "
         "(only when robots is empty)",
-        minimum=0.0,
+        minimum=0.05,
         maximum=3600.0,
-        exclusive_minimum=True,
     )
     merge_period: float = param(
         1.0,
         unit="s",
         doc="how often the partial maps are merged again, when one of them changed",
-        minimum=0.0,
+        minimum=0.05,
         maximum=3600.0,
-        exclusive_minimum=True,
     )
     map_frame: str = param(
         "map",
@@ -55,8 +53,8 @@ class MapMergerConfig:
         0.05,
         unit="m",
         doc="line width of the global map's segment markers (visualisation only)",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.001,
+        maximum=10.0,
     )
     merge_worker: bool = param(
         True,
@@ -71,6 +69,7 @@ class MapMergerConfig:
         doc="the same kind of message (a robot still unmerged, a failed merge) is logged at "
         "most once per this period",
         minimum=0.0,
+        maximum=3600.0,
     )
     merge: MergeConfig = dataclasses.field(default_factory=MergeConfig)
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import fnmatch
 import re
-import shutil
 import sqlite3
 import struct
 from collections.abc import Mapping
@@ -39,6 +38,7 @@ from multi_robot_mapper.core.geometry import (
     yaw_from_quaternion,
 )
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.io.outputs import OutputError, staged_new
 
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
@@ -351,10 +351,25 @@ def write_recordings(
                     )
                 messages.append((_stamp_ns(item.stamp), len(messages), topic, item))
     messages.sort(key=lambda m: (m[0], m[1]))
+    try:
+        with staged_new(path) as staging:  # an interrupted write leaves no half bag at path
+            _write_messages(staging, path, recordings, messages, plugins[storage])
+    except (OSError, OutputError) as exc:
+        raise BagError(f"{path}: cannot create the bag ({_reason(exc)})") from None
+    return path
+
+
+def _write_messages(
+    staging: Path,
+    path: Path,
+    recordings: Mapping[str, RobotRecording],
+    messages: list[tuple[int, int, str, Any]],
+    plugin: StoragePlugin,
+) -> None:
     serialize = _typestore().serialize_cdr
     write_errors = (WriterError, OSError, sqlite3.Error, ValueError, OverflowError, struct.error)
     try:
-        bag = Writer(path, version=Writer.VERSION_LATEST, storage_plugin=plugins[storage])
+        bag = Writer(staging, version=Writer.VERSION_LATEST, storage_plugin=plugin)
         bag.open()
     except write_errors as exc:
         raise BagError(f"{path}: cannot create the bag ({_reason(exc)})") from None
@@ -376,10 +391,7 @@ def write_recordings(
     except (*write_errors, SerdeError) as exc:
         with contextlib.suppress(*write_errors):  # the first error is the one to report
             bag.abort()
-        # Writer.open created the directory (it refuses existing paths): remove the half bag.
-        shutil.rmtree(path, ignore_errors=True)
         raise BagError(f"{path}: cannot write the bag ({_reason(exc)})") from None
-    return path
 
 
 # A scan takes the ground-truth pose stamped nearest to it when within this (replay, evaluate).

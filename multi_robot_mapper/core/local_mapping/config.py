@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.matching import IntegrateConfig
@@ -17,26 +18,28 @@ class LocalMapperConfig:
         unit="m",
         doc="a scan this far from the last keyframe becomes a keyframe",
         minimum=0.0,
+        maximum=100.0,
     )
     keyframe_angle: float = param(
         0.35,
         unit="rad",
         doc="a scan turned this much from the last keyframe becomes a keyframe",
         minimum=0.0,
+        maximum=math.pi,
     )
     submap_radius: float = param(
         12.0,
         unit="m",
         doc="partial-map segments within this distance of the last pose are matched",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.5,
+        maximum=1000.0,
     )
     fusion_tolerance: float = param(
         0.02,
         unit="m",
         doc="FUSIONTOLERANCE: a fused polyline stays this close to every segment it replaces",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.001,
+        maximum=1.0,
     )
     min_match_fraction: float = param(
         0.15,
@@ -57,6 +60,7 @@ class LocalMapperConfig:
         "aside makes the next match harder (bench/scan_gate.py); with a value > 0 a scan set "
         "aside for this alone is bridged when the next scan matches it validly",
         minimum=0.0,
+        maximum=100.0,
     )
     map_refine_limit: float = param(
         0.1,
@@ -64,6 +68,7 @@ class LocalMapperConfig:
         doc="refinement on the partial map may move a scan at most this far (metres, and "
         "radians) from where its match with the last scan put it",
         minimum=0.0,
+        maximum=10.0,
     )
     tracking_fraction: float = param(
         0.7,
@@ -81,6 +86,7 @@ class LocalMapperConfig:
         "scan: wrong map matches on the logs jump >= 2 m (right ones <= 1.3 m; the sparse "
         "logs step <= 1.8 m, a fast laser a few cm); 0 turns map matching off",
         minimum=0.0,
+        maximum=100.0,
     )
     submap_turn: float = param(
         1.2,
@@ -89,6 +95,7 @@ class LocalMapperConfig:
         "at most this much from the last scan: wrong map matches on the logs turn >= 1.5 rad, "
         "mostly half round in a symmetric corridor; right ones <= 0.9 rad",
         minimum=0.0,
+        maximum=math.pi,
     )
     integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
 
