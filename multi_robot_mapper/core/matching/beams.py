@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from numpy.typing import NDArray
 
+from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.geometry import lines_of, sample_segments
 from multi_robot_mapper.core.matching.config import IntegrateConfig
 from multi_robot_mapper.core.scan import LaserScanData, scan_points
@@ -51,9 +54,44 @@ def _beam_evidence(
     return np.asarray(distance < free - margin), np.asarray(np.abs(distance - hit) <= margin)
 
 
-def _view_points(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArray]:
-    """A view's returns in its laser frame, each weighted by the surface it stands for (the
-    smaller gap to a neighbouring return, at most ``cap``); one return per degree at most."""
+@dataclasses.dataclass(frozen=True)
+class Viewpoint:
+    """A scan and where its laser stood in the frame of the set it belongs to."""
+
+    scan: LaserScanData
+    T_set_laser: FloatArray  # 3x3
+
+    @staticmethod
+    def at_origin(scan: LaserScanData) -> Viewpoint:
+        return Viewpoint(scan, np.eye(3))
+
+
+@dataclasses.dataclass(frozen=True)
+class ViewReturns:
+    """A set's returns in the set's frame, each weighted by the surface it stands for."""
+
+    points: FloatArray  # (P, 2)
+    weights: FloatArray  # (P,) metres of surface
+
+    @staticmethod
+    def of(viewpoints: list[Viewpoint], cap: float) -> ViewReturns:
+        """Every viewpoint's returns (at most one per degree), moved into the set's frame; each
+        return stands for the smaller gap to a neighbouring return, at most ``cap``."""
+        pieces, weights = [], []
+        for viewpoint in viewpoints:
+            points, weight = scan_returns(viewpoint.scan, cap)
+            pieces.append(se2.transform_points(viewpoint.T_set_laser, points))
+            weights.append(weight)
+        if not pieces:
+            return ViewReturns(np.zeros((0, 2)), np.zeros(0))
+        return ViewReturns(np.vstack(pieces), np.concatenate(weights))
+
+    @property
+    def total(self) -> float:
+        return float(self.weights.sum())
+
+
+def scan_returns(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArray]:
     points = scan_points(view).points
     points = points[:: max(1, round(np.radians(1.0) / abs(view.angle_increment)))]
     if len(points) < 2:
@@ -61,6 +99,111 @@ def _view_points(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArra
     gap = np.hypot(*np.diff(points, axis=0).T)
     gap = np.minimum(np.concatenate((gap, gap[-1:])), np.concatenate((gap[:1], gap)))
     return points, np.minimum(gap, cap)
+
+
+@dataclasses.dataclass(frozen=True)
+class BeamAgreement:
+    """Metres of surface of one set, judged by the other set's beams."""
+
+    confirmed: float  # where a beam of the other ended (within the margin)
+    seen_through: float  # where the other's beams passed on (a contradiction)
+    occluded: float  # behind what the other saw
+    outside: float  # outside the other's fields of view and ranges
+    total: float
+
+    @staticmethod
+    def unjudged(total: float) -> BeamAgreement:
+        """Returns of ``total`` metres that no beam judged (the other side's views unknown)."""
+        return BeamAgreement(0.0, 0.0, 0.0, total, total)
+
+    def as_array(self) -> FloatArray:
+        return np.array(
+            [self.confirmed, self.seen_through, self.occluded, self.outside, self.total]
+        )
+
+    def __add__(self, other: BeamAgreement) -> BeamAgreement:
+        return BeamAgreement(
+            self.confirmed + other.confirmed,
+            self.seen_through + other.seen_through,
+            self.occluded + other.occluded,
+            self.outside + other.outside,
+            self.total + other.total,
+        )
+
+
+def beam_categories(
+    view: LaserScanData, points: FloatArray, margin: float, spread: int
+) -> tuple[BoolArray, BoolArray, BoolArray]:
+    """For points in the view's laser frame: (confirmed, seen through, visible).
+
+    *Confirmed*: within ``margin`` of the range the view measured on that bearing, read
+    between the two nearest beams when both returned from one surface (a slanted wall's
+    range changes from beam to beam). *Seen through*: nearer than every return within
+    ``spread`` beams by more than ``margin`` (a grazing wall's neighbouring beams differ;
+    one short beam is not free space). *Visible*: on a bearing with a valid return and not
+    behind it by more than ``margin``. Beams without a valid return say nothing.
+    """
+    ranges = np.asarray(view.ranges, dtype=np.float64)
+    count = ranges.size
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(ranges) & (ranges >= view.range_min) & (ranges < view.range_max)
+    nearest = np.where(valid, ranges, -np.inf)
+    if spread > 0:
+        padded = np.concatenate((np.full(spread, -np.inf), nearest, np.full(spread, -np.inf)))
+        window = np.lib.stride_tricks.sliding_window_view(padded, 2 * spread + 1).min(axis=1)
+        nearest = np.where(valid, window, -np.inf)
+    bearing = np.arctan2(points[:, 1], points[:, 0])
+    distance = np.hypot(points[:, 0], points[:, 1])
+    position = (bearing - view.angle_min) / view.angle_increment
+    beam = np.rint(position).astype(np.int64)
+    inside = (beam >= 0) & (beam < count)
+    beam = np.clip(beam, 0, count - 1)
+    low = np.clip(np.floor(position).astype(np.int64), 0, max(count - 2, 0))
+    high = np.minimum(low + 1, count - 1)
+    r_low, r_high = ranges[low], ranges[high]
+    both = valid[low] & valid[high] & (np.abs(r_high - r_low) <= 2.0 * margin + 0.05 * r_low)
+    share = np.clip(position - low, 0.0, 1.0)
+    measured = np.where(both, r_low + share * (r_high - r_low), ranges[beam])
+    hit = inside & valid[beam]
+    with np.errstate(invalid="ignore"):
+        confirmed = hit & (np.abs(distance - measured) <= margin)
+        through = inside & (distance < nearest[beam] - margin) & ~confirmed
+        visible = hit & (distance <= measured + margin)
+    return np.asarray(confirmed), np.asarray(through), np.asarray(visible)
+
+
+def beam_agreement(
+    returns: ViewReturns,
+    T_other_set: FloatArray,
+    viewpoints: list[Viewpoint],
+    margin: float,
+    spread: int,
+) -> BeamAgreement:
+    """How the other set's viewpoints judge these returns (moved by ``T_other_set`` into the
+    other set's frame). A return confirmed by any viewpoint is confirmed; else seen through by
+    any, seen through; else visible to one, occluded; else outside."""
+    count = len(returns.points)
+    confirmed = np.zeros(count, dtype=bool)
+    through = np.zeros(count, dtype=bool)
+    visible = np.zeros(count, dtype=bool)
+    if count:
+        for viewpoint in viewpoints:
+            T_laser_set = se2.invert(viewpoint.T_set_laser) @ T_other_set
+            local = se2.transform_points(T_laser_set, returns.points)
+            ok, passed, seen = beam_categories(viewpoint.scan, local, margin, spread)
+            confirmed |= ok
+            through |= passed
+            visible |= seen | passed
+    through &= ~confirmed
+    occluded = visible & ~confirmed & ~through
+    w = returns.weights
+    return BeamAgreement(
+        float(w[confirmed].sum()),
+        float(w[through].sum()),
+        float(w[occluded].sum()),
+        float(w[~(confirmed | through | occluded)].sum()),
+        returns.total,
+    )
 
 
 def _segment_points(segments: FloatArray, config: IntegrateConfig) -> tuple[FloatArray, FloatArray]:
@@ -75,30 +218,46 @@ def _segment_points(segments: FloatArray, config: IntegrateConfig) -> tuple[Floa
     return points, np.full(len(points), spacing)
 
 
+Views = LaserScanData | list[Viewpoint] | None
+"""What one side of a match was seen from: one scan (its laser at the set's origin), several
+(a submap: each keyframe's scan at its pose), or nothing known."""
+
+
+def viewpoints_of(views: Views) -> list[Viewpoint] | None:
+    """One side's views as a list of viewpoints (None: no views known)."""
+    if views is None:
+        return None
+    if isinstance(views, LaserScanData):
+        return [Viewpoint.at_origin(views)]
+    return list(views) or None
+
+
 def seen_through_many(
     segments1: FloatArray,
     segments2: FloatArray,
     transforms: FloatArray,
-    views: tuple[LaserScanData | None, LaserScanData | None],
+    views: tuple[Views, Views],
     config: IntegrateConfig,
 ) -> tuple[FloatArray, FloatArray]:
-    """Per transform: the length of each scan lying in the other's observed free space, and
+    """Per transform: the length of each set lying in the other's observed free space, and
     the length the other's beams confirm (ending within ``free_space_margin`` of it).
 
-    With both views the tested points are the views' own returns (a corridor's far end is a
-    few sparse returns, too few for a segment, and it is what fixes the offset along the
-    corridor); with one view, points along the other set's long segments (short ones are
-    mostly people, who move between scans).
+    With both sides' views the tested points are the views' own returns (a corridor's far end
+    is a few sparse returns, too few for a segment, and it is what fixes the offset along the
+    corridor); with one side's, points along the other set's long segments (short ones are
+    mostly people, who move between scans). A side seen from several viewpoints (a submap)
+    counts a point seen through, or confirmed, when any of its viewpoints does.
     """
-    view1, view2 = views
+    views1, views2 = viewpoints_of(views[0]), viewpoints_of(views[1])
     through = np.zeros(len(transforms))
     confirmed = np.zeros(len(transforms))
-    if (view1 is None and view2 is None) or len(transforms) == 0:
+    if (views1 is None and views2 is None) or len(transforms) == 0:
         return through, confirmed
     cap = config.view_point_length
-    if view1 is not None and view2 is not None:
-        points2, weight2 = _view_points(view2, cap)
-        points1, weight1 = _view_points(view1, cap)
+    if views1 is not None and views2 is not None:
+        returns1, returns2 = ViewReturns.of(views1, cap), ViewReturns.of(views2, cap)
+        points1, weight1 = returns1.points, returns1.weights
+        points2, weight2 = returns2.points, returns2.weights
     else:
         points2, weight2 = _segment_points(segments2, config)
         points1, weight1 = _segment_points(segments1, config)
@@ -106,18 +265,31 @@ def seen_through_many(
     tx, ty = transforms[:, 1, None], transforms[:, 2, None]
     margin, spread = config.free_space_margin, config.free_space_spread
     shape = (len(transforms), -1)
-    if view1 is not None and len(points2):
+
+    def judged(points: FloatArray, viewpoints: list[Viewpoint]) -> tuple[FloatArray, FloatArray]:
+        """(T, P) seen through / confirmed of points (already in the viewpoints' set frame,
+        one row per transform) by any of the viewpoints."""
+        hit = np.zeros(points.shape[:2], dtype=bool)
+        seen = np.zeros(points.shape[:2], dtype=bool)
+        for viewpoint in viewpoints:
+            local = se2.transform_points(se2.invert(viewpoint.T_set_laser), points.reshape(-1, 2))
+            h, k = _beam_evidence(viewpoint.scan, local, margin, spread)
+            hit |= h.reshape(shape)
+            seen |= k.reshape(shape)
+        return hit, seen
+
+    if views1 is not None and len(points2):
         # S2 points in S1's frame: q = R p + t, for every transform.
         qx = c * points2[None, :, 0] - s * points2[None, :, 1] + tx
         qy = s * points2[None, :, 0] + c * points2[None, :, 1] + ty
-        hit, seen = _beam_evidence(view1, np.column_stack((qx.ravel(), qy.ravel())), margin, spread)
-        through += hit.reshape(shape) @ weight2
-        confirmed += seen.reshape(shape) @ weight2
-    if view2 is not None and len(points1):
+        hit, seen = judged(np.stack((qx, qy), axis=-1), views1)
+        through += hit @ weight2
+        confirmed += seen @ weight2
+    if views2 is not None and len(points1):
         # S1 points in S2's frame: p = R^T (q - t).
         dx, dy = points1[None, :, 0] - tx, points1[None, :, 1] - ty
         px, py = c * dx + s * dy, -s * dx + c * dy
-        hit, seen = _beam_evidence(view2, np.column_stack((px.ravel(), py.ravel())), margin, spread)
-        through += hit.reshape(shape) @ weight1
-        confirmed += seen.reshape(shape) @ weight1
+        hit, seen = judged(np.stack((px, py), axis=-1), views2)
+        through += hit @ weight1
+        confirmed += seen @ weight1
     return through, confirmed

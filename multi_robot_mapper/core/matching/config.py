@@ -155,6 +155,14 @@ class IntegrateConfig:
         minimum=0.0,
         maximum=10.0,
     )
+    confirm_margin: float = param(
+        0.1,
+        unit="m",
+        doc="for the match confidence, a return within this of the range the other scan "
+        "measured on its bearing is confirmed by it",
+        minimum=0.001,
+        maximum=2.0,
+    )
     free_space_weight: float = param(
         1.0,
         unit="",

@@ -8,8 +8,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.geometry import lines_of
-from multi_robot_mapper.core.matching.beams import seen_through_many
+from multi_robot_mapper.core.geometry import lines_of, sample_segments
+from multi_robot_mapper.core.matching.beams import (
+    BeamAgreement,
+    ViewReturns,
+    Views,
+    beam_agreement,
+    seen_through_many,
+    viewpoints_of,
+)
+from multi_robot_mapper.core.matching.confidence import (
+    RIGHT_ANGLE,
+    RIGHT_DISTANCE,
+    MatchEvidence,
+    confidence,
+)
 from multi_robot_mapper.core.matching.config import IntegrateConfig
 from multi_robot_mapper.core.matching.hypotheses import (
     HEURISTICS,
@@ -27,11 +40,12 @@ from multi_robot_mapper.core.matching.scoring import (
     score_pairs,
     transform_values,
 )
-from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 
+# A refined slid hypothesis replaces the slid one unless its net score is this much lower (m):
 # the slide grid is coarse, the refinement is the precise answer.
 _POLISH_TOLERANCE = 0.25
 
@@ -46,6 +60,8 @@ class MatchResult:
     valid: bool  # passes min_match_value and min_match_fraction
     hypotheses: int  # distinct hypotheses generated
     evaluated: int  # hypotheses fully evaluated after pruning
+    confidence: float = 0.0  # P(right within 0.30 m / 5 deg), see core.matching.confidence
+    evidence: MatchEvidence | None = None  # what the confidence was computed from
 
     @property
     def matrix(self) -> FloatArray:
@@ -61,7 +77,7 @@ def integrate(
     heuristics: tuple[str, ...] = HEURISTICS,
     ordered: tuple[bool, bool] = (True, True),
     extra_hypotheses: FloatArray | None = None,
-    views: tuple[LaserScanData | None, LaserScanData | None] = (None, None),
+    views: tuple[Views, Views] = (None, None),
     hypothesis_sets: tuple[FloatArray, FloatArray] | None = None,
 ) -> MatchResult:
     """Find how S2 lies in S1's frame with no initial guess (INTEGRATE steps 1-2).
@@ -71,7 +87,8 @@ def integrate(
     the last keyframe's scan (few segments, few landmarks) and evaluates them on the partial
     map around it (every wall seen nearby).
 
-    ``views`` are the scans each set was seen in, in its own frame, when known. Overlap length
+    ``views`` are the scans each set was seen in (one scan at the set's origin, or several
+    viewpoints for a submap), when known. Overlap length
     cannot tell a corridor's true motion from standing still (the visible stretch of wall moves
     with the robot); the beams can: under a wrong hypothesis one scan's walls lie where the
     other scan's beams passed (seen through), and few of its returns lie where the other's
@@ -154,12 +171,88 @@ def integrate(
     through, _ = seen_through_many(segments1, segments2, best_T[None, :], views, config)
     best_score = best_value - config.free_space_weight * float(through[0])
     fraction = best_score / shorter
+    best_support = cross_support(segments1, segments2, best_T, config)
     valid = (
         best_score >= config.min_match_value
         and fraction >= config.min_match_fraction
-        and cross_support(segments1, segments2, best_T, config) >= config.min_cross_support
+        and best_support >= config.min_cross_support
     )
-    return MatchResult(best_T.copy(), best_value, fraction, bool(valid), len(transforms), evaluated)
+    # The confidence: the beams of both sets on the chosen placement, how far it beats its
+    # best rival (a distinct placement, beyond the correctness tolerance), the fit's spread.
+    rivals = _distinct_from(refined, best_T)
+    evidence = match_evidence(
+        segments1,
+        segments2,
+        best_T,
+        views,
+        config,
+        score=float(scores[pick]),
+        rival_score=float(scores[rivals].max()) if rivals.any() else 0.0,
+        support=best_support,
+        fraction=fraction,
+    )
+    return MatchResult(
+        best_T.copy(),
+        best_value,
+        fraction,
+        bool(valid),
+        len(transforms),
+        evaluated,
+        confidence(evidence.features()),
+        evidence,
+    )
+
+
+def _distinct_from(transforms: FloatArray, T: FloatArray) -> BoolArray:
+    """Rows farther from ``T`` (theta, tx, ty) than the correctness tolerance: rival answers."""
+    turn = np.abs(se2.wrap_angle(transforms[:, 0] - T[0]))
+    shift = np.hypot(transforms[:, 1] - T[1], transforms[:, 2] - T[2])
+    return np.asarray((turn >= RIGHT_ANGLE) | (shift >= RIGHT_DISTANCE))
+
+
+def match_evidence(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    T_1_2: FloatArray,
+    views: tuple[Views, Views],
+    config: IntegrateConfig,
+    *,
+    score: float,
+    rival_score: float,
+    support: float,
+    fraction: float,
+) -> MatchEvidence:
+    """The evidence for the placement ``T_1_2`` (theta, tx, ty) of S2 in S1: each side's
+    returns (points along its segments when its views are unknown) judged by the other side's
+    beams, with the score, the rival's and the fit's spread."""
+    cap = config.view_point_length
+    sides = [viewpoints_of(v) for v in views]
+    returns = [
+        ViewReturns.of(viewpoints, cap)
+        if viewpoints is not None
+        else ViewReturns(*_segment_returns(segments, cap))
+        for viewpoints, segments in zip(sides, (segments1, segments2), strict=True)
+    ]
+    T = se2.matrix_from_pose(float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0]))
+    margin, spread = config.confirm_margin, config.free_space_spread
+    # S2's returns judged by S1's beams, and S1's by S2's (unjudged: every return outside).
+    judged = [
+        beam_agreement(
+            returns[1 - side], T if side == 0 else se2.invert(T), viewpoints, margin, spread
+        )
+        if viewpoints is not None
+        else BeamAgreement.unjudged(returns[1 - side].total)
+        for side, viewpoints in enumerate(sides)
+    ]
+    return MatchEvidence(judged[0], judged[1], score, rival_score, support, fraction)
+
+
+def _segment_returns(segments: FloatArray, spacing: float) -> tuple[FloatArray, FloatArray]:
+    """Points every ``spacing`` along segments, each standing for ``spacing`` of surface."""
+    if len(segments) == 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    points, _ = sample_segments(segments, spacing)
+    return points, np.full(len(points), spacing)
 
 
 def _slide(
@@ -169,7 +262,7 @@ def _slide(
     scores: FloatArray,
     support: FloatArray,
     direction: FloatArray,
-    views: tuple[LaserScanData | None, LaserScanData | None],
+    views: tuple[Views, Views],
     config: IntegrateConfig,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Hypotheses slid along the direction their matched walls leave free, with their values
@@ -201,7 +294,7 @@ def _net_scores(
     segments1: FloatArray,
     segments2: FloatArray,
     transforms: FloatArray,
-    views: tuple[LaserScanData | None, LaserScanData | None],
+    views: tuple[Views, Views],
     config: IntegrateConfig,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Value, net score, cross support and least constrained direction of each transform.

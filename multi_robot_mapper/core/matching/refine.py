@@ -39,55 +39,15 @@ def refine_many(
     count = len(T)
     if count == 0 or len(segments1) == 0 or len(segments2) == 0 or config.refine_iterations == 0:
         return T
-    lines1, lines2 = lines_of(segments1), lines_of(segments2)
-    gauss = np.array([0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0)])
     active = np.ones(count, dtype=bool)
     for _ in range(config.refine_iterations):
         live = np.flatnonzero(active)
         if live.size == 0:
             break
-        scores = score_pairs(segments1, segments2, T[live], config)
-        if scores.first.size == 0:
+        system = normal_equations(segments1, segments2, T[live], config)
+        if system is None:
             break
-        h, a, b = scores.hypothesis, scores.first, scores.second
-        c, s = np.cos(T[live[h], 0]), np.sin(T[live[h], 0])
-        tx, ty = T[live[h], 1], T[live[h], 2]
-        ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
-        # Where S2's end points fall along S1's line: the part of s2 over s1.
-        p1, p2 = segments2[b, :2], segments2[b, 2:]
-        t1 = ux * (c * p1[:, 0] - s * p1[:, 1] + tx - segments1[a, 0]) + uy * (
-            s * p1[:, 0] + c * p1[:, 1] + ty - segments1[a, 1]
-        )
-        t2 = ux * (c * p2[:, 0] - s * p2[:, 1] + tx - segments1[a, 0]) + uy * (
-            s * p2[:, 0] + c * p2[:, 1] + ty - segments1[a, 1]
-        )
-        span = np.where(np.abs(t2 - t1) > 1e-9, t2 - t1, 1e-9)
-        lo = np.clip(np.minimum(-t1 / span, (lines1.length[a] - t1) / span), 0.0, 1.0)
-        hi = np.clip(np.maximum(-t1 / span, (lines1.length[a] - t1) / span), 0.0, 1.0)
-        weight = 0.5 * (hi - lo) * lines2.length[b]
-        # Two Gauss points per pair on the overlapping part of s2 (in S2's frame).
-        lam = lo[:, None] + (hi - lo)[:, None] * gauss[None, :]
-        px = (p1[:, 0, None] + lam * (p2[:, 0] - p1[:, 0])[:, None]).ravel()
-        py = (p1[:, 1, None] + lam * (p2[:, 1] - p1[:, 1])[:, None]).ravel()
-        hh = np.repeat(h, 2)
-        aa = np.repeat(a, 2)
-        cc, ss = np.repeat(c, 2), np.repeat(s, 2)
-        qx = cc * px - ss * py + np.repeat(tx, 2)
-        qy = ss * px + cc * py + np.repeat(ty, 2)
-        nx, ny = -lines1.direction[aa, 1], lines1.direction[aa, 0]
-        r = nx * qx + ny * qy - lines1.normal_offset[aa]
-        w = np.repeat(weight, 2) / (1.0 + (r / config.point_distance_tolerance) ** 2)
-        # d q / d theta = (-(s px + c py), c px - s py)
-        j0 = nx * -(ss * px + cc * py) + ny * (cc * px - ss * py)
-        J = (j0, nx, ny)
-        H = np.empty((live.size, 3, 3))
-        g = np.empty((live.size, 3))
-        for i in range(3):
-            g[:, i] = np.bincount(hh, weights=w * J[i] * r, minlength=live.size)
-            for j in range(i, 3):
-                H[:, i, j] = H[:, j, i] = np.bincount(
-                    hh, weights=w * J[i] * J[j], minlength=live.size
-                )
+        H, g = system
         # Levenberg damping: a direction no matched line constrains gets no step.
         damping = 1e-6 + 1e-4 * np.trace(H, axis1=1, axis2=2)
         H += damping[:, None, None] * np.eye(3)[None, :, :]
@@ -97,3 +57,102 @@ def refine_many(
         active[live[small]] = False
     T[:, 0] = se2.wrap_angle(T[:, 0])
     return T
+
+
+_GAUSS = np.array([0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0)])
+
+
+def normal_equations(
+    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+) -> tuple[FloatArray, FloatArray] | None:
+    """``(H, g)``: the Gauss-Newton system ``sum w J J^T``, ``sum w J r`` of each hypothesis
+    (``(T, 3, 3)`` and ``(T, 3)``, in (theta, tx, ty)), None when no segment pair matches.
+
+    The pairs that match under each hypothesis (Alg. 4 l. 5-19) pull the part of each S2
+    segment that projects onto its S1 segment onto that segment's line. The squared
+    point-to-line residual and its Jacobian are linear along a segment, so two Gauss points
+    per pair integrate the normal equations exactly (before weighting): ``w`` is metres of
+    overlapping segment, times a Cauchy weight (scale ``point_distance_tolerance``).
+    """
+    count = len(transforms)
+    scores = score_pairs(segments1, segments2, transforms, config)
+    if scores.first.size == 0:
+        return None
+    lines1, lines2 = lines_of(segments1), lines_of(segments2)
+    h, a, b = scores.hypothesis, scores.first, scores.second
+    c, s = np.cos(transforms[h, 0]), np.sin(transforms[h, 0])
+    tx, ty = transforms[h, 1], transforms[h, 2]
+    ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
+    # Where S2's end points fall along S1's line: the part of s2 over s1.
+    p1, p2 = segments2[b, :2], segments2[b, 2:]
+    t1 = ux * (c * p1[:, 0] - s * p1[:, 1] + tx - segments1[a, 0]) + uy * (
+        s * p1[:, 0] + c * p1[:, 1] + ty - segments1[a, 1]
+    )
+    t2 = ux * (c * p2[:, 0] - s * p2[:, 1] + tx - segments1[a, 0]) + uy * (
+        s * p2[:, 0] + c * p2[:, 1] + ty - segments1[a, 1]
+    )
+    span = np.where(np.abs(t2 - t1) > 1e-9, t2 - t1, 1e-9)
+    lo = np.clip(np.minimum(-t1 / span, (lines1.length[a] - t1) / span), 0.0, 1.0)
+    hi = np.clip(np.maximum(-t1 / span, (lines1.length[a] - t1) / span), 0.0, 1.0)
+    weight = 0.5 * (hi - lo) * lines2.length[b]
+    # Two Gauss points per pair on the overlapping part of s2 (in S2's frame).
+    lam = lo[:, None] + (hi - lo)[:, None] * _GAUSS[None, :]
+    px = (p1[:, 0, None] + lam * (p2[:, 0] - p1[:, 0])[:, None]).ravel()
+    py = (p1[:, 1, None] + lam * (p2[:, 1] - p1[:, 1])[:, None]).ravel()
+    hh = np.repeat(h, 2)
+    aa = np.repeat(a, 2)
+    cc, ss = np.repeat(c, 2), np.repeat(s, 2)
+    qx = cc * px - ss * py + np.repeat(tx, 2)
+    qy = ss * px + cc * py + np.repeat(ty, 2)
+    nx, ny = -lines1.direction[aa, 1], lines1.direction[aa, 0]
+    r = nx * qx + ny * qy - lines1.normal_offset[aa]
+    w = np.repeat(weight, 2) / (1.0 + (r / config.point_distance_tolerance) ** 2)
+    # d q / d theta = (-(s px + c py), c px - s py)
+    j0 = nx * -(ss * px + cc * py) + ny * (cc * px - ss * py)
+    J = (j0, nx, ny)
+    H = np.empty((count, 3, 3))
+    g = np.empty((count, 3))
+    for i in range(3):
+        g[:, i] = np.bincount(hh, weights=w * J[i] * r, minlength=count)
+        for j in range(i, 3):
+            H[:, i, j] = H[:, j, i] = np.bincount(hh, weights=w * J[i] * J[j], minlength=count)
+    return H, g
+
+
+def match_information(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    T_1_2: FloatArray,
+    config: IntegrateConfig,
+    wall_sigma: float,
+    sigma_floor: tuple[float, float],
+    sigma_ceiling: tuple[float, float],
+) -> FloatArray:
+    """Information (3x3) of the placement ``T_1_2`` (theta, tx, ty) of S2 in S1, in the
+    tangent space gtsam's Pose2 uses for a between measurement: ``(x, y, theta)``, the
+    perturbation applied in S2's frame (``T_1_2 * Exp(xi)``).
+
+    Each metre of matched wall is taken as one measurement of its line with standard
+    deviation ``wall_sigma`` (m): ``H / wall_sigma^2`` with ``H`` the normal matrix of the
+    point-to-line least squares (:func:`normal_equations`). The covariance is then held
+    between ``sigma_floor`` and ``sigma_ceiling`` (metres, radians): no match is trusted to
+    better than the floor (scan matching errors are not independent from one scan to the
+    next), and a direction no wall constrains (along a bare corridor) keeps the ceiling.
+    """
+    T = np.asarray(T_1_2, dtype=np.float64).reshape(1, 3)
+    system = normal_equations(segments1, segments2, T, config)
+    H_thetat = np.zeros((3, 3)) if system is None else system[0][0]
+    theta = float(T[0, 0])
+    c, s = np.cos(theta), np.sin(theta)
+    # d(theta, tx, ty) = A d(vx, vy, omega): the translation moves in S2's frame (R v).
+    A = np.array([[0.0, 0.0, 1.0], [c, -s, 0.0], [s, c, 0.0]])
+    information = A.T @ H_thetat @ A / wall_sigma**2
+    scale = np.array([sigma_floor[0], sigma_floor[0], sigma_floor[1]])
+    # Clip the eigenvalues of the information, in units where both bounds are isotropic.
+    unit = information * np.outer(scale, scale)
+    values, vectors = np.linalg.eigh(0.5 * (unit + unit.T))
+    ratio = np.array([sigma_floor[0] / sigma_ceiling[0]] * 2 + [sigma_floor[1] / sigma_ceiling[1]])
+    lowest = float(np.min(ratio)) ** 2
+    values = np.clip(values, lowest, 1.0)
+    clipped = (vectors * values) @ vectors.T
+    return np.asarray(clipped / np.outer(scale, scale))

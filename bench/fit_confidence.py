@@ -1,0 +1,333 @@
+"""Fit and check the match confidence (issue 11): a logistic model of P(right) from evidence.
+
+Two steps, each its own command:
+
+    .venv/bin/python bench/fit_confidence.py collect [--logs intel aces ...] [--jobs 2]
+    .venv/bin/python bench/fit_confidence.py fit [--write] [--out bench_output/confidence]
+
+``collect`` matches scan pairs of every shared log with INTEGRATE (no guess, both scans'
+views) and stores each pair's evidence features, its kind and whether the match is right
+(within 0.30 m / 5 deg of the reference) in ``OUT/<log>.npz``. Pair kinds, so that the model
+sees what the mappers ask of it:
+
+- ``consecutive``: scan k and k+1 (the pair bench; on the dense freiburg-079, every 3rd k);
+- ``gap2``, ``gap3``: k and k+2, k+3 (a scan set aside in between; larger motions). On the
+  dense freiburg-079 the gaps are 5, 10 and 20 scans (0.5, 1 and 2 m: keyframe spacing);
+- ``revisit``: scans far apart in time whose reference poses are within 1.5 m and 60 deg
+  (what a loop closure matches);
+- ``unrelated``: scans whose reference poses are more than 15 m apart (no overlap: any
+  answer is wrong; an unrelated room must get a low confidence).
+
+``fit`` fits the model (L2-regularised logistic regression, scipy) on all logs but one and
+checks it on the one left out, in turn: log loss, Brier score, and precision / recall of
+"confidence >= threshold" for each use's threshold, on the consecutive pairs (the pair
+bench) and on all pairs. It draws the reliability diagram (predicted against observed
+success, in bins, every log left out in turn) and the precision/recall curves to
+``OUT/reliability.png`` and ``OUT/precision_recall.png``. ``--write`` writes the model fitted
+on every log into ``multi_robot_mapper/core/matching/confidence_model.py``.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import datetime  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import textwrap  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+from scipy.optimize import minimize  # noqa: E402
+
+from multi_robot_mapper.core import se2  # noqa: E402
+from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
+from multi_robot_mapper.core.matching import IntegrateConfig, integrate  # noqa: E402
+from multi_robot_mapper.core.matching.confidence import (  # noqa: E402
+    FEATURES,
+    LogisticModel,
+    MatchEvidence,
+    is_right,
+)
+from multi_robot_mapper.core.matching.integrate import match_evidence  # noqa: E402
+from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data" / "carmen"
+LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079", "edmonton")
+DENSE = ("freiburg-079",)
+MODEL_FILE = REPO / "multi_robot_mapper" / "core" / "matching" / "confidence_model.py"
+KINDS = ("consecutive", "gap2", "gap3", "revisit", "unrelated")
+RAW = 14  # numbers of MatchEvidence.as_array
+SAMPLES = 300  # revisit and unrelated pairs per log
+L2 = 1e-2  # regularisation of the logistic fit (per pair, on standardised features)
+
+
+def pairs_of(name: str, poses: np.ndarray, stamps: np.ndarray) -> list[tuple[str, int, int]]:
+    """Every (kind, i, j) pair of one log (deterministic)."""
+    n = len(poses)
+    rng = np.random.default_rng(7)
+    out: list[tuple[str, int, int]] = []
+    if name in DENSE:
+        steps = {"consecutive": (1, 3), "gap2": (5, 3), "gap3": (10, 3)}
+        for kind, (gap, every) in steps.items():
+            out += [(kind, k, k + gap) for k in range(0, n - gap, every)]
+    else:
+        for kind, gap in (("consecutive", 1), ("gap2", 2), ("gap3", 3)):
+            out += [(kind, k, k + gap) for k in range(n - gap)]
+    xy = poses[:, :2]
+    distance = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    turn = np.abs(se2.wrap_angle(poses[:, None, 2] - poses[None, :, 2]))
+    i, j = np.triu_indices(n, k=1)
+    apart = j - i > (100 if name in DENSE else 20)
+    revisit = np.flatnonzero(apart & (distance[i, j] < 1.5) & (turn[i, j] < np.radians(60)))
+    unrelated = np.flatnonzero(distance[i, j] > 15.0)
+    for kind, chosen in (("revisit", revisit), ("unrelated", unrelated)):
+        if chosen.size > SAMPLES:
+            chosen = rng.choice(chosen, SAMPLES, replace=False)
+        out += [(kind, int(i[c]), int(j[c])) for c in np.sort(chosen)]
+    return out
+
+
+def collect_log(name: str, out_dir: Path) -> str:
+    path = DATA / f"{name}.log.gz"
+    if not path.is_file():
+        return f"{name}: skipped, {path} not found"
+    started = time.perf_counter()
+    scans = list(read_carmen(path))
+    views = [carmen_scan_data(s) for s in scans]
+    segments = [extract_scan(v, ExtractionConfig())[0].segments for v in views]
+    poses = np.array([s.reference_pose for s in scans])
+    stamps = np.array([s.timestamp for s in scans])
+    config = IntegrateConfig()
+    rows, at_truth, kinds, right, times, errors = [], [], [], [], [], []
+    nothing = MatchEvidence.from_array(np.zeros(RAW))
+    for kind, i, j in pairs_of(name, poses, stamps):
+        t0 = time.perf_counter()
+        result = integrate(segments[i], segments[j], config, views=(views[i], views[j]))
+        times.append(time.perf_counter() - t0)
+        T_truth = se2.invert(se2.matrix_from_pose(*poses[i])) @ se2.matrix_from_pose(*poses[j])
+        ok = kind != "unrelated" and is_right(result.matrix, T_truth)
+        rows.append((result.evidence or nothing).as_array())
+        # The beams at the reference placement: where they contradict it far more than the
+        # match, the reference itself is wrong (reported, never used to relabel).
+        x, y, theta = se2.pose_from_matrix(T_truth)
+        truth = match_evidence(
+            segments[i],
+            segments[j],
+            np.array([theta, x, y]),
+            (views[i], views[j]),
+            config,
+            score=0.0,
+            rival_score=0.0,
+            support=0.0,
+            fraction=0.0,
+        )
+        at_truth.append(truth.as_array())
+        dx, dy, dth = se2.pose_from_matrix(se2.invert(T_truth) @ result.matrix)
+        kinds.append(KINDS.index(kind))
+        right.append(ok)
+        errors.append((np.hypot(dx, dy), abs(dth)))
+    np.savez_compressed(
+        out_dir / f"{name}.npz",
+        evidence=np.array(rows),
+        evidence_at_truth=np.array(at_truth),
+        kind=np.array(kinds),
+        right=np.array(right),
+        seconds=np.array(times),
+        error=np.array(errors),
+    )
+    return (
+        f"{name}: {len(rows)} pairs, right {np.mean(right):.3f}, "
+        f"{time.perf_counter() - started:.0f} s"
+    )
+
+
+def load(out_dir: Path, logs: list[str]) -> dict[str, dict[str, np.ndarray]]:
+    data = {}
+    for name in logs:
+        path = out_dir / f"{name}.npz"
+        if not path.is_file():
+            print(f"{name}: no {path}; run 'collect' first", file=sys.stderr)
+            continue
+        with np.load(path) as f:
+            entry = {k: f[k] for k in f.files}
+        entry["features"] = np.array(
+            [MatchEvidence.from_array(raw).features() for raw in entry["evidence"]]
+        )
+        data[name] = entry
+    return data
+
+
+def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = L2) -> LogisticModel:
+    """Maximum-likelihood logistic regression with an L2 penalty on standardised features."""
+    mean, scale = x.mean(axis=0), x.std(axis=0) + 1e-9
+    z = (x - mean) / scale
+    design = np.column_stack((np.ones(len(z)), z))
+
+    def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
+        logits = design @ w
+        p = 1.0 / (1.0 + np.exp(-logits))
+        nll = np.sum(np.logaddexp(0.0, logits) - y * logits)
+        penalty = 0.5 * l2 * len(y) * np.sum(w[1:] ** 2)
+        grad = design.T @ (p - y) + l2 * len(y) * np.concatenate(([0.0], w[1:]))
+        return float(nll + penalty), grad
+
+    w = minimize(loss, np.zeros(design.shape[1]), jac=True, method="L-BFGS-B").x
+    weights = w[1:] / scale
+    return LogisticModel(float(w[0] - np.dot(weights, mean)), weights)
+
+
+def precision_recall(p: np.ndarray, y: np.ndarray, threshold: float) -> tuple[float, float]:
+    accepted = p >= threshold
+    precision = float(y[accepted].mean()) if accepted.any() else float("nan")
+    recall = float(accepted[y].mean()) if y.any() else float("nan")
+    return precision, recall
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("step", choices=("collect", "fit"))
+    parser.add_argument("--logs", nargs="+", default=list(LOGS))
+    parser.add_argument("--out", type=Path, default=REPO / "bench_output" / "confidence")
+    parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--write", action="store_true", help="write the model fitted on all logs")
+    parser.add_argument(
+        "--thresholds",
+        type=float,
+        nargs="+",
+        default=[0.5, 0.8, 0.9, 0.95, 0.98],
+        help="thresholds reported",
+    )
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    if args.step == "collect":
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            for line in pool.map(collect_log, args.logs, [args.out] * len(args.logs)):
+                print(line, flush=True)
+        return
+    data = load(args.out, args.logs)
+    report: dict[str, object] = {}
+    held_out_p: dict[str, np.ndarray] = {}
+    for name in data:
+        train = [d for n, d in data.items() if n != name]
+        x = np.vstack([d["features"] for d in train])
+        y = np.concatenate([d["right"] for d in train]).astype(float)
+        model = fit_logistic(x, y)
+        test = data[name]
+        p = model.probability(test["features"])
+        held_out_p[name] = p
+        yt = test["right"].astype(bool)
+        consecutive = test["kind"] == KINDS.index("consecutive")
+        loss = float(np.mean(np.logaddexp(0.0, -np.where(yt, 1, -1) * np.log(p / (1 - p)))))
+        entry: dict[str, object] = {
+            "pairs": len(yt),
+            "right": float(yt.mean()),
+            "consecutive_right": float(yt[consecutive].mean()),
+            "log_loss": loss,
+            "brier": float(np.mean((p - yt) ** 2)),
+        }
+        for threshold in args.thresholds:
+            pc, rc = precision_recall(p[consecutive], yt[consecutive], threshold)
+            pa, ra = precision_recall(p, yt, threshold)
+            entry[f"t{threshold}"] = {
+                "consecutive_precision": pc,
+                "consecutive_recall": rc,
+                "all_precision": pa,
+                "all_recall": ra,
+            }
+        report[name] = entry
+        print(f"{name} (held out): {json.dumps(entry)}", flush=True)
+    (args.out / "cross_validation.json").write_text(json.dumps(report, indent=1) + "\n")
+    draw(data, held_out_p, args.out)
+    if args.write:
+        x = np.vstack([d["features"] for d in data.values()])
+        y = np.concatenate([d["right"] for d in data.values()]).astype(float)
+        write_model(fit_logistic(x, y), list(data), len(y))
+        print(f"wrote {MODEL_FILE.relative_to(REPO)}")
+
+
+def draw(
+    data: dict[str, dict[str, np.ndarray]], held_out: dict[str, np.ndarray], out: Path
+) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    bins = np.linspace(0.0, 1.0, 11)
+    fig, ax = plt.subplots(figsize=(6, 6))
+    ax.plot([0, 1], [0, 1], "k:", lw=1, label="perfect calibration")
+    for name, p in held_out.items():
+        y = data[name]["right"].astype(float)
+        which = np.clip(np.digitize(p, bins) - 1, 0, len(bins) - 2)
+        centres, observed, sizes = [], [], []
+        for b in range(len(bins) - 1):
+            inside = which == b
+            if inside.sum() >= 5:
+                centres.append(p[inside].mean())
+                observed.append(y[inside].mean())
+                sizes.append(inside.sum())
+        ax.plot(centres, observed, "o-", ms=3, label=f"{name} (held out)")
+    ax.set_xlabel("predicted P(right)")
+    ax.set_ylabel("observed fraction right")
+    ax.set_title("Match confidence: reliability, each log left out of the fit")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.savefig(out / "reliability.png", dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(6, 5))
+    for name, p in held_out.items():
+        y = data[name]["right"].astype(bool)
+        order = np.argsort(-p)
+        hits = np.cumsum(y[order])
+        precision = hits / np.arange(1, len(y) + 1)
+        recall = hits / max(y.sum(), 1)
+        ax.plot(recall, precision, label=name)
+    ax.set_xlabel("recall (right matches accepted)")
+    ax.set_ylabel("precision (accepted matches right)")
+    ax.set_ylim(0.8, 1.001)
+    ax.set_title("Match confidence: precision / recall, all pair kinds, held out")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.savefig(out / "precision_recall.png", dpi=120, bbox_inches="tight")
+    plt.close(fig)
+
+
+def write_model(model: LogisticModel, logs: list[str], pairs: int) -> None:
+    weights = "".join(f"    {w:.6g},\n" for w in model.weights)
+    names = "".join(f'    "{n}",\n' for n in FEATURES)
+    day = datetime.date.today().isoformat()
+    provenance = textwrap.fill(
+        f"Fitted on {day} on {pairs} scan pairs of {', '.join(logs)} (kinds: "
+        f"{', '.join(KINDS)}): ``.venv/bin/python bench/fit_confidence.py collect && "
+        f".venv/bin/python bench/fit_confidence.py fit --write``. Calibration checked leaving "
+        f"each log out in turn (README, 'Match confidence').",
+        width=95,
+    )
+    MODEL_FILE.write_text(
+        '''"""The fitted match-confidence model. Generated by ``bench/fit_confidence.py``: do not
+edit.
+
+'''
+        + provenance
+        + f'''
+"""
+
+SCAN_FEATURES = (
+{names})
+SCAN_INTERCEPT = {model.intercept:.6g}
+SCAN_WEIGHTS = (
+{weights})
+'''
+    )
+
+
+if __name__ == "__main__":
+    main()

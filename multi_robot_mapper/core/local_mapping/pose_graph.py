@@ -1,0 +1,197 @@
+"""The keyframe pose graph: the one module that talks to gtsam.
+
+Nodes are keyframes, each an SE(2) pose ``(x, y, theta)`` in its piece's frame; edges are
+relative poses ``T_first_second`` measured by scan matching, with an information matrix from
+the match itself (:func:`core.matching.refine.match_information`). Edges between keyframes
+far apart in time (loop closures, joins between pieces) carry a robust kernel (Cauchy), so
+one wrong closure that got past the checks pulls with a bounded force. Every piece (a part of
+the map started when the robot was lost) has a prior on its first keyframe: pieces float
+freely until a closure joins them (:meth:`PoseGraph.join`).
+
+Optimisation is incremental (ISAM2: a new keyframe or closure costs milliseconds, not a batch
+solve of the whole graph); joining pieces moves a whole piece into another's frame and
+rebuilds the solver from the stored edges. The rest of core sees numpy arrays only:
+``(x, y, theta)`` triples and 3x3 information matrices in gtsam's Pose2 tangent order
+``(x, y, theta)``, expressed in the ``second`` keyframe's frame (gtsam's ``between`` error).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+
+FloatArray = NDArray[np.float64]
+Pose = tuple[float, float, float]
+
+# The prior that holds each piece's first keyframe where it is: 1 mm, 0.006 degrees.
+_ANCHOR_SIGMAS = np.array([1e-3, 1e-3, 1e-4])
+
+
+@dataclasses.dataclass(frozen=True)
+class Edge:
+    """A measured relative pose between two keyframes."""
+
+    first: int
+    second: int
+    T_first_second: Pose  # x, y, theta
+    information: FloatArray  # (3, 3), Pose2 tangent order (x, y, theta)
+    robust: bool  # loop closures and joins: Cauchy kernel
+
+
+class PoseGraph:
+    """Keyframe poses optimised with gtsam's ISAM2."""
+
+    def __init__(self, robust_scale: float = 1.0) -> None:
+        self.robust_scale = robust_scale
+        self.edges: dict[int, Edge] = {}  # edge id -> edge
+        self._anchors: dict[int, Pose] = {}  # key -> prior pose (each piece's first keyframe)
+        self._estimate: dict[int, Pose] = {}
+        self._factor_index: dict[int, int] = {}  # edge id -> ISAM2 factor index
+        self._next_edge = 0
+        self._isam = gtsam.ISAM2(self._params())
+        self._new_factors = gtsam.NonlinearFactorGraph()
+        self._new_values = gtsam.Values()
+        self._pending_anchors: list[int] = []  # keys whose prior leads _new_factors
+        self._pending_edges: list[int] = []  # edge ids in _new_factors after them, in order
+        self._removed: list[int] = []  # ISAM2 factor indices to remove at the next update
+
+    @staticmethod
+    def _params() -> gtsam.ISAM2Params:
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(0.01)
+        params.relinearizeSkip = 1
+        return params
+
+    def __contains__(self, key: int) -> bool:
+        return key in self._estimate
+
+    def __len__(self) -> int:
+        return len(self._estimate)
+
+    # --- building ---------------------------------------------------------------------------
+
+    def add_node(self, key: int, pose: Pose, anchored: bool = False) -> None:
+        """A keyframe at its initial ``pose``; ``anchored`` for the first keyframe of a piece."""
+        if key in self._estimate:
+            raise ValueError(f"keyframe {key} is already in the graph")
+        self._estimate[key] = pose
+        self._new_values.insert(key, gtsam.Pose2(*pose))
+        if anchored:
+            self._anchors[key] = pose
+            self._pending_anchors.append(key)
+            self._batch()
+
+    def add_edge(self, edge: Edge) -> int:
+        """Add a measured relative pose; returns its id (for :meth:`remove_edge`)."""
+        for key in (edge.first, edge.second):
+            if key not in self._estimate:
+                raise ValueError(f"edge to keyframe {key}, which is not in the graph")
+        edge_id = self._next_edge
+        self._next_edge += 1
+        self.edges[edge_id] = edge
+        self._pending_edges.append(edge_id)
+        self._new_factors.push_back(self._factor(edge))
+        return edge_id
+
+    def remove_edge(self, edge_id: int) -> None:
+        """Drop an edge (a closure found wrong); takes effect at the next :meth:`optimize`."""
+        del self.edges[edge_id]
+        index = self._factor_index.pop(edge_id, None)
+        if index is not None:
+            self._removed.append(index)
+        else:  # never reached the solver
+            self._pending_edges.remove(edge_id)
+            self._batch()
+
+    def _batch(self) -> None:
+        """The factors not yet given to the solver: anchors first, then edges (the order
+        :meth:`optimize` reads their solver indices in)."""
+        factors = gtsam.NonlinearFactorGraph()
+        for key in self._pending_anchors:
+            factors.push_back(self._anchor_factor(key, self._anchors[key]))
+        for edge_id in self._pending_edges:
+            factors.push_back(self._factor(self.edges[edge_id]))
+        self._new_factors = factors
+
+    def _anchor_factor(self, key: int, pose: Pose) -> gtsam.PriorFactorPose2:
+        return gtsam.PriorFactorPose2(
+            key, gtsam.Pose2(*pose), gtsam.noiseModel.Diagonal.Sigmas(_ANCHOR_SIGMAS)
+        )
+
+    def _factor(self, edge: Edge) -> gtsam.BetweenFactorPose2:
+        information = 0.5 * (edge.information + edge.information.T)
+        noise: gtsam.noiseModel.Base = gtsam.noiseModel.Gaussian.Information(information)
+        if edge.robust:
+            kernel = gtsam.noiseModel.mEstimator.Cauchy.Create(self.robust_scale)
+            noise = gtsam.noiseModel.Robust.Create(kernel, noise)
+        return gtsam.BetweenFactorPose2(
+            edge.first, edge.second, gtsam.Pose2(*edge.T_first_second), noise
+        )
+
+    # --- solving ----------------------------------------------------------------------------
+
+    def optimize(self, iterations: int = 1) -> None:
+        """Bring the estimate up to date with every node and edge added since the last call
+        (ISAM2: one incremental step, plus ``iterations - 1`` relinearising steps)."""
+        result = self._isam.update(self._new_factors, self._new_values, self._removed)
+        indices = result.getNewFactorsIndices()
+        # New factors get their indices in insertion order: the anchors first, then the edges.
+        offset = len(self._pending_anchors)
+        for position, edge_id in enumerate(self._pending_edges):
+            self._factor_index[edge_id] = int(indices[offset + position])
+        for _ in range(iterations - 1):
+            self._isam.update()
+        self._new_factors = gtsam.NonlinearFactorGraph()
+        self._new_values = gtsam.Values()
+        self._pending_edges, self._pending_anchors, self._removed = [], [], []
+        values = self._isam.calculateEstimate()
+        for key in self._estimate:
+            pose = values.atPose2(key)
+            self._estimate[key] = (float(pose.x()), float(pose.y()), float(pose.theta()))
+
+    def pose(self, key: int) -> Pose:
+        """The keyframe's current estimate (as of the last :meth:`optimize`, or as added)."""
+        return self._estimate[key]
+
+    def poses(self) -> dict[int, Pose]:
+        return dict(self._estimate)
+
+    def covariance(self, key: int) -> FloatArray:
+        """Marginal covariance (3x3, Pose2 tangent order) of an optimised keyframe."""
+        return np.asarray(self._isam.marginalCovariance(key), dtype=np.float64)
+
+    def edge_error(self, edge_id: int) -> float:
+        """Squared Mahalanobis distance of an edge's measurement at the current estimate."""
+        edge = self.edges[edge_id]
+        T_first = se2.matrix_from_pose(*self._estimate[edge.first])
+        T_second = se2.matrix_from_pose(*self._estimate[edge.second])
+        T_measured = se2.matrix_from_pose(*edge.T_first_second)
+        residual = se2.invert(T_measured) @ se2.invert(T_first) @ T_second
+        local = np.asarray(gtsam.Pose2.Logmap(gtsam.Pose2(*se2.pose_from_matrix(residual))))
+        return float(local @ edge.information @ local)
+
+    # --- pieces -----------------------------------------------------------------------------
+
+    def join(self, moved: list[int], T_kept_moved: FloatArray, dropped_anchor: int) -> None:
+        """Express the keyframes ``moved`` (a whole piece) in another piece's frame:
+        ``T_kept_moved`` (3x3) maps the moved piece's frame into the kept one. The moved
+        piece's anchor is dropped (the joining edge holds it now); the solver is rebuilt from
+        the stored edges with the moved estimates."""
+        for key in moved:
+            T = T_kept_moved @ se2.matrix_from_pose(*self._estimate[key])
+            self._estimate[key] = se2.pose_from_matrix(T)
+        self._anchors.pop(dropped_anchor, None)
+        self._isam = gtsam.ISAM2(self._params())
+        self._factor_index.clear()
+        self._removed = []
+        self._new_values = gtsam.Values()
+        for key, pose in self._estimate.items():
+            self._new_values.insert(key, gtsam.Pose2(*pose))
+        self._pending_anchors = list(self._anchors)
+        self._pending_edges = list(self.edges)
+        self._batch()

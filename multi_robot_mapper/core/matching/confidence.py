@@ -1,0 +1,167 @@
+"""Match confidence: the probability that a match is right (within 0.30 m and 5 degrees).
+
+INTEGRATE's value (overlap length of matching segments) says how much two segment sets agree
+under the best transformation, not whether the transformation is right: in clutter most
+returns make no segment, in corridors a wrong offset overlaps as much as the right one, and a
+small overlap is often the true one. The confidence combines evidence that holds in those
+cases too, each a number with a meaning:
+
+- **beam agreement** (:func:`beam_agreement`): every return of one scan tested against the
+  other scan's beams, both ways. A return where the other's beam ended is *confirmed*; one
+  lying where the other's beam passed on is *seen through* (a contradiction: the other laser
+  saw free space there); one behind what the other saw is *occluded*; one outside its field
+  of view or range is *outside* (neither for nor against). Clusters too small for a segment
+  (chairs, table legs, people) are returns like any other, so a cluttered hall keeps its
+  evidence;
+- **possible overlap**: the share of both scans that the other could have seen at all
+  (confirmed + seen through), given both fields of view and what occludes them;
+- **uniqueness**: the net score of the best placement against that of the best *rival*, a
+  distinct placement more than the correctness tolerance away (a corridor that fits twice);
+- **spread of the fit**: the matched length across the least constrained direction (the
+  smallest eigenvalue of the point-to-line information, :func:`scoring.information`): zero in
+  a bare corridor, whose offset along the walls nothing fixes.
+
+A logistic model turns them into a probability. Its weights are fitted on the shared logs by
+``bench/fit_confidence.py`` (leave one log out to check calibration) and written, with the
+command and data they came from, into :mod:`confidence_model` (a generated module); the
+thresholds that decide each use (integrate a scan, close a loop, link two robots) are in the
+configs of those stages, chosen from the precision/recall curve (README).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.matching import confidence_model
+from multi_robot_mapper.core.matching.beams import BeamAgreement
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+# A match is right when it is within these of the truth: what the confidence estimates.
+RIGHT_DISTANCE = 0.30  # m
+RIGHT_ANGLE = float(np.radians(5.0))
+
+
+@dataclasses.dataclass(frozen=True)
+class MatchEvidence:
+    """Everything the confidence is computed from (lengths in metres)."""
+
+    second_in_first: BeamAgreement  # S2's returns judged by S1's beams
+    first_in_second: BeamAgreement  # S1's returns judged by S2's beams
+    score: float  # INTEGRATE's net score of the chosen placement
+    rival_score: float  # net score of the best distinct rival placement (0: none)
+    support: float  # matched length across the least constrained direction
+    fraction: float  # INTEGRATE's net value / shorter set's segment length
+
+    def as_array(self) -> FloatArray:
+        """The raw evidence as 14 numbers (:meth:`from_array` inverts it): what the fitting
+        script stores, so that features can change without matching again."""
+        return np.concatenate(
+            (
+                self.second_in_first.as_array(),
+                self.first_in_second.as_array(),
+                [self.score, self.rival_score, self.support, self.fraction],
+            )
+        )
+
+    @staticmethod
+    def from_array(raw: FloatArray) -> MatchEvidence:
+        return MatchEvidence(
+            BeamAgreement(*(float(v) for v in raw[0:5])),
+            BeamAgreement(*(float(v) for v in raw[5:10])),
+            *(float(v) for v in raw[10:14]),
+        )
+
+    def features(self) -> FloatArray:
+        """The model's inputs, each bounded and of one meaning (see :data:`FEATURES`)."""
+        both = self.second_in_first + self.first_in_second
+        confirmed = np.log1p(both.confirmed)
+        score, rival = max(self.score, 0.0), max(self.rival_score, 0.0)
+        uniqueness = (score - rival) / score if score > 0.0 else 0.0
+        support = np.log1p(max(self.support, 0.0))
+        sides = (self.second_in_first, self.first_in_second)
+        return np.array(
+            [
+                _agreement(both),
+                confirmed,
+                _possible(both),
+                both.seen_through / both.total if both.total > 0.0 else 0.0,
+                uniqueness,
+                support,
+                float(np.clip(self.fraction, -1.0, 1.0)),
+                float(np.clip(np.log(max(score, 1e-3) / max(rival, 1e-3)), -3.0, 3.0)),
+                min(_agreement(side) for side in sides),
+                min(_possible(side) for side in sides),
+                uniqueness * confirmed,
+                support * confirmed,
+            ]
+        )
+
+
+def _agreement(agreement: BeamAgreement) -> float:
+    """Confirmed / (confirmed + seen through): how the other side's beams judge what they
+    could see."""
+    judged = agreement.confirmed + agreement.seen_through
+    return agreement.confirmed / judged if judged > 0.0 else 0.0
+
+
+def _possible(agreement: BeamAgreement) -> float:
+    """(Confirmed + seen through) / all: the share the other side could see at all."""
+    judged = agreement.confirmed + agreement.seen_through
+    return judged / agreement.total if agreement.total > 0.0 else 0.0
+
+
+FEATURES = (
+    "agreement",  # confirmed / (confirmed + seen through), both sides
+    "log_confirmed",  # log(1 + metres confirmed)
+    "possible_overlap",  # (confirmed + seen through) / all returns
+    "seen_through_share",  # seen through / all returns
+    "uniqueness",  # (score - rival) / score
+    "log_support",  # log(1 + cross support in metres)
+    "fraction",  # INTEGRATE's net fraction
+    "log_score_ratio",  # log(score / rival), within +-3
+    "weaker_agreement",  # the lower agreement of the two sides
+    "weaker_overlap",  # the lower possible overlap of the two sides
+    "uniqueness_x_log_confirmed",  # a tie is suspect however much agrees
+    "log_support_x_log_confirmed",  # a corridor is suspect however much agrees
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class LogisticModel:
+    """P(right) = 1 / (1 + exp(-(intercept + weights . features)))."""
+
+    intercept: float
+    weights: FloatArray
+
+    def probability(self, features: FloatArray) -> FloatArray:
+        """P(right) of each row of ``features`` (or of one feature vector)."""
+        z = self.intercept + np.asarray(features, dtype=np.float64) @ self.weights
+        return np.asarray(1.0 / (1.0 + np.exp(-np.clip(z, -50.0, 50.0))))
+
+
+if tuple(confidence_model.SCAN_FEATURES) != FEATURES:  # pragma: no cover - a stale fit
+    raise ImportError(
+        "core/matching/confidence_model.py was fitted on other features; "
+        "re-run bench/fit_confidence.py"
+    )
+SCAN_MODEL = LogisticModel(
+    confidence_model.SCAN_INTERCEPT, np.asarray(confidence_model.SCAN_WEIGHTS, dtype=np.float64)
+)
+
+
+def confidence(features: FloatArray, model: LogisticModel | None = None) -> float:
+    """P(right) of a match with these :meth:`MatchEvidence.features` (the fitted model unless
+    ``model`` is given)."""
+    return float((SCAN_MODEL if model is None else model).probability(features))
+
+
+def is_right(T_estimate: FloatArray, T_truth: FloatArray) -> bool:
+    """Is an estimated ``T_a_b`` (3x3) within the correctness tolerance of the truth?"""
+    dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_truth) @ T_estimate)
+    return bool(np.hypot(dx, dy) < RIGHT_DISTANCE and abs(dtheta) < RIGHT_ANGLE)
