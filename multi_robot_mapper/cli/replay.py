@@ -8,6 +8,7 @@ writes DIR/map.json, map.svg, map.png, trajectories/<robot>.tum, robots.json and
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,12 @@ def register(subparsers: Any) -> None:
     add_overwrite_option(parser)
     parser.add_argument("--method", choices=METHODS, default="local")
     parser.add_argument("--scan-topics", default="/*/scan", help="topic pattern (fnmatch)")
+    parser.add_argument(
+        "--salvage",
+        action="store_true",
+        help="read every intact chunk of a damaged or cut MCAP bag (damaged chunks are skipped "
+        "and counted; the exit code is then 1)",
+    )
     add_config_options(parser, merging=True)
     parser.set_defaults(func=run)
 
@@ -44,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
         run_offline,
     )
     from multi_robot_mapper.io import pictures
-    from multi_robot_mapper.io.bags import read_recordings, reference_poses
+    from multi_robot_mapper.io.bags import ReadReport, read_recordings, reference_poses
     from multi_robot_mapper.io.outputs import staged_folder
     from multi_robot_mapper.io.results import ReplayResult, write_results
 
@@ -55,7 +62,10 @@ def run(args: argparse.Namespace) -> int:
         require_method(args.method)  # before reading a large bag
     except MethodNotImplementedError as exc:
         raise CliError(str(exc)) from exc
-    recordings = read_recordings(args.bag, scan_pattern=args.scan_topics)
+    report = ReadReport()
+    recordings = read_recordings(
+        args.bag, scan_pattern=args.scan_topics, salvage=args.salvage, report=report
+    )
     inputs: dict[str, Sequence[TimedLaserScan]] = {}
     for name, rec in recordings.items():
         stamps = np.array([s.stamp for s in rec.scans], dtype=np.float64)
@@ -108,4 +118,6 @@ def run(args: argparse.Namespace) -> int:
         f"({offline.stats['scans_posed']} posed), {len(offline.map_segments)} map segments, "
         f"{offline.stats['total_s']} s -> {out}"
     )
-    return 0
+    for note in report.notes:  # replayed, but not all of the bag: said, and exit code 1
+        print(f"mrm replay: warning: {note}", file=sys.stderr)
+    return 1 if report.notes else 0

@@ -37,6 +37,32 @@ class RobotMapperConfig:
         minimum=0.05,
         maximum=3600.0,
     )
+    scan_max_queue_delay: float = param(
+        0.5,
+        unit="s",
+        doc="a scan that waited longer than this in the subscription's queue is dropped "
+        "(counted) so that the newest scans are mapped: the latency stays bounded when scans "
+        "come faster than they can be mapped",
+        minimum=0.01,
+        maximum=60.0,
+    )
+    stamp_reset_jump: float = param(
+        5.0,
+        unit="s",
+        doc="a scan stamped further back than this from the last one (a bag played again, a "
+        "clock reset) starts the robot's map over; a smaller step back is a stale scan, "
+        "dropped, and a repeated stamp a duplicate, dropped",
+        minimum=0.01,
+        maximum=1e6,
+    )
+    max_stamp_lead: float = param(
+        10.0,
+        unit="s",
+        doc="a scan stamped further ahead of this node's clock is dropped (a robot clock far "
+        "off, a corrupt stamp); not checked while a simulated clock has not started",
+        minimum=0.0,
+        maximum=1e6,
+    )
     map_frame: str = param(
         "",
         unit="",

@@ -71,6 +71,30 @@ class MapMergerConfig:
         minimum=0.0,
         maximum=3600.0,
     )
+    max_keyframes_per_map: int = param(
+        50_000,
+        unit="keyframes",
+        doc="a partial map with more keyframe markers is refused before it is read (a robot "
+        "keeps its last good map)",
+        minimum=1,
+        maximum=10_000_000,
+    )
+    max_segments_per_map: int = param(
+        200_000,
+        unit="segments",
+        doc="a partial map with more segments (line-list point pairs) is refused before it is read",
+        minimum=1,
+        maximum=10_000_000,
+    )
+    max_map_extent: float = param(
+        200.0,
+        unit="m",
+        doc="a partial map (or pose) reaching farther from its robot's map origin is refused: "
+        "the map correlation's memory grows with the square of the extent (two 300-segment "
+        "maps reaching 200 m from their origins: 0.8 GB and 13 s on one core)",
+        minimum=1.0,
+        maximum=100_000.0,
+    )
     merge: MergeConfig = dataclasses.field(default_factory=MergeConfig)
 
     def __post_init__(self) -> None:

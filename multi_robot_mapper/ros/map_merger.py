@@ -57,13 +57,18 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError, config_from_flat, field_specs
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeResult, merge
+from multi_robot_mapper.io.inputs import (
+    InputError,
+    MapLimits,
+    partial_map_from_msg,
+    pose_from_checked_msg,
+)
 from multi_robot_mapper.io.messages import (
-    keyframes_from_markers,
-    pose_from_msg,
     pose_msg,
     pose_stamped,
     segments_marker,
 )
+from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
 from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.parameters import declare_config
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
@@ -113,20 +118,6 @@ def newest(stamps: list[Time]) -> Time:
     return max(stamps, key=_key) if stamps else Time()
 
 
-def partial_map_contents(msg: MarkerArray) -> tuple[FloatArray, FloatArray]:
-    """A ``partial_map`` MarkerArray as ``(N, 4)`` segments in the robot's map frame (each
-    keyframe's segments moved by the keyframe's pose) and the ``(K, 3)`` keyframe poses: where
-    the robot's laser stood, the viewpoints of its free space."""
-    keyframes = keyframes_from_markers(msg)
-    pieces = [
-        se2.transform_segments(se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments)
-        for kf in keyframes
-        if len(kf.segments)
-    ]
-    poses = np.array([kf.T_robotmap_keyframe for kf in keyframes], dtype=np.float64)
-    return (np.vstack(pieces) if pieces else np.zeros((0, 4))), poses.reshape(-1, 3)
-
-
 @dataclasses.dataclass
 class RobotState:
     """What the merger knows of one robot (guarded by the node's lock)."""
@@ -151,6 +142,10 @@ class MapMerger(Node):
         self.config.require_implemented()
         self.notes = ThrottledWarnings(self.get_logger().info, self.config.warning_period)
         self.warnings = ThrottledWarnings(self.get_logger().warning, self.config.warning_period)
+        # A robot's bad input is rejected (counted per robot and reason, a throttled warning
+        # naming robot and field, its last good map kept); no error escapes a callback.
+        self.rejections = Rejections(self.warnings)
+        self.guard = CallbackGuard(self.warnings)
         self._lock = threading.Lock()
         self.robots: dict[str, RobotState] = {}
         self.result: MergeResult | None = None
@@ -158,6 +153,10 @@ class MapMerger(Node):
         self.merge_errors = 0
         self.global_maps_published = 0
         self._merged_versions: dict[str, int] = {}  # partial map versions of the last merge
+        # Each robot's map as the last successful merge used it: what a robot whose new map
+        # makes the merge fail falls back to.
+        self._merged_inputs: dict[str, tuple[FloatArray, FloatArray]] = {}
+        self._culprits: set[str] = set()  # robots set back by the last failed merge
         self._worker: ProcessPoolExecutor | None = None  # started on the first merge
         self._shown: tuple[object, ...] | None = None  # what the last global_map showed
         self._input_groups = MutuallyExclusiveCallbackGroup()
@@ -167,10 +166,14 @@ class MapMerger(Node):
         self._tf = StaticTransformBroadcaster(self) if StaticTransformBroadcaster else None
         self._transforms: dict[str, TransformStamped] = {}
         self._discovery_timer = self.create_timer(
-            self.config.discovery_period, self.discover, callback_group=self._input_groups
+            self.config.discovery_period,
+            self.guard("discover", self.discover),
+            callback_group=self._input_groups,
         )
         self._merge_timer = self.create_timer(
-            self.config.merge_period, self.merge_now, callback_group=self._merge_group
+            self.config.merge_period,
+            self.guard("merge", self.merge_now),
+            callback_group=self._merge_group,
         )
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.discover()
@@ -201,41 +204,46 @@ class MapMerger(Node):
             self.create_subscription(
                 MarkerArray,
                 f"/{name}/partial_map",
-                lambda msg, n=name: self._on_partial_map(n, msg),
+                self.guard(f"{name}/partial_map", lambda msg, n=name: self._on_partial_map(n, msg)),
                 LATCHED_QOS,
                 callback_group=self._input_groups,
             ),
             self.create_subscription(
                 PoseStamped,
                 f"/{name}/pose",
-                lambda msg, n=name: self._on_pose(n, msg),
+                self.guard(f"{name}/pose", lambda msg, n=name: self._on_pose(n, msg)),
                 POSE_QOS,
                 callback_group=self._input_groups,
             ),
         ]
         self.get_logger().info(f"merging robot '{name}' (/{name}/partial_map)")
 
+    def _limits(self) -> MapLimits:
+        config = self.config
+        return MapLimits(
+            config.max_keyframes_per_map, config.max_segments_per_map, config.max_map_extent
+        )
+
     def _on_partial_map(self, name: str, msg: MarkerArray) -> None:
         try:
-            segments, keyframe_poses = partial_map_contents(msg)
-        except Exception:
-            self.warnings.warn(
-                f"bad_map:{name}",
-                f"partial map of '{name}' ignored after an error:\n{traceback.format_exc()}",
-            )
+            received = partial_map_from_msg(msg, self._limits())
+        except InputError as exc:  # the robot's last good map stays
+            self.rejections.reject(name, exc.kind, exc.field, exc.message, "partial map")
             return
-        markers = msg.markers
-        stamp = newest([m.header.stamp for m in markers]) if markers else None
         with self._lock:
             state = self.robots[name]
-            state.segments = segments
-            state.keyframe_poses = keyframe_poses
-            state.map_stamp = stamp
-            state.map_frame = markers[0].header.frame_id if markers else state.map_frame
+            state.segments = received.segments
+            state.keyframe_poses = received.keyframe_poses
+            state.map_stamp = received.stamp
+            state.map_frame = received.frame_id
             state.version += 1
 
     def _on_pose(self, name: str, msg: PoseStamped) -> None:
-        pose = pose_from_msg(msg.pose)
+        try:
+            pose = pose_from_checked_msg(msg.pose, self.config.max_map_extent)
+        except InputError as exc:
+            self.rejections.reject(name, exc.kind, exc.field, exc.message, "pose")
+            return
         with self._lock:
             state = self.robots[name]
             state.pose = pose
@@ -274,7 +282,10 @@ class MapMerger(Node):
                     "merge_error",
                     f"merge failed (the last global map stays):\n{traceback.format_exc()}",
                 )
-                return False
+                if not self._merge_without_new_maps(maps, viewpoints, versions, config):
+                    return False
+            else:
+                self._merged_inputs = {n: (maps[n], viewpoints[n]) for n in maps}
             self._merged_versions = versions
             self.merges += 1
             merged = True
@@ -298,6 +309,54 @@ class MapMerger(Node):
                 f"'{result.reference}' yet (nothing published for it)",
             )
         return merged
+
+    def _merge_without_new_maps(
+        self,
+        maps: dict[str, FloatArray],
+        viewpoints: dict[str, FloatArray],
+        versions: dict[str, int],
+        config: MapMergerConfig,
+    ) -> bool:
+        """After a failed merge, merge again with one robot whose map changed since the last
+        good merge set back to its previous map (or left out), the robot that failed before
+        first; failing that, with every changed robot set back. One robot's map that the merge
+        cannot take must not stop the others: the robots set back are rejected (reason
+        ``merge_error``) until they send a new map. True when a merge succeeded."""
+        changed = [n for n in maps if versions[n] != self._merged_versions.get(n)]
+        changed.sort(key=lambda n: n not in self._culprits)
+        trials = [[name] for name in changed] if len(changed) > 1 else []
+        trials.append(changed)
+        for set_back in trials:
+            kept = {n: (maps[n], viewpoints[n]) for n in maps if n not in set_back}
+            kept.update({n: self._merged_inputs[n] for n in set_back if n in self._merged_inputs})
+            if not kept:
+                continue
+            try:
+                self.result = self._merge(
+                    {n: m for n, (m, _) in kept.items()},
+                    {n: v for n, (_, v) in kept.items()},
+                    config,
+                )
+            except Exception:
+                continue
+            self._culprits = set(set_back)
+            for name in set_back:
+                self.rejections.reject(
+                    name,
+                    "merge_error",
+                    "partial_map",
+                    "the merge failed with this robot's new map; its last good map is merged "
+                    "instead until it sends another",
+                    "partial map",
+                )
+                with self._lock:  # the map the merge took stays this robot's map
+                    state = self.robots[name]
+                    state.segments, state.keyframe_poses = kept.get(
+                        name, (np.zeros((0, 4)), np.zeros((0, 3)))
+                    )
+            self._merged_inputs = kept
+            return True
+        return False
 
     def _merge(
         self,
@@ -415,9 +474,11 @@ class MapMerger(Node):
         try:
             config = config_from_flat(MapMergerConfig, values)
             config.require_implemented()
+            self._apply_config(config)
         except ConfigError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        self._apply_config(config)
+        except Exception as exc:  # never into the executor
+            return SetParametersResult(successful=False, reason=f"not applied: {exc}")
         return SetParametersResult(successful=True)
 
     def _apply_config(self, config: MapMergerConfig) -> None:
@@ -427,12 +488,16 @@ class MapMerger(Node):
         if config.discovery_period != old.discovery_period:
             self.destroy_timer(self._discovery_timer)
             self._discovery_timer = self.create_timer(
-                config.discovery_period, self.discover, callback_group=self._input_groups
+                config.discovery_period,
+                self.guard("discover", self.discover),
+                callback_group=self._input_groups,
             )
         if config.merge_period != old.merge_period:
             self.destroy_timer(self._merge_timer)
             self._merge_timer = self.create_timer(
-                config.merge_period, self.merge_now, callback_group=self._merge_group
+                config.merge_period,
+                self.guard("merge", self.merge_now),
+                callback_group=self._merge_group,
             )
         if config.merge != old.merge:
             self._merged_versions = {}  # merge again with the new settings

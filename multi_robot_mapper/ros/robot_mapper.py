@@ -17,7 +17,10 @@ Parameters: the fields of :class:`RobotMapperConfig` (``config/robot_mapper.yaml
 from __future__ import annotations
 
 import sys
+import time
 import traceback
+from collections import Counter
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -37,6 +40,7 @@ from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalUpdate
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import ScanError
+from multi_robot_mapper.io.inputs import ScanStampGate
 from multi_robot_mapper.io.messages import (
     keyframe_marker,
     pose_stamped,
@@ -45,9 +49,14 @@ from multi_robot_mapper.io.messages import (
     segments_marker,
     stamp_from_seconds,
 )
+from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
 from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.parameters import declare_config, on_config_change
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
+
+# Notices about the laser itself (it is mounted upside down, its intensities are of another
+# length): one warning, then only counted.
+_ONCE = frozenset({"negative_increment", "intensities_length"})
 
 POSE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 PARTIAL_MAP_QOS = QoSProfile(
@@ -70,9 +79,20 @@ class RobotMapper(Node):
         super().__init__(node_name, **kwargs)  # type: ignore[arg-type]
         self.config = declare_config(self, RobotMapperConfig)
         self.warnings = ThrottledWarnings(self.get_logger().warning, self.config.warning_period)
+        self.robot = self.get_namespace().strip("/") or self.get_name()
+        # Bad input is rejected (counted per reason, throttled warning naming the field); no
+        # exception escapes a callback.
+        self.rejections = Rejections(self.warnings)
+        self.guard = CallbackGuard(self.warnings)
+        self.stamps = ScanStampGate(self.config.stamp_reset_jump, self.config.max_stamp_lead)
         self.scans_received = 0
         self.scans_rejected = 0  # dropped before mapping: bad scan or front-end error
         self.mapping_errors = 0  # scans the local mapper failed on (map kept as it was)
+        self.map_resets = 0  # maps started over after the stamps jumped back
+        self.beams_dropped: Counter[str] = Counter()  # beams without a return, by kind
+        self.scans_lost = 0  # never delivered (gaps in the publisher's sequence numbers)
+        self.max_queue_delay = 0.0  # longest wait in the queue of a scan that was mapped, s
+        self._last_sequence: int | None = None
         self.partial_maps_published = 0
         self.mapper = LocalMapper(self.config.local_mapping)
         self.last_update: LocalUpdate | None = None
@@ -85,9 +105,11 @@ class RobotMapper(Node):
         self._pose_pub = self.create_publisher(PoseStamped, "pose", POSE_QOS)
         self._map_pub = self.create_publisher(MarkerArray, "partial_map", PARTIAL_MAP_QOS)
         self._scan_sub = self.create_subscription(
-            LaserScan, "scan", self._on_scan, qos_profile_sensor_data
+            LaserScan, "scan", self.guard("scan", self._receive_scan), qos_profile_sensor_data
         )
-        self._map_timer = self.create_timer(self.config.partial_map_period, self.publish_map)
+        self._map_timer = self.create_timer(
+            self.config.partial_map_period, self.guard("partial_map", self.publish_map)
+        )
         on_config_change(self, RobotMapperConfig, self._apply_config)
 
     @property
@@ -99,10 +121,16 @@ class RobotMapper(Node):
         old = self.config
         self.config = config
         self.warnings.period = config.warning_period
+        self.stamps.reset_jump, self.stamps.max_lead = (
+            config.stamp_reset_jump,
+            config.max_stamp_lead,
+        )
         self.mapper.config = config.local_mapping  # read at every scan; the map is kept
         if config.partial_map_period != old.partial_map_period:
             self.destroy_timer(self._map_timer)
-            self._map_timer = self.create_timer(config.partial_map_period, self.publish_map)
+            self._map_timer = self.create_timer(
+                config.partial_map_period, self.guard("partial_map", self.publish_map)
+            )
         if (config.map_frame, config.segment_marker_width) != (
             old.map_frame,
             old.segment_marker_width,
@@ -110,17 +138,48 @@ class RobotMapper(Node):
             self._marker_cache.clear()
             self.published_version = -1  # republish in the new frame / width
 
+    def _receive_scan(self, msg: LaserScan, info: dict[str, Any]) -> None:
+        """The scan subscription: scans lost on the way are counted, one that waited too long
+        in the queue is dropped (newer ones wait behind it), the others are mapped."""
+        sequence = info.get("publication_sequence_number")
+        if sequence:
+            last = self._last_sequence
+            if last is not None and sequence > last + 1:
+                self.scans_lost += sequence - last - 1
+            self._last_sequence = sequence
+        received = info.get("received_timestamp")
+        delay = (time.time_ns() - received) * 1e-9 if received else 0.0
+        if delay > self.config.scan_max_queue_delay:
+            self.scans_received += 1
+            self._reject(
+                "stale_in_queue",
+                "",
+                f"waited {delay * 1e3:.0f} ms in the queue, more than scan_max_queue_delay "
+                f"({self.config.scan_max_queue_delay:g} s): newer scans come first",
+            )
+            return
+        self.max_queue_delay = max(self.max_queue_delay, delay)
+        self._on_scan(msg)
+
+    def _reject(self, kind: str, field: str, message: str) -> None:
+        self.scans_rejected += 1
+        self.rejections.reject(self.robot, kind, field, message, "scan")
+
+    def _clock_seconds(self) -> float:
+        return float(self.get_clock().now().nanoseconds) * 1e-9
+
     def _on_scan(self, msg: LaserScan) -> None:
         self.scans_received += 1
         stamp = seconds_from_stamp(msg.header.stamp)
+        verdict = self.stamps.check(stamp, self._clock_seconds())
+        if verdict.action == "reject":
+            self._reject(verdict.kind, "header.stamp", verdict.message)
+            return
         try:
             view = scan_from_msg(msg)
             segments, valid = extract_scan(view, self.config.extraction)
         except ScanError as exc:
-            self.scans_rejected += 1
-            self.warnings.warn(
-                exc.kind, f"dropped scan (frame '{msg.header.frame_id}', stamp {stamp:.3f}): {exc}"
-            )
+            self._reject(exc.kind, exc.field, f"(stamp {stamp:.3f}) {exc}")
             return
         except Exception:  # a bug must not take the robot's mapper down with it
             self.scans_rejected += 1
@@ -130,8 +189,17 @@ class RobotMapper(Node):
                 f"{traceback.format_exc()}",
             )
             return
+        if verdict.action == "reset":
+            self._start_over(verdict.message)
+        self.stamps.accepted(stamp)
+        for kind, count in valid.dropped:
+            self.beams_dropped[kind] += count
         for notice in valid.notices:
-            self.warnings.warn(notice.kind, f"scan (stamp {stamp:.3f}): {notice.message}")
+            text = f"{self.robot}: scan (stamp {stamp:.3f}): {notice.message}"
+            if notice.kind in _ONCE:  # a property of the laser: said once, then counted
+                self.warnings.once(notice.kind, text)
+            else:
+                self.warnings.warn(notice.kind, text)
         self._segments_pub.publish(
             segments_marker(
                 segments.segments,
@@ -158,6 +226,16 @@ class RobotMapper(Node):
             self._keyframe_stamps[stamp] = msg.header.stamp
         if update.accepted and update.pose is not None:
             self._pose_pub.publish(pose_stamped(update.pose, msg.header.stamp, self.map_frame))
+
+    def _start_over(self, why: str) -> None:
+        """A new, empty map (the old one stays published until the new one has a keyframe)."""
+        self.map_resets += 1
+        self.warnings.warn("map_reset", f"{self.robot}: {why}")
+        self.mapper = LocalMapper(self.config.local_mapping)
+        self.last_update = None
+        self._keyframe_stamps.clear()
+        self._marker_cache.clear()
+        self.published_version = -1  # the new map's first version is published
 
     def publish_map(self) -> bool:
         """Publish the whole partial map if it changed since the last publication."""
