@@ -120,6 +120,12 @@ def _too_many_segments(msg: MarkerArray) -> MarkerArray:
     return bad
 
 
+def _repeated_keyframes(msg: MarkerArray) -> MarkerArray:
+    bad = copy.deepcopy(msg)
+    bad.markers = bad.markers + bad.markers[:3]  # three keyframes sent twice
+    return bad
+
+
 def _empty(msg: MarkerArray) -> MarkerArray:
     return MarkerArray()
 
@@ -133,6 +139,7 @@ BAD_MAPS = {
     "too many keyframes": (_too_many_keyframes, "too_many_keyframes", "max_keyframes_per_map"),
     "too many segments": (_too_many_segments, "too_many_segments", "max_segments_per_map"),
     "no keyframe at all": (_empty, "empty_map", "no keyframe marker"),
+    "repeated keyframes": (_repeated_keyframes, "duplicate_keyframes", "markers[].id"),
 }
 
 

@@ -78,6 +78,13 @@ def partial_map_from_msg(msg: MarkerArray, limits: MapLimits) -> PartialMap:
         raise InputError(
             "empty_map", "markers", "no keyframe marker (ns 'partial_map', ADD LINE_LIST)"
         )
+    ids = [m.id for m in keyframes]
+    if len(set(ids)) != len(ids):
+        raise InputError(
+            "duplicate_keyframes",
+            "markers[].id",
+            f"{len(ids) - len(set(ids))} keyframe markers repeat an id (a map holds each once)",
+        )
     counts = [len(m.points) for m in keyframes]
     if sum(counts) > 2 * limits.max_segments:
         raise InputError(
