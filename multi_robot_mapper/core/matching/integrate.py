@@ -34,7 +34,6 @@ from multi_robot_mapper.core.matching.hypotheses import (
 )
 from multi_robot_mapper.core.matching.refine import refine_many
 from multi_robot_mapper.core.matching.scoring import (
-    cross_support,
     information,
     pruned_values,
     refused,
