@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: venv test lint typecheck unit demo bench config clean
+.PHONY: venv test lint typecheck unit fuzz demo bench config clean
 
 venv: $(STAMP)
 
@@ -32,6 +32,12 @@ unit: $(STAMP)
 	$(BIN)/python -m pytest
 
 test: lint typecheck unit
+
+# The property-based fuzz tests of test/test_fuzz.py at 25 times their examples, with a new
+# random seed each run (`make test` runs them on a fixed seed in well under a minute).
+# MRM_FUZZ_SCALE=100 make fuzz for longer.
+fuzz: $(STAMP)
+	MRM_FUZZ=1 $(BIN)/python -m pytest test/test_fuzz.py --hypothesis-show-statistics
 
 demo: $(STAMP)
 	$(BIN)/mrm demo --out demo_output

@@ -14,6 +14,8 @@ from pathlib import Path
 import pytest
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+# Deprecated since Jazzy and in conflict with the discovery range above: never inherited.
+os.environ.pop("ROS_LOCALHOST_ONLY", None)
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "carmen"

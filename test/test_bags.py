@@ -17,6 +17,7 @@ from multi_robot_mapper.io.bags import (
     BagError,
     BagNotFoundError,
     NoScanTopicsError,
+    ReadReport,
     RobotRecording,
     TimedPose,
     TimedScan,
@@ -270,12 +271,16 @@ def test_scan_topic_of_another_type(tmp_path: Path, storage: str) -> None:
     expect(UnknownMessageTypeError, bag, "/robot1/scan", "std_msgs/msg/String")
 
 
-def test_ground_truth_of_another_type(tmp_path: Path) -> None:
+def test_ground_truth_of_another_type_is_left_out_with_a_note(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         writer.add_connection("/robot1/scan", "sensor_msgs/msg/LaserScan", typestore=TYPESTORE)
         writer.add_connection("/robot1/ground_truth", "nav_msgs/msg/Odometry", typestore=TYPESTORE)
-    expect(UnknownMessageTypeError, bag, "/robot1/ground_truth", "nav_msgs/msg/Odometry")
+    report = ReadReport()
+    recordings = read_recordings(bag, report=report)
+    assert list(recordings) == ["robot1"] and recordings["robot1"].ground_truth == []
+    (note,) = report.notes
+    assert "/robot1/ground_truth" in note and "nav_msgs/msg/Odometry" in note
 
 
 @pytest.mark.parametrize("storage", STORAGES)

@@ -54,7 +54,7 @@ def test_params_file_node_section_overrides_wildcard(tmp_path: Path) -> None:
     ("values", "message"),
     [
         ({"extraction.split_tolerance": -0.1}, "extraction.split_tolerance"),
-        ({"extraction.split_tolerance": 0.0}, "must be >"),
+        ({"extraction.split_tolerance": 0.0}, r"outside its range \[0.001, 1\] m"),
         ({"extraction.min_cluster_points": 2.5}, "must be int"),
         ({"extraction.simplifier": "rdp"}, "not one of split, dce"),
         ({"extraction.cluster_distance": True}, "must be float"),

@@ -131,24 +131,59 @@ def test_topics_are_relative_to_the_namespace(harness: Harness) -> None:
     assert {"/robot1/scan", "/robot1/scan_segments", "/robot1/pose", "/robot1/partial_map"} <= names
 
 
-def bad(base: LaserScanData | None = None, **changes) -> LaserScan:
+def bad(base: LaserScanData | None = None, t: float = 1.0, **changes) -> LaserScan:
     scan = base or room_scan()
-    msg = scan_to_msg(scan, "robot1/laser", stamp_from_seconds(1.0))
+    msg = scan_to_msg(scan, "robot1/laser", stamp_from_seconds(t))
     for key, value in changes.items():
         setattr(msg, key, value)
     return msg
 
 
+def reversed_room() -> LaserScanData:
+    scan = room_scan()
+    return LaserScanData(
+        scan.ranges[::-1].copy(), scan.angle_max, scan.angle_min, -scan.angle_increment, 0.05, 30.0
+    )
+
+
+# case: (changes, kind, words in the warning, rejected or only noted)
 BAD_SCANS = {
-    "nan": (dict(ranges=[float("nan")] * 100 + [2.0] * 261), "non_finite_ranges", "NaN"),
-    "inf": (dict(ranges=[float("inf")] * 361), "non_finite_ranges", "inf"),
-    "all_invalid": (dict(ranges=[0.0] * 361), "no_valid_ranges", "none of the 361 ranges"),
-    "zero_beams": (dict(ranges=[]), "no_beams", "no beams"),
-    "ten_thousand_beams": (dict(ranges=[2.0] * 10_000), "beam_span", "10000 beams"),
-    "negative_increment": ({}, "negative_increment", "clockwise"),
-    "intensities_length": (dict(intensities=[1.0] * 7), "intensities_length", "intensities has 7"),
-    "angle_max_below_min": (dict(angle_max=-3.0), "angle_order", "opposite sign"),
-    "range_max_below_min": (dict(range_min=5.0, range_max=1.0), "range_limits", "range_max"),
+    "nan": (dict(ranges=[float("nan")] * 100 + [2.0] * 261), "non_finite_ranges", "NaN", False),
+    "inf": (dict(ranges=[float("inf")] * 361), "no_valid_ranges", "none of the 361", True),
+    "all_invalid": (dict(ranges=[0.0] * 361), "no_valid_ranges", "none of the 361 ranges", True),
+    "zero_beams": (dict(ranges=[]), "no_beams", "no beams", True),
+    "ten_thousand_beams": (dict(ranges=[2.0] * 10_000), "beam_span", "10000 beams", True),
+    "negative_increment": ({}, "negative_increment", "clockwise", False),
+    "intensities_length": (
+        dict(intensities=[1.0] * 7),
+        "intensities_length",
+        "intensities has 7",
+        False,
+    ),
+    "angle_max_below_min": (dict(angle_max=-3.0), "angle_order", "opposite sign", True),
+    "range_max_below_min": (dict(range_min=5.0, range_max=1.0), "range_limits", "range_max", True),
+    "range_min_negative": (dict(range_min=-0.5), "range_limits", "[range_min]", True),
+    "range_max_nan": (dict(range_max=float("nan")), "non_finite_field", "[range_max]", True),
+    "increment_zero": (dict(angle_increment=0.0), "zero_increment", "[angle_increment]", True),
+    "increment_inf": (
+        dict(angle_increment=float("inf")),
+        "non_finite_field",
+        "[angle_increment]",
+        True,
+    ),
+    "fields_contradict_count": (dict(ranges=[2.0] * 200), "beam_count", "describe 361", True),
+    "degenerate_increment": (
+        dict(angle_increment=1e-4, angle_max=-2.356194 + 1e-4 * 360),
+        "field_of_view",
+        "min_field_of_view",
+        True,
+    ),
+    "one_beam": (
+        dict(ranges=[2.0], angle_max=-2.356194, angle_increment=0.0),
+        "field_of_view",
+        "1 beams",
+        True,
+    ),
 }
 
 
@@ -156,25 +191,18 @@ BAD_SCANS = {
 def test_bad_scan_warns_once_names_the_problem_and_the_node_goes_on(
     harness: Harness, case: str
 ) -> None:
-    changes, kind, words = BAD_SCANS[case]
-    if case == "negative_increment":
-        scan = room_scan()
-        reversed_scan = LaserScanData(
-            scan.ranges[::-1].copy(),
-            scan.angle_max,
-            scan.angle_min,
-            -scan.angle_increment,
-            0.05,
-            30.0,
-        )
-        msg = bad(reversed_scan)
-    else:
-        msg = bad(**changes)
-    harness.send(msg)
-    harness.send(msg)  # the same problem again within the period: throttled
+    changes, kind, words, rejected = BAD_SCANS[case]
+    base = reversed_room() if case == "negative_increment" else None
+    harness.send(bad(base, t=1.0, **changes))
+    harness.send(bad(base, t=1.5, **changes))  # the same problem again within the period
     matching = [line for line in harness.logged if words in line]
     assert len(matching) == 1, harness.logged
-    assert harness.mapper.warnings.counts[kind] == 2
+    mapper = harness.mapper
+    if rejected:  # not used, counted per reason, the warning names the robot
+        assert mapper.rejections.counts[("robot1", kind)] == 2
+        assert mapper.scans_rejected == 2 and matching[0].startswith("robot1: scan rejected")
+    else:  # used, with a notice
+        assert mapper.warnings.counts[kind] == 2 and mapper.scans_rejected == 0
     marker = harness.send_good(2.0)  # and the next good scan is processed as usual
     assert len(segments_from_marker(marker)) == 5
 
@@ -185,7 +213,7 @@ def test_negative_increment_scan_gives_the_same_segments(harness: Harness) -> No
     reversed_scan = LaserScanData(
         scan.ranges[::-1].copy(), scan.angle_max, scan.angle_min, -scan.angle_increment, 0.05, 30.0
     )
-    backward = harness.answer_to(bad(reversed_scan))
+    backward = harness.answer_to(bad(reversed_scan, t=4.0))
     np.testing.assert_allclose(segments_from_marker(backward), forward, atol=1e-4)
 
 
@@ -347,7 +375,7 @@ def test_an_error_inside_the_local_mapper_is_logged_and_the_map_kept(
     far = len(run.scans) - 1  # the drive's last scan, not sent before
     scan = scan_to_msg(run.scans[far], "robot1/laser", stamp_from_seconds(run.stamps[-1] + 1.0))
     h.answer_to(scan)  # scan_segments still comes back
-    h.send(scan)
+    h.send(scan_to_msg(run.scans[far], "robot1/laser", stamp_from_seconds(run.stamps[-1] + 1.5)))
     logged = [line for line in h.logged if "simulated bug" in line]
     assert len(logged) == 1 and "partial map is kept" in logged[0]  # throttled
     assert h.mapper.mapping_errors == 2
@@ -366,10 +394,10 @@ def test_an_error_inside_the_local_mapper_is_logged_and_the_map_kept(
 
 def test_bad_scans_leave_the_partial_map_alone(harness: Harness) -> None:
     harness.send(bad(ranges=[]))  # refused by the front end: never reaches the mapper
-    harness.send(bad(ranges=[float("nan")] * 361))  # processed, but nothing to place
-    assert harness.mapper.scans_rejected == 1
+    harness.send(bad(ranges=[float("nan")] * 361, t=1.5))  # nothing to map: refused too
+    assert harness.mapper.scans_rejected == 2
     local = harness.mapper.mapper
-    assert local.scans_accepted == 0 and local.scans_set_aside == 1 and local.pose is None
+    assert local.scans_accepted == 0 and local.scans_set_aside == 0 and local.pose is None
     assert harness.poses == [] and local.version == 0
     harness.send_good(5.0)
     assert local.scans_accepted == 1

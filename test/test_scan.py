@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
 from multi_robot_mapper.core.scan import LaserScanData, ScanError, scan_points
 
 ONE_DEGREE = math.radians(1.0)
@@ -82,11 +83,104 @@ def test_more_than_max_beams_is_refused() -> None:
         scan_points(make_scan(np.ones(50), increment=0.001), max_beams=20)
 
 
-def test_count_mismatch_within_a_turn_is_a_notice() -> None:
+def test_angle_fields_that_contradict_the_beam_count_are_refused() -> None:
     scan = make_scan(np.ones(200), angle_max=math.pi / 2)  # fields describe 181 beams
+    with pytest.raises(ScanError, match="describe 181") as err:
+        scan_points(scan)
+    assert (err.value.kind, err.value.field) == ("beam_count", "ranges")
+    # One beam of slack either way: drivers disagree on where angle_max lies.
+    assert len(scan_points(make_scan(np.ones(182), angle_max=math.pi / 2)).points) == 182
+
+
+def test_known_answer_points_and_beams_dropped_by_kind() -> None:
+    # ranges [1, inf, 2, NaN, 3], increment pi/4 from 0, range_min 2, range_max 10: beam 0 is
+    # too close, 1 no return, 3 erroneous; beams 2 (90 deg) and 4 (180 deg) are the points.
+    scan = LaserScanData(
+        np.array([1.0, np.inf, 2.0, np.nan, 3.0]), 0.0, math.pi, math.pi / 4, 2.0, 10.0
+    )
     result = scan_points(scan)
-    assert "beam_count" in kinds(result)
-    assert len(result.points) == 200
+    np.testing.assert_allclose(result.points, [[0.0, 2.0], [-3.0, 0.0]], atol=1e-15)
+    np.testing.assert_array_equal(result.beam_index, [2, 4])
+    assert dict(result.dropped) == {"below_range_min": 1, "+inf": 1, "nan": 1}
+
+
+def test_mixed_infinities_and_out_of_range_beams_are_counted_by_kind() -> None:
+    ranges = [np.inf, -np.inf, np.inf, 0.01, 31.0, 30.0, 5.0, np.nan, -1.0]
+    result = scan_points(make_scan(ranges, range_min=0.05, range_max=30.0))
+    assert dict(result.dropped) == {
+        "+inf": 2,
+        "-inf": 1,
+        "nan": 1,
+        "below_range_min": 2,
+        "beyond_range_max": 2,
+    }
+    assert len(result.points) == 1
+    assert dict(scan_points(make_scan([np.nan] * 7)).dropped) == {"nan": 7}
+
+
+def test_negative_range_min_is_refused() -> None:
+    with pytest.raises(ScanError, match="range_min is negative") as err:
+        scan_points(make_scan(np.ones(5), range_min=-0.1))
+    assert (err.value.kind, err.value.field) == ("range_limits", "range_min")
+
+
+@pytest.mark.parametrize("increment", [0.0, float("nan"), float("inf"), float("-inf")])
+def test_zero_or_non_finite_increment_is_refused(increment: float) -> None:
+    scan = LaserScanData(np.ones(5), 0.0, 0.04, increment, 0.0, 10.0)
+    with pytest.raises(ScanError) as err:
+        scan_points(scan)
+    assert err.value.field == "angle_increment"
+
+
+@pytest.mark.parametrize("limits", [(float("nan"), 10.0), (0.0, float("inf")), (0.0, float("nan"))])
+def test_non_finite_range_limits_are_refused(limits: tuple[float, float]) -> None:
+    with pytest.raises(ScanError, match="not a finite number"):
+        scan_points(make_scan(np.ones(5), range_min=limits[0], range_max=limits[1]))
+
+
+@pytest.mark.parametrize("increment", [1e-30, 1e-8, 1e-4])
+def test_degenerate_scans_no_laser_makes_are_refused_before_the_front_end(
+    increment: float,
+) -> None:
+    # 1081 beams within 6 degrees or much less: every point on a line or on one spot.
+    ranges = 3.0 + 0.01 * np.arange(1081)
+    scan = make_scan(ranges, angle_min=-0.05, increment=increment)
+    if increment == 1e-30:  # angle_max == angle_min in floating point: the fields contradict
+        with pytest.raises(ScanError, match="describe 1:"):
+            extract_scan(scan, ExtractionConfig())
+        return
+    assert len(scan_points(scan).points) == 1081  # the fields themselves are consistent
+    with pytest.raises(ScanError, match="min_field_of_view") as err:
+        extract_scan(scan, ExtractionConfig())
+    assert (err.value.kind, err.value.field) == ("field_of_view", "angle_increment")
+    # The rule is a parameter: 0 lets such scans through (for a user who really has one).
+    extract_scan(scan, ExtractionConfig(min_field_of_view=0.0))
+
+
+def test_one_beam_is_handled_and_a_scan_without_a_reading_refused() -> None:
+    one = LaserScanData(np.array([2.0]), 0.3, 0.3, 0.0, 0.0, 10.0)
+    np.testing.assert_allclose(scan_points(one).points, [[2 * math.cos(0.3), 2 * math.sin(0.3)]])
+    with pytest.raises(ScanError) as err:  # one beam spans no field of view
+        extract_scan(one, ExtractionConfig())
+    assert err.value.kind == "field_of_view"
+    with pytest.raises(ScanError) as err:
+        extract_scan(make_scan([np.nan] * 181), ExtractionConfig())
+    assert (err.value.kind, err.value.field) == ("no_valid_ranges", "ranges")
+
+
+def test_upside_down_laser_gives_the_mirrored_scans_endpoints() -> None:
+    # angle_min > angle_max with a negative increment: the same beams listed clockwise.
+    rng = np.random.default_rng(1)
+    ranges = rng.uniform(1.0, 8.0, 271)
+    forward = make_scan(ranges, angle_min=-2.0, increment=0.015)
+    mirrored = LaserScanData(
+        ranges[::-1].copy(), forward.angle_max, forward.angle_min, -0.015, 0.05, 30.0
+    )
+    a, b = (
+        extract_scan(forward, ExtractionConfig())[0],
+        extract_scan(mirrored, ExtractionConfig())[0],
+    )
+    np.testing.assert_allclose(b.segments, a.segments, atol=1e-6)
 
 
 def test_negative_increment_gives_the_same_points_counter_clockwise() -> None:

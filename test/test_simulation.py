@@ -265,6 +265,26 @@ def test_mrm_simulate_writes_a_readable_bag(
         assert first == [s.scan.ranges.tobytes() for s in again[name].scans]
 
 
+def test_mrm_simulate_clutter_puts_objects_between_the_robot_and_its_walls(
+    mrm, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Same seed, same route: with clutter, some beams end short of the walls they reach in
+    # the empty building, and none ends beyond them.
+    args = ["--robots", "1", "--beams", "361", "--rate", "10", "--duration", "4"]
+    assert mrm(["simulate", "--out", str(tmp_path / "empty"), *args, "--noise", "0"]) == 0
+    crowd = ["--clutter", "0.5", "--noise", "0"]
+    assert mrm(["simulate", "--out", str(tmp_path / "crowd"), *args, *crowd]) == 0
+    assert "clutter 0.5 objects/m^2" in capsys.readouterr().out
+    empty = read_recordings(tmp_path / "empty")["robot1"]
+    crowded = read_recordings(tmp_path / "crowd")["robot1"]
+    shorter = 0
+    for a, b in zip(empty.scans, crowded.scans, strict=True):
+        both = np.isfinite(a.scan.ranges) & np.isfinite(b.scan.ranges)
+        assert np.all(b.scan.ranges[both] <= a.scan.ranges[both] + 1e-9)
+        shorter += int(np.count_nonzero(b.scan.ranges[both] < a.scan.ranges[both] - 0.05))
+    assert shorter > 0.01 * sum(len(a.scan.ranges) for a in empty.scans)
+
+
 @pytest.mark.parametrize(
     ("extra", "words"),
     [
@@ -274,6 +294,7 @@ def test_mrm_simulate_writes_a_readable_bag(
         (["--robots", "2", "--beams", "1"], "--beams"),
         (["--robots", "2", "--noise", "-1"], "--noise"),
         (["--robots", "2", "--duration", "0"], "--duration"),
+        (["--robots", "2", "--clutter", "3"], "--clutter"),
     ],
 )
 def test_mrm_simulate_errors_are_one_line(

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
+from typing import Any
 
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.merger_config import MapMergerConfig
@@ -13,6 +15,59 @@ MERGER_PREFIX = "merge."  # --set names of the merging parameters (map_merger's 
 
 class CliError(Exception):
     """A user error: printed as one line on stderr, exit code 2."""
+
+
+# Every number a command-line option takes, with its allowed range: one table, checked before
+# any work (the node and config parameters have theirs in the config dataclasses).
+CLI_LIMITS: dict[str, tuple[float, float, str]] = {
+    "robots": (1, 100, "robots"),
+    "seed": (0, 2**32 - 1, ""),
+    "rate": (0.1, 1000.0, "Hz"),
+    "beams": (2, 100_000, "beams"),
+    "noise": (0.0, 1.0, "m"),
+    "duration": (0.1, 3600.0, "s"),
+    "clutter": (0.0, 2.0, "objects/m^2"),
+    "overlap_scans": (0, 1_000_000, "scans"),
+    "range_max": (0.1, 100_000.0, "m"),
+    "max_points": (1, 10_000_000, "points"),
+}
+# simulate keeps every reading in memory before writing: about 1 GB at this many.
+MAX_SIMULATED_READINGS = 100_000_000
+
+
+def check_limits(args: argparse.Namespace, *names: str) -> None:
+    """Refuse (one line, exit 2) any of the options ``names`` outside its range in CLI_LIMITS;
+    an option left unset (None) is not checked."""
+    for name in names:
+        value: Any = getattr(args, name, None)
+        if value is None:
+            continue
+        low, high, unit = CLI_LIMITS[name]
+        if not (math.isfinite(value) and low <= value <= high):
+            option = "--" + name.replace("_", "-")
+            unit_text = f" {unit}" if unit else ""
+            raise CliError(f"{option} must be in [{low:g}, {high:g}]{unit_text}, got {value:g}")
+
+
+def add_overwrite_option(parser: argparse.ArgumentParser) -> None:
+    """``--overwrite``: replace an output folder that already holds an earlier result."""
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace --out if it already holds files (as a whole, when the new result is "
+        "complete); without it such a folder is refused",
+    )
+
+
+def check_output(path: Path, *, kind: str = "folder", overwrite: bool = False) -> Path:
+    """:func:`multi_robot_mapper.io.outputs.check_output` with its error as a CLI error."""
+    from multi_robot_mapper.io.outputs import OutputError
+    from multi_robot_mapper.io.outputs import check_output as check
+
+    try:
+        return check(path, kind=kind, overwrite=overwrite)
+    except OutputError as exc:
+        raise CliError(str(exc)) from exc
 
 
 def add_config_options(parser: argparse.ArgumentParser, merging: bool = False) -> None:

@@ -22,12 +22,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from multi_robot_mapper.cli.common import CliError
+from multi_robot_mapper.cli.common import CliError, check_limits, check_output
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.scan import ScanError, scan_points
 from multi_robot_mapper.evaluation import metrics as rules
 from multi_robot_mapper.evaluation.metrics import Metrics, RobotTrack, evaluate
 from multi_robot_mapper.io.bags import GROUND_TRUTH_MATCH_S, nearest_stamps, reference_poses
+from multi_robot_mapper.io.outputs import atomic_write_text
 from multi_robot_mapper.io.results import ReplayResult
 
 FloatArray = NDArray[np.float64]
@@ -186,10 +187,10 @@ def run(args: argparse.Namespace) -> int:
     from multi_robot_mapper.io.bags import read_recordings
     from multi_robot_mapper.io.results import read_results
 
-    if args.max_points < 1:
-        raise CliError(f"--max-points must be at least 1, got {args.max_points}")
+    check_limits(args, "max_points")
     directory = Path(args.directory)
     result = read_results(directory)
+    check_output(directory / METRICS_FILE, kind="file")  # before the work
     if not Path(args.bag).exists():
         raise CliError(f"no such bag: {args.bag}")
     recordings = read_recordings(args.bag)
@@ -207,7 +208,7 @@ def run(args: argparse.Namespace) -> int:
     report["bag"] = str(args.bag)
     report["reference_beam_stride"] = inputs.beam_stride
     report["scans_without_reference"] = inputs.scans_without_reference
-    (directory / METRICS_FILE).write_text(json.dumps(report, indent=1) + "\n")
+    atomic_write_text(directory / METRICS_FILE, json.dumps(report, indent=1) + "\n")
     if args.json:
         print(json.dumps(report, indent=1))
     else:

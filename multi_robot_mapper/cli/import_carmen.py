@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from multi_robot_mapper.cli.common import CliError
+from multi_robot_mapper.cli.common import CliError, check_limits, check_output
 from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan
 from multi_robot_mapper.io.carmen import (
     CarmenFormatError,
@@ -74,13 +74,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"no such log file: {log}")
     if args.robots < 1:
         raise CliError(f"--robots must be at least 1, got {args.robots}")
-    if args.overlap_scans < 0:
-        raise CliError(f"--overlap-scans must be >= 0, got {args.overlap_scans}")
-    if args.range_max is not None and not (0.0 < args.range_max < 1e6):
-        raise CliError(f"--range-max must be in (0, 1e6) m, got {args.range_max}")
-    out = Path(args.out)
-    if out.exists():
-        raise CliError(f"{out} already exists; not overwriting it")
+    check_limits(args, "overlap_scans", "range_max")
+    out = check_output(Path(args.out), kind="new")
     try:
         scans = read_carmen(log, range_max=args.range_max)
     except (CarmenFormatError, OSError, UnicodeError) as exc:

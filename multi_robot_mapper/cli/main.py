@@ -12,21 +12,30 @@ mrm run            robot_mappers and a map_merger in one process, live (no launc
 from __future__ import annotations
 
 import argparse
+import math
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from multi_robot_mapper.cli.common import CliError, add_config_options, load_mapper_config
+from multi_robot_mapper.cli.common import (
+    CliError,
+    add_config_options,
+    check_limits,
+    load_mapper_config,
+)
 from multi_robot_mapper.core.config import ConfigError
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from multi_robot_mapper.cli.demo import DemoScenario, run_demo
 
-    if not args.speed > 0.0:
-        raise CliError(f"--speed must be > 0, got {args.speed}")
+    check_limits(args, "seed")
+    if not (math.isfinite(args.speed) and 0.0 < args.speed <= 100.0):
+        raise CliError(f"--speed must be in (0, 100], got {args.speed:g}")
     scenario = DemoScenario(seed=args.seed, speed=args.speed)
     print(
         f"mrm demo: {scenario.robots} simulated robots in the {scenario.world} world, "
@@ -132,21 +141,40 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that every output being written is cleaned up."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     from multi_robot_mapper.io.bags import BagError
+    from multi_robot_mapper.io.outputs import OutputError
     from multi_robot_mapper.io.results import ResultsError
 
     args = build_parser().parse_args(argv)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         return int(args.func(args))
-    except (CliError, ConfigError, BagError, ResultsError) as exc:
+    except (CliError, ConfigError, BagError, ResultsError, OutputError) as exc:
         print(f"mrm {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except Terminated:
+        print(f"mrm {args.command}: terminated; nothing half-written was left", file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
+        print(f"mrm {args.command}: interrupted; nothing half-written was left", file=sys.stderr)
         return 130
     except BrokenPipeError:  # `mrm ... | head` closed the pipe: not an error
         sys.stderr.close()
         return 0
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ writes DIR/map.json, map.svg, map.png, trajectories/<robot>.tum, robots.json and
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -17,6 +18,8 @@ import numpy as np
 from multi_robot_mapper.cli.common import (
     CliError,
     add_config_options,
+    add_overwrite_option,
+    check_output,
     load_mapper_config,
     load_merger_config,
 )
@@ -27,8 +30,15 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser("replay", help="run the pipeline offline on a rosbag2 file")
     parser.add_argument("bag", type=Path, help="rosbag2 folder or .mcap file with */scan topics")
     parser.add_argument("--out", type=Path, required=True, help="output folder")
+    add_overwrite_option(parser)
     parser.add_argument("--method", choices=METHODS, default="local")
     parser.add_argument("--scan-topics", default="/*/scan", help="topic pattern (fnmatch)")
+    parser.add_argument(
+        "--salvage",
+        action="store_true",
+        help="read every intact chunk of a damaged or cut MCAP bag (damaged chunks are skipped "
+        "and counted; the exit code is then 1)",
+    )
     add_config_options(parser, merging=True)
     parser.set_defaults(func=run)
 
@@ -41,16 +51,21 @@ def run(args: argparse.Namespace) -> int:
         run_offline,
     )
     from multi_robot_mapper.io import pictures
-    from multi_robot_mapper.io.bags import read_recordings, reference_poses
+    from multi_robot_mapper.io.bags import ReadReport, read_recordings, reference_poses
+    from multi_robot_mapper.io.outputs import staged_folder
     from multi_robot_mapper.io.results import ReplayResult, write_results
 
     config = load_mapper_config(args)
     merging = load_merger_config(args).merge
+    out = check_output(Path(args.out), overwrite=args.overwrite)  # before any work
     try:
         require_method(args.method)  # before reading a large bag
     except MethodNotImplementedError as exc:
         raise CliError(str(exc)) from exc
-    recordings = read_recordings(args.bag, scan_pattern=args.scan_topics)
+    report = ReadReport()
+    recordings = read_recordings(
+        args.bag, scan_pattern=args.scan_topics, salvage=args.salvage, report=report
+    )
     inputs: dict[str, Sequence[TimedLaserScan]] = {}
     for name, rec in recordings.items():
         stamps = np.array([s.stamp for s in rec.scans], dtype=np.float64)
@@ -75,30 +90,34 @@ def run(args: argparse.Namespace) -> int:
         )
     finally:
         bar.close()
-    out = Path(args.out)
-    write_results(
-        out,
-        ReplayResult(
-            method=args.method,
-            robots=offline.robots,
-            map_segments=offline.map_segments,
-            segment_robot=offline.segment_robot,
-            trajectories=offline.trajectories,
-            robot_frames=offline.robot_frames,
-            stats=offline.stats,
-        ),
-    )
     paths = {robot: poses for robot, (_, poses) in offline.trajectories.items()}
     title = f"{args.bag.name}: method '{args.method}'" + (
         " (scans at reference poses, not a mapping result)" if args.method == "reference" else ""
     )
-    figure = pictures.draw_map(
-        offline.map_segments, offline.segment_robot, offline.robots, paths, title
-    )
-    pictures.save_figure(figure, out / "map.png", out / "map.svg")
+    # Everything goes to a fresh folder that replaces --out only when complete: an interrupted
+    # run leaves the old result, and no file of an earlier run stays beside the new ones.
+    with staged_folder(out) as staging:
+        write_results(
+            staging,
+            ReplayResult(
+                method=args.method,
+                robots=offline.robots,
+                map_segments=offline.map_segments,
+                segment_robot=offline.segment_robot,
+                trajectories=offline.trajectories,
+                robot_frames=offline.robot_frames,
+                stats=offline.stats,
+            ),
+        )
+        figure = pictures.draw_map(
+            offline.map_segments, offline.segment_robot, offline.robots, paths, title
+        )
+        pictures.save_figure(figure, staging / "map.png", staging / "map.svg")
     print(
         f"{len(offline.robots)} robots, {offline.stats['scans_total']} scans "
         f"({offline.stats['scans_posed']} posed), {len(offline.map_segments)} map segments, "
         f"{offline.stats['total_s']} s -> {out}"
     )
-    return 0
+    for note in report.notes:  # replayed, but not all of the bag: said, and exit code 1
+        print(f"mrm replay: warning: {note}", file=sys.stderr)
+    return 1 if report.notes else 0

@@ -12,9 +12,14 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from multi_robot_mapper.cli.common import CliError
+from multi_robot_mapper.cli.common import (
+    MAX_SIMULATED_READINGS,
+    CliError,
+    check_limits,
+    check_output,
+)
 from multi_robot_mapper.core.extraction import ExtractionConfig
-from multi_robot_mapper.core.simulation import ROUTES, LaserModel, simulate_robots
+from multi_robot_mapper.core.simulation import ROUTES, LaserModel, clutter_for, simulate_robots
 
 DEFAULT_LASER = LaserModel()  # Hokuyo UTM-30LX
 DEFAULT_DURATION_S = 20.0  # about 16 m of driving per robot at the default speed
@@ -52,6 +57,15 @@ def register(subparsers: Any) -> None:
     parser.add_argument(
         "--duration", type=float, default=DEFAULT_DURATION_S, metavar="SECONDS", help="drive time"
     )
+    parser.add_argument(
+        "--clutter",
+        type=float,
+        default=0.0,
+        metavar="DENSITY",
+        help="objects per square metre of free floor: chair and table legs, pillars and "
+        "walking people, kept off the robots' route (default 0: an empty building; 0.2 is a "
+        "busy office, 0.5 a crowded hall)",
+    )
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     parser.set_defaults(func=run)
 
@@ -59,21 +73,18 @@ def register(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from multi_robot_mapper.io.bags import recording_of, write_recordings
 
-    if args.robots < 1:
-        raise CliError(f"--robots must be at least 1, got {args.robots}")
+    check_limits(args, "robots", "seed", "rate", "beams", "noise", "duration", "clutter")
     if args.world not in ROUTES:
         raise CliError(f"unknown world {args.world!r}; known: {', '.join(ROUTES)}")
-    if not args.rate > 0.0:
-        raise CliError(f"--rate must be > 0 Hz, got {args.rate}")
-    if not 2 <= args.beams <= MAX_BEAMS:
-        raise CliError(f"--beams must be in 2..{MAX_BEAMS}, got {args.beams}")
-    if not args.noise >= 0.0:
-        raise CliError(f"--noise must be >= 0 m, got {args.noise}")
-    if not args.duration > 0.0:
-        raise CliError(f"--duration must be > 0 s, got {args.duration}")
-    out = Path(args.out)
-    if out.exists():
-        raise CliError(f"{out} already exists; not overwriting it")
+    if args.beams > MAX_BEAMS:
+        raise CliError(f"--beams must be in [2, {MAX_BEAMS}] (the front end's max_beams)")
+    readings = args.robots * args.rate * args.duration * args.beams
+    if readings > MAX_SIMULATED_READINGS:
+        raise CliError(
+            f"--robots x --rate x --duration x --beams = {readings:.3g} readings, more than "
+            f"{MAX_SIMULATED_READINGS:.0e} (about 1 GB in memory); simulate less"
+        )
+    out = check_output(Path(args.out), kind="new")
 
     laser = LaserModel(beams=args.beams, range_noise=args.noise, rate=args.rate)
     runs = simulate_robots(
@@ -83,12 +94,14 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         duration=args.duration,
         speed=SPEED_M_S,
+        clutter=clutter_for(args.world, args.clutter, args.seed) if args.clutter > 0 else None,
     )
     recordings = {f"robot{k + 1}": recording_of(f"robot{k + 1}", run) for k, run in enumerate(runs)}
     write_recordings(out, recordings, storage=args.storage)
     count = sum(len(r.scans) for r in recordings.values())
+    crowd = f", clutter {args.clutter:g} objects/m^2" if args.clutter > 0 else ""
     print(
-        f"wrote {out} ({args.storage}): {args.robots} robots in {args.world!r}, {count} scans "
-        f"of {laser.beams} beams at {laser.rate:g} Hz"
+        f"wrote {out} ({args.storage}): {args.robots} robots in {args.world!r}{crowd}, {count} "
+        f"scans of {laser.beams} beams at {laser.rate:g} Hz"
     )
     return 0

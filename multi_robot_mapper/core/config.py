@@ -9,6 +9,7 @@ Values are validated on load and errors name the parameter, the value and the ru
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import functools
 import typing
 from collections.abc import Mapping
@@ -58,6 +59,20 @@ class FieldSpec:
     maximum: float | None
     exclusive_minimum: bool
     choices: tuple[str, ...] | None
+
+    def within(self, value: float) -> bool:
+        """Whether a number lies in this field's declared range."""
+        low = self.minimum
+        if low is not None and (value < low or (self.exclusive_minimum and value == low)):
+            return False
+        return self.maximum is None or value <= self.maximum
+
+    def range_text(self) -> str:
+        """The declared range, e.g. ``[0.005, 10] m``."""
+        low = "(" if self.exclusive_minimum else "["
+        lo = "-inf" if self.minimum is None else f"{self.minimum:g}"
+        hi = "inf" if self.maximum is None else f"{self.maximum:g}"
+        return f"{low}{lo}, {hi}]{' ' + self.unit if self.unit else ''}"
 
     def describe(self) -> str:
         """One line for ROS parameter descriptors and ``--help``."""
@@ -128,21 +143,13 @@ def _coerce(spec: FieldSpec, value: Any) -> Any:
         raise ConfigError(
             f"parameter '{spec.name}' = {value!r} is not one of {', '.join(spec.choices)}"
         )
-    if kind in (int, float):
-        if spec.minimum is not None:
-            too_low = value <= spec.minimum if spec.exclusive_minimum else value < spec.minimum
-            if too_low:
-                rel = ">" if spec.exclusive_minimum else ">="
-                raise ConfigError(
-                    f"parameter '{spec.name}' = {value!r} {spec.unit} "
-                    f"must be {rel} {spec.minimum:g}"
-                )
-        if spec.maximum is not None and value > spec.maximum:
-            raise ConfigError(
-                f"parameter '{spec.name}' = {value!r} {spec.unit} must be <= {spec.maximum:g}"
-            )
-        if kind is float and value != value:  # NaN
-            raise ConfigError(f"parameter '{spec.name}' is NaN")
+    if kind is float and value != value:  # NaN
+        raise ConfigError(f"parameter '{spec.name}' is NaN; allowed: {spec.range_text()}")
+    if kind in (int, float) and not spec.within(value):
+        unit = f" {spec.unit}" if spec.unit else ""
+        raise ConfigError(
+            f"parameter '{spec.name}' = {value!r}{unit} is outside its range {spec.range_text()}"
+        )
     return value
 
 
@@ -167,16 +174,32 @@ def flatten_mapping(mapping: Mapping[str, Any], prefix: str = "") -> dict[str, A
     return flat
 
 
+def unknown_message(unknown: list[str], known: list[str]) -> str:
+    """One line naming unknown parameters, with the closest known name of each."""
+    hints = []
+    for name in unknown:
+        match = difflib.get_close_matches(name, known, n=1)
+        if not match:  # a misplaced section: 'slide_step' for 'local_mapping.integrate.slide_step'
+            match = [k for k in known if k.endswith("." + name)][:1]
+        if match:
+            hints.append(f"'{name}' -> '{match[0]}'")
+    close = f"; did you mean {', '.join(hints)}?" if hints else ""
+    return f"unknown parameter(s) {', '.join(repr(n) for n in unknown)}{close}"
+
+
 def config_from_flat(cls: type[C], values: Mapping[str, Any]) -> C:
     """Build a config of type ``cls`` from dotted names; missing names keep their defaults."""
+    return _build(cls, check_values(cls, values), prefix="")
+
+
+def check_values(cls: type, values: Mapping[str, Any]) -> dict[str, Any]:
+    """``values`` checked field by field against ``cls`` (names, types, declared ranges) and
+    coerced; raises :class:`ConfigError` naming the first problem."""
     specs = {s.name: s for s in field_specs(cls)}
     unknown = sorted(set(values) - set(specs))
     if unknown:
-        raise ConfigError(
-            f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(specs))}"
-        )
-    coerced = {name: _coerce(specs[name], v) for name, v in values.items()}
-    return _build(cls, coerced, prefix="")
+        raise ConfigError(unknown_message(unknown, list(specs)))
+    return {name: _coerce(specs[name], v) for name, v in values.items()}
 
 
 def _build(cls: type[C], values: Mapping[str, Any], prefix: str) -> C:

@@ -22,6 +22,7 @@ numpy calls per scan (see the cost model after the imports).
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -37,7 +38,7 @@ from multi_robot_mapper.core.geometry import (
 from multi_robot_mapper.core.geometry import (
     segment_distance_1d as _segment_distance,
 )
-from multi_robot_mapper.core.scan import LaserScanData, ScanPoints, scan_points
+from multi_robot_mapper.core.scan import LaserScanData, ScanError, ScanPoints, scan_points
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -73,21 +74,22 @@ class ExtractionConfig:
         0.20,
         unit="m",
         doc="tau: consecutive points farther apart start a new cluster (Amigoni III-D, Wolter 3.1)",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.01,
+        maximum=10.0,
     )
     split_tolerance: float = param(
         0.025,
         unit="m",
         doc="kappa: recursive split stops when every point is this close to its segment",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.001,
+        maximum=1.0,
     )
     min_cluster_points: int = param(
         2,
         unit="points",
         doc="clusters with fewer points are dropped (a lone return cannot make a segment)",
         minimum=2,
+        maximum=1000,
     )
     simplifier: str = param(
         "split",
@@ -99,14 +101,25 @@ class ExtractionConfig:
         0.005,
         unit="m",
         doc="DCE removes vertices while the least relevance K(u,v,w) (Wolter eq. 1) is below this",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.0001,
+        maximum=1.0,
     )
     max_beams: int = param(
         100_000,
         unit="beams",
         doc="scans with more beams are refused as corrupt",
         minimum=1,
+        maximum=1_000_000,
+    )
+    min_field_of_view: float = param(
+        0.5,
+        unit="rad",
+        doc="scans whose beams span less (|angle_increment| x (beams - 1)) are refused: no "
+        "laser makes them (an increment of 1e-4 rad puts 1081 beams within 6 degrees, every "
+        "point nearly on one line), and no match can constrain a pose with them; 0.5 rad lets "
+        "depth cameras through (about 1 rad)",
+        minimum=0.0,
+        maximum=2.0 * math.pi,
     )
 
     def __post_init__(self) -> None:
@@ -567,4 +580,20 @@ def extract_scan(scan: LaserScanData, config: ExtractionConfig) -> tuple[Segment
     Raises :class:`~multi_robot_mapper.core.scan.ScanError` for a scan that cannot be used.
     """
     valid = scan_points(scan, max_beams=config.max_beams)
+    span = abs(scan.angle_increment) * (valid.beam_count - 1)
+    if span < config.min_field_of_view:
+        raise ScanError(
+            "field_of_view",
+            f"{valid.beam_count} beams at angle_increment {scan.angle_increment:.3g} rad span "
+            f"{math.degrees(span):.3g} deg, less than min_field_of_view "
+            f"{math.degrees(config.min_field_of_view):.3g} deg: no laser makes such a scan",
+            field="angle_increment",
+        )
+    if len(valid.points) == 0:
+        raise ScanError(
+            "no_valid_ranges",
+            f"none of the {valid.beam_count} ranges is a finite reading in "
+            f"[range_min={scan.range_min:g}, range_max={scan.range_max:g}) m",
+            field="ranges",
+        )
     return extract_segments(valid.points, config), valid

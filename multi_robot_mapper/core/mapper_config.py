@@ -21,21 +21,47 @@ class RobotMapperConfig:
         unit="s",
         doc="the same kind of bad-scan warning is logged at most once per this period",
         minimum=0.0,
+        maximum=3600.0,
     )
     segment_marker_width: float = param(
         0.03,
         unit="m",
         doc="line width of the segment markers (visualisation only)",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.001,
+        maximum=10.0,
     )
     partial_map_period: float = param(
         1.0,
         unit="s",
         doc="the whole partial map is republished at most once per this period, when it changed",
-        minimum=0.0,
+        minimum=0.05,
         maximum=3600.0,
-        exclusive_minimum=True,
+    )
+    scan_max_queue_delay: float = param(
+        0.5,
+        unit="s",
+        doc="a scan that waited longer than this in the subscription's queue is dropped "
+        "(counted) so that the newest scans are mapped: the latency stays bounded when scans "
+        "come faster than they can be mapped",
+        minimum=0.01,
+        maximum=60.0,
+    )
+    stamp_reset_jump: float = param(
+        5.0,
+        unit="s",
+        doc="a scan stamped further back than this from the last one (a bag played again, a "
+        "clock reset) starts the robot's map over; a smaller step back is a stale scan, "
+        "dropped, and a repeated stamp a duplicate, dropped",
+        minimum=0.01,
+        maximum=1e6,
+    )
+    max_stamp_lead: float = param(
+        10.0,
+        unit="s",
+        doc="a scan stamped further ahead of this node's clock is dropped (a robot clock far "
+        "off, a corrupt stamp); not checked while a simulated clock has not started",
+        minimum=0.0,
+        maximum=1e6,
     )
     map_frame: str = param(
         "",
@@ -56,18 +82,16 @@ class RobotMapperConfig:
         unit="s",
         doc="how often the robot's status (scan rate, scans rejected and set aside by reason) "
         "goes out on /diagnostics",
-        minimum=0.0,
+        minimum=0.01,
         maximum=3600.0,
-        exclusive_minimum=True,
     )
     stale_timeout: float = param(
         5.0,
         unit="s",
         doc="the status turns STALE when no scan arrived for this long (node clock: sim time "
         "when use_sim_time is set)",
-        minimum=0.0,
+        minimum=0.01,
         maximum=86400.0,
-        exclusive_minimum=True,
     )
 
     def __post_init__(self) -> None:

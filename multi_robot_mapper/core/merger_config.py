@@ -28,17 +28,15 @@ class MapMergerConfig:
         unit="s",
         doc="how often the topic list is searched for new '<namespace>/partial_map' topics "
         "(only when robots is empty)",
-        minimum=0.0,
+        minimum=0.05,
         maximum=3600.0,
-        exclusive_minimum=True,
     )
     merge_period: float = param(
         1.0,
         unit="s",
         doc="how often the partial maps are merged again, when one of them changed",
-        minimum=0.0,
+        minimum=0.05,
         maximum=3600.0,
-        exclusive_minimum=True,
     )
     map_frame: str = param(
         "map",
@@ -56,8 +54,8 @@ class MapMergerConfig:
         0.05,
         unit="m",
         doc="line width of the global map's segment markers (visualisation only)",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.001,
+        maximum=10.0,
     )
     merge_worker: bool = param(
         True,
@@ -72,6 +70,31 @@ class MapMergerConfig:
         doc="the same kind of message (a robot still unmerged, a failed merge) is logged at "
         "most once per this period",
         minimum=0.0,
+        maximum=3600.0,
+    )
+    max_keyframes_per_map: int = param(
+        50_000,
+        unit="keyframes",
+        doc="a partial map with more keyframe markers is refused before it is read (a robot "
+        "keeps its last good map)",
+        minimum=1,
+        maximum=10_000_000,
+    )
+    max_segments_per_map: int = param(
+        200_000,
+        unit="segments",
+        doc="a partial map with more segments (line-list point pairs) is refused before it is read",
+        minimum=1,
+        maximum=10_000_000,
+    )
+    max_map_extent: float = param(
+        200.0,
+        unit="m",
+        doc="a partial map (or pose) reaching farther from its robot's map origin is refused: "
+        "the map correlation's memory grows with the square of the extent (two 300-segment "
+        "maps reaching 200 m from their origins: 0.8 GB and 13 s on one core)",
+        minimum=1.0,
+        maximum=100_000.0,
     )
     stale_timeout: float = param(
         5.0,
@@ -79,18 +102,16 @@ class MapMergerConfig:
         doc="a robot whose partial map and pose have not arrived for this long is STALE in "
         "/diagnostics (its map stays in the global map; node clock: sim time when "
         "use_sim_time is set)",
-        minimum=0.0,
+        minimum=0.01,
         maximum=86400.0,
-        exclusive_minimum=True,
     )
     diagnostics_period: float = param(
         1.0,
         unit="s",
         doc="how often every robot's status (OK merged / WARN unmerged / STALE silent, pose "
         "rate, merge score) goes out on /diagnostics",
-        minimum=0.0,
+        minimum=0.01,
         maximum=3600.0,
-        exclusive_minimum=True,
     )
     map_file: str = param(
         "~/.ros/multi_robot_mapper/global_map.json",

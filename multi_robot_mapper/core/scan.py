@@ -34,12 +34,14 @@ class ScanNotice:
 
 
 class ScanError(ValueError):
-    """The scan cannot be used at all. ``kind`` is a stable key for throttling warnings."""
+    """The scan cannot be used at all. ``kind`` is a stable key for counters and throttled
+    warnings, ``field`` the LaserScan field at fault."""
 
-    def __init__(self, kind: str, message: str) -> None:
+    def __init__(self, kind: str, message: str, field: str = "") -> None:
         super().__init__(message)
         self.kind = kind
         self.message = message
+        self.field = field
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,6 +65,9 @@ class ScanPoints:
     beam_index: IntArray  # (M,) index of each point's beam in the original ``ranges``
     beam_count: int
     notices: tuple[ScanNotice, ...]
+    # Beams without a usable return, by kind: "nan", "+inf" (no return, REP-117), "-inf" (too
+    # close), "below_range_min", "beyond_range_max" (at or beyond it). Empty when all are valid.
+    dropped: tuple[tuple[str, int], ...] = ()
 
     @property
     def invalid_count(self) -> int:
@@ -78,11 +83,12 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
     n = r.size
     notices: list[ScanNotice] = []
     if n == 0:
-        raise ScanError("no_beams", "scan has no beams (ranges is empty)")
+        raise ScanError("no_beams", "scan has no beams (ranges is empty)", "ranges")
     if n > max_beams:
         raise ScanError(
             "too_many_beams",
             f"scan has {n} beams, more than max_beams={max_beams}; refusing it as corrupt",
+            "ranges",
         )
     # The scalar checks use math, not numpy: numpy costs about a microsecond per scalar call.
     for name, value in (
@@ -94,21 +100,31 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
     ):
         if not math.isfinite(value):
             raise ScanError(
-                "non_finite_field", f"scan field {name} is {value}, not a finite number"
+                "non_finite_field", f"scan field {name} is {value}, not a finite number", name
             )
+    if range_min < 0.0:
+        raise ScanError(
+            "range_limits",
+            f"range_min is negative ({range_min:g} m): no laser measures that",
+            "range_min",
+        )
     if range_max <= range_min:
         raise ScanError(
             "range_limits",
             f"range_max ({range_max:g} m) <= range_min ({range_min:g} m): no reading can be valid",
+            "range_max",
         )
     if n > 1 and angle_increment == 0.0:
-        raise ScanError("zero_increment", f"angle_increment is 0 for a scan of {n} beams")
+        raise ScanError(
+            "zero_increment", f"angle_increment is 0 for a scan of {n} beams", "angle_increment"
+        )
     span = angle_max - angle_min
     if n > 1 and span != 0.0 and (span > 0.0) != (angle_increment > 0.0):
         raise ScanError(
             "angle_order",
             f"angle_max ({angle_max:.4f} rad) - angle_min ({angle_min:.4f} rad) = {span:.4f} rad "
             f"has the opposite sign of angle_increment ({angle_increment:.6f} rad)",
+            "angle_max",
         )
     sweep = abs(angle_increment) * (n - 1)
     if sweep > _FULL_TURN + abs(angle_increment):
@@ -117,16 +133,18 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
             f"ranges has {n} beams: at angle_increment {angle_increment:.6f} rad they sweep "
             f"{math.degrees(sweep):.0f} deg, more than a full turn "
             f"(angle_min..angle_max describe {abs(span) / abs(angle_increment) + 1:.0f} beams)",
+            "ranges",
         )
     if n > 1:
+        # Drivers disagree on whether angle_max is the last beam's angle or one increment
+        # beyond it: a beam of slack either way. More is a scan whose fields contradict it.
         expected = abs(span) / abs(angle_increment) + 1.0
         if abs(expected - n) > 1.5:
-            notices.append(
-                ScanNotice(
-                    "beam_count",
-                    f"ranges has {n} beams but angle_min/angle_max/angle_increment describe "
-                    f"{expected:.0f}; beam angles taken as angle_min + i * angle_increment",
-                )
+            raise ScanError(
+                "beam_count",
+                f"ranges has {n} beams but angle_min/angle_max/angle_increment describe "
+                f"{expected:.0f}: the fields contradict each other",
+                "ranges",
             )
     if intensities is not None:
         n_int = np.asarray(intensities).size
@@ -141,18 +159,18 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
     # The range limits are finite (checked above), so NaN and +-inf fail one of the two
     # comparisons: no separate finiteness test is needed.
     with np.errstate(invalid="ignore"):
-        valid = (r >= max(range_min, 0.0)) & (r < range_max)
+        valid = (r >= range_min) & (r < range_max)
     index = valid.nonzero()[0]
+    dropped: tuple[tuple[str, int], ...] = ()
     if index.size < n:
-        finite = np.isfinite(r)
-        n_finite = int(np.count_nonzero(finite))
-        if n_finite < n:
-            n_nan = int(np.count_nonzero(np.isnan(r)))
+        dropped = _dropped_by_kind(r, range_min, range_max)
+        counts = dict(dropped)
+        n_nan, n_inf = counts.get("nan", 0), counts.get("+inf", 0) + counts.get("-inf", 0)
+        if n_nan or n_inf:
             notices.append(
                 ScanNotice(
                     "non_finite_ranges",
-                    f"{n_nan} NaN and {n - n_finite - n_nan} inf of {n} ranges: "
-                    "treated as no return",
+                    f"{n_nan} NaN and {n_inf} inf of {n} ranges: treated as no return",
                 )
             )
     if angle_increment < 0.0:
@@ -184,7 +202,26 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
         beam_index=index.astype(np.int64, copy=False),
         beam_count=n,
         notices=tuple(notices),
+        dropped=dropped,
     )
+
+
+def _dropped_by_kind(
+    r: FloatArray, range_min: float, range_max: float
+) -> tuple[tuple[str, int], ...]:
+    """How many beams are NaN, +inf, -inf, below range_min, at or beyond range_max."""
+    nan = np.isnan(r)
+    pos_inf = r == np.inf
+    neg_inf = r == -np.inf
+    finite = ~(nan | pos_inf | neg_inf)
+    counts = (
+        ("nan", int(np.count_nonzero(nan))),
+        ("+inf", int(np.count_nonzero(pos_inf))),
+        ("-inf", int(np.count_nonzero(neg_inf))),
+        ("below_range_min", int(np.count_nonzero(finite & (r < range_min)))),
+        ("beyond_range_max", int(np.count_nonzero(finite & (r >= range_max)))),
+    )
+    return tuple((kind, count) for kind, count in counts if count)
 
 
 # A laser never changes its beam geometry, so the cosine and sine of every beam angle are

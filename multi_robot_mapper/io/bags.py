@@ -15,10 +15,9 @@ from __future__ import annotations
 import contextlib
 import fnmatch
 import re
-import shutil
 import sqlite3
 import struct
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -26,6 +25,8 @@ from typing import Any, Literal
 
 import apsw  # rosbags' sqlite3 storage reads through apsw
 import numpy as np
+import yaml
+from mcap.exceptions import McapError
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterError
 from rosbags.serde import SerdeError
@@ -40,6 +41,9 @@ from multi_robot_mapper.core.geometry import (
 )
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import SimulatedRobot
+from multi_robot_mapper.io.mcap_chunks import Salvage, add_chunk_checksums
+from multi_robot_mapper.io.mcap_chunks import salvage as salvage_chunks
+from multi_robot_mapper.io.outputs import OutputError, staged_new
 
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
@@ -234,7 +238,7 @@ def _pose_msg(item: TimedPose) -> Any:
     )
 
 
-def _open_reader(path: Path) -> Reader:
+def _open_reader(path: Path, hint: str = "") -> Reader:
     """A rosbags reader for a bag directory or a bare ``.mcap``/``.db3`` file."""
     if path.is_dir():
         if not (path / "metadata.yaml").is_file():
@@ -252,7 +256,7 @@ def _open_reader(path: Path) -> Reader:
         reader = Reader(path)
         reader.open()
     except _READ_ERRORS as exc:
-        raise BagCorruptError(f"{path}: cannot open the bag ({_reason(exc)})") from None
+        raise BagCorruptError(f"{path}: cannot open the bag ({_reason(exc)}){hint}") from None
     return reader
 
 
@@ -262,70 +266,164 @@ def _reason(exc: BaseException) -> str:
     return text if len(text) <= 200 else text[:197] + "..."
 
 
-def read_recordings(path: str | Path, scan_pattern: str = "/*/scan") -> dict[str, RobotRecording]:
+@dataclass
+class ReadReport:
+    """What :func:`read_recordings` left out of a bag it could read: empty when it read all."""
+
+    notes: list[str] = field(default_factory=list)
+    salvage: Salvage | None = None
+
+
+def read_recordings(
+    path: str | Path,
+    scan_pattern: str = "/*/scan",
+    *,
+    salvage: bool = False,
+    report: ReadReport | None = None,
+) -> dict[str, RobotRecording]:
     """Every robot's scans (and ground truth, when recorded) from a rosbag2 bag.
 
     ``scan_pattern`` is an ``fnmatch`` pattern on topic names; each matching topic is one
     robot, named by its namespace (:func:`robot_name`). Ground truth is read from
     ``<namespace>/ground_truth`` when that topic exists. Lists are sorted by header stamp.
+    A topic of another message type is left out (and said in ``report``) while others remain;
+    a damaged MCAP file is refused unless ``salvage``, which reads every intact chunk.
     """
     path = Path(path)
+    report = report if report is not None else ReadReport()
     if not path.exists():
         raise BagNotFoundError(f"{path}: no such bag file or directory")
-    reader = _open_reader(path)
+    if salvage:
+        return _read_salvaged(path, scan_pattern, report)
+    hint = "; --salvage reads every intact chunk" if _mcap_file(path) is not None else ""
+    reader = _open_reader(path, hint)
     try:
-        return _read(reader, path, scan_pattern)
+        topics: dict[str, list[Connection]] = {}
+        for connection in reader.connections:
+            topics.setdefault(connection.topic, []).append(connection)
+        types = {topic: {c.msgtype for c in conns} for topic, conns in topics.items()}
+        wanted = _select(types, path, scan_pattern, report)
+        selected = [c for topic in wanted for c in topics[topic]]
+        messages = (
+            (c.topic, c.msgtype, raw) for c, _, raw in reader.messages(connections=selected)
+        )
+        expected = {t: sum(c.msgcount for c in topics[t]) for t in wanted}
+        return _decode(messages, wanted, expected, "metadata.yaml", report)
     except BagError:
         raise
     except _READ_ERRORS as exc:
-        raise BagCorruptError(f"{path}: cannot read the bag ({_reason(exc)})") from None
+        raise BagCorruptError(f"{path}: cannot read the bag ({_reason(exc)}){hint}") from None
     finally:
         # Closing a damaged file may fail too; the read error above is the one to report.
         with contextlib.suppress(*_READ_ERRORS):
             reader.close()
 
 
-def _read(reader: Reader, path: Path, scan_pattern: str) -> dict[str, RobotRecording]:
-    topics: dict[str, list[Connection]] = {}
-    for connection in reader.connections:
-        topics.setdefault(connection.topic, []).append(connection)
-    scan_topics = sorted(t for t in topics if fnmatch.fnmatchcase(t, scan_pattern))
-    if not scan_topics:
-        known = ", ".join(sorted(topics)) or "none"
-        raise NoScanTopicsError(f"{path}: no topic matches {scan_pattern!r} (topics: {known})")
+def _mcap_file(path: Path) -> Path | None:
+    """The MCAP file of a bag (a bare ``.mcap``, or the one in a bag directory), if any."""
+    if path.is_file():
+        return path if path.suffix == ".mcap" else None
+    files = sorted(path.glob("*.mcap")) if path.is_dir() else []
+    return files[0] if len(files) == 1 else None
 
-    wanted: dict[str, tuple[str, str]] = {}  # topic -> (robot, kind)
+
+def _read_salvaged(path: Path, scan_pattern: str, report: ReadReport) -> dict[str, RobotRecording]:
+    """:func:`read_recordings` on whatever chunks of a damaged MCAP file are intact."""
+    mcap = _mcap_file(path)
+    if mcap is None:
+        raise BagError(f"{path}: --salvage reads MCAP bags (one .mcap file) only")
+    report.salvage = Salvage()
+    try:
+        messages = list(salvage_chunks(mcap, report.salvage))
+    except OSError as exc:
+        raise BagCorruptError(f"{path}: cannot read ({_reason(exc)})") from None
+    types: dict[str, set[str]] = {}
+    for topic, msgtype, _, _ in messages:
+        types.setdefault(topic, set()).add(msgtype)
+    wanted = _select(types, path, scan_pattern, report)
+    report.notes.append(f"{mcap.name}: {report.salvage.describe()}")
+    expected = _metadata_counts(path) if path.is_dir() else {}
+    picked = ((t, m, raw) for t, m, _, raw in messages if t in wanted)
+    try:
+        return _decode(picked, wanted, expected, "metadata.yaml", report)
+    except _READ_ERRORS as exc:
+        raise BagCorruptError(
+            f"{path}: cannot decode a salvaged message ({_reason(exc)})"
+        ) from None
+
+
+def _metadata_counts(path: Path) -> dict[str, int]:
+    """Messages per topic as a bag directory's metadata.yaml has them ({} if unreadable)."""
+    try:
+        info = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        return {
+            str(t["topic_metadata"]["name"]): int(t["message_count"])
+            for t in info["topics_with_message_count"]
+        }
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError):
+        return {}
+
+
+def _select(
+    types: dict[str, set[str]], path: Path, scan_pattern: str, report: ReadReport
+) -> dict[str, tuple[str, str]]:
+    """topic -> (robot, "scan" or "truth") of the topics to read; a topic of another message
+    type is left out with a note, and an error only when no scan topic remains."""
+    scan_topics = sorted(t for t in types if fnmatch.fnmatchcase(t, scan_pattern))
+    if not scan_topics:
+        known = ", ".join(sorted(types)) or "none"
+        raise NoScanTopicsError(f"{path}: no topic matches {scan_pattern!r} (topics: {known})")
+    wanted: dict[str, tuple[str, str]] = {}
+    refused: list[str] = []
     for topic in scan_topics:
         name = robot_name(topic)
         for other, (robot, _) in wanted.items():
             if robot == name:
                 raise BagError(f"{path}: topics {other} and {topic} both name robot {name!r}")
-        wanted[topic] = (name, "scan")
         truth = f"{topic.rsplit('/', 1)[0]}/{GROUND_TRUTH}"
-        if truth in topics:
-            wanted[truth] = (name, "truth")
-    for topic, (_, kind) in wanted.items():
-        expected = SCAN_TYPE if kind == "scan" else POSE_TYPE
-        for connection in topics[topic]:
-            if connection.msgtype != expected:
-                raise UnknownMessageTypeError(
-                    f"{path}: topic {topic} has type {connection.msgtype}, expected {expected}"
-                )
+        for candidate, kind, expected in ((topic, "scan", SCAN_TYPE), (truth, "truth", POSE_TYPE)):
+            if candidate not in types:
+                continue
+            odd = sorted(types[candidate] - {expected})
+            if odd:
+                refused.append(f"topic {candidate} has type {', '.join(odd)}, expected {expected}")
+                if kind == "scan":
+                    break  # no scans: no robot (and its ground truth is of no use)
+                continue
+            wanted[candidate] = (name, kind)
+    if not any(kind == "scan" for _, kind in wanted.values()):
+        raise UnknownMessageTypeError(f"{path}: {'; '.join(refused)}")
+    report.notes.extend(f"{path}: {reason}: left out" for reason in refused)
+    return wanted
 
+
+def _decode(
+    messages: Iterable[tuple[str, str, bytes]],
+    wanted: dict[str, tuple[str, str]],
+    expected: dict[str, int],
+    source: str,
+    report: ReadReport,
+) -> dict[str, RobotRecording]:
     recordings = {
         name: RobotRecording(name=name, scans=[], ground_truth=[])
         for name, kind in wanted.values()
         if kind == "scan"
     }
-    selected = [c for topic in wanted for c in topics[topic]]
+    counts: dict[str, int] = dict.fromkeys(wanted, 0)
     deserialize = _typestore().deserialize_cdr
-    for connection, _, raw in reader.messages(connections=selected):
-        name, kind = wanted[connection.topic]
-        msg = deserialize(raw, connection.msgtype)
+    for topic, msgtype, raw in messages:
+        name, kind = wanted[topic]
+        msg = deserialize(raw, msgtype)
+        counts[topic] += 1
         if kind == "scan":
             recordings[name].scans.append(_scan_from_msg(msg))
         else:
             recordings[name].ground_truth.append(_pose_from_msg(msg))
+    for topic, count in counts.items():
+        if topic in expected and expected[topic] != count:
+            report.notes.append(
+                f"{source} counts {expected[topic]} messages on {topic}, the bag holds {count}"
+            )
     for recording in recordings.values():
         recording.scans.sort(key=lambda item: item.stamp)  # stable: equal stamps keep bag order
         recording.ground_truth.sort(key=lambda item: item.stamp)
@@ -368,10 +466,27 @@ def write_recordings(
                     )
                 messages.append((_stamp_ns(item.stamp), len(messages), topic, item))
     messages.sort(key=lambda m: (m[0], m[1]))
+    try:
+        with staged_new(path) as staging:  # an interrupted write leaves no half bag at path
+            _write_messages(staging, path, recordings, messages, plugins[storage])
+            for mcap in staging.glob("*.mcap"):  # rosbags writes chunks without checksums
+                add_chunk_checksums(mcap)
+    except (OSError, OutputError, McapError) as exc:
+        raise BagError(f"{path}: cannot create the bag ({_reason(exc)})") from None
+    return path
+
+
+def _write_messages(
+    staging: Path,
+    path: Path,
+    recordings: Mapping[str, RobotRecording],
+    messages: list[tuple[int, int, str, Any]],
+    plugin: StoragePlugin,
+) -> None:
     serialize = _typestore().serialize_cdr
     write_errors = (WriterError, OSError, sqlite3.Error, ValueError, OverflowError, struct.error)
     try:
-        bag = Writer(path, version=Writer.VERSION_LATEST, storage_plugin=plugins[storage])
+        bag = Writer(staging, version=Writer.VERSION_LATEST, storage_plugin=plugin)
         bag.open()
     except write_errors as exc:
         raise BagError(f"{path}: cannot create the bag ({_reason(exc)})") from None
@@ -393,10 +508,7 @@ def write_recordings(
     except (*write_errors, SerdeError) as exc:
         with contextlib.suppress(*write_errors):  # the first error is the one to report
             bag.abort()
-        # Writer.open created the directory (it refuses existing paths): remove the half bag.
-        shutil.rmtree(path, ignore_errors=True)
         raise BagError(f"{path}: cannot write the bag ({_reason(exc)})") from None
-    return path
 
 
 # A scan takes the ground-truth pose stamped nearest to it when within this (replay, evaluate).

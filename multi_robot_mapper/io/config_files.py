@@ -14,6 +14,7 @@ import yaml
 
 from multi_robot_mapper.core.config import (
     ConfigError,
+    check_values,
     config_from_flat,
     flatten_mapping,
     parse_override,
@@ -22,33 +23,77 @@ from multi_robot_mapper.core.config import (
 C = TypeVar("C")
 
 
+# A parameters file is a few kilobytes; anything far larger is not one (and is not read).
+MAX_CONFIG_BYTES = 1_000_000
+
+
 def parameters_from_yaml(path: str | Path, node_name: str | None = None) -> dict[str, Any]:
     """The flat dotted parameters of a YAML file (ROS params-file layout or a plain mapping).
 
     In a params file, ``/**`` applies to every node; a section named after ``node_name``
-    (with or without namespace) is applied on top of it.
+    (with or without namespace) is applied on top of it. Every problem with the file is a
+    :class:`ConfigError` of one line naming the file (and the key, when one is at fault).
     """
     path = Path(path)
     try:
+        if path.is_dir():
+            raise ConfigError(f"configuration file {path} is a directory")
+        if path.stat().st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(
+                f"configuration file {path} is larger than {MAX_CONFIG_BYTES} bytes: "
+                "not a parameters file"
+            )
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except FileNotFoundError as exc:
         raise ConfigError(f"configuration file {path} does not exist") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"configuration file {path} is not UTF-8 text (byte {exc.start}: "
+            f"{exc.object[exc.start : exc.start + 1]!r})"
+        ) from exc
+    except OSError as exc:
+        raise ConfigError(f"configuration file {path} cannot be read ({exc.strerror})") from exc
     except yaml.YAMLError as exc:
-        raise ConfigError(f"configuration file {path} is not valid YAML: {exc}") from exc
+        where = getattr(exc, "problem_mark", None)
+        line = f" (line {where.line + 1})" if where is not None else ""
+        problem = getattr(exc, "problem", None) or type(exc).__name__
+        raise ConfigError(f"configuration file {path} is not valid YAML{line}: {problem}") from exc
+    except RecursionError as exc:  # deeply nested flow collections
+        raise ConfigError(f"configuration file {path} is nested too deeply") from exc
     if data is None:
         return {}
     if not isinstance(data, Mapping):
         raise ConfigError(f"configuration file {path} must hold a mapping at top level")
     sections = [v for v in data.values() if isinstance(v, Mapping) and "ros__parameters" in v]
     if not sections:
-        return flatten_mapping(data)
+        return _flat(data, path, "")
     flat: dict[str, Any] = {}
     for key, value in data.items():
         if not (isinstance(value, Mapping) and "ros__parameters" in value):
             continue
         name = str(key).rstrip("/").split("/")[-1]
         if key == "/**" or (node_name is not None and name == node_name):
-            flat.update(flatten_mapping(value["ros__parameters"]))
+            parameters = value["ros__parameters"]
+            if parameters is None:
+                continue
+            if not isinstance(parameters, Mapping):
+                raise ConfigError(
+                    f"configuration file {path}: '{key}: ros__parameters' must be a mapping of "
+                    f"parameters, not {parameters!r}"
+                )
+            flat.update(_flat(parameters, path, f"{key}: ros__parameters: "))
+    return flat
+
+
+def _flat(mapping: Mapping[Any, Any], path: Path, where: str) -> dict[str, Any]:
+    """``flatten_mapping`` with every key a string and every value a scalar."""
+    flat = flatten_mapping({str(k): v for k, v in mapping.items()})
+    for name, value in flat.items():
+        if not isinstance(value, (bool, int, float, str)):
+            raise ConfigError(
+                f"configuration file {path}: {where}'{name}' must be a single value, "
+                f"not {type(value).__name__} {value!r}"[:300]
+            )
     return flat
 
 
@@ -58,12 +103,22 @@ def load_config(
     overrides: Iterable[str] = (),
     node_name: str | None = None,
 ) -> C:
-    """Defaults, then the YAML file, then ``name=value`` overrides; validated on load."""
+    """Defaults, then the YAML file, then ``name=value`` overrides; validated on load, every
+    error naming where the value came from (the file or ``--set``)."""
     flat: dict[str, Any] = {}
     if path is not None:
-        flat.update(parameters_from_yaml(path, node_name=node_name))
+        from_file = parameters_from_yaml(path, node_name=node_name)
+        try:
+            check_values(cls, from_file)
+        except ConfigError as exc:
+            raise ConfigError(f"configuration file {path}: {exc}") from exc
+        flat.update(from_file)
     for text in overrides:
         name, value = parse_override(text)
+        try:
+            check_values(cls, {name: value})
+        except ConfigError as exc:
+            raise ConfigError(f"--set {text.strip()}: {exc}") from exc
         flat[name] = value
     return config_from_flat(cls, flat)
 
@@ -133,7 +188,10 @@ def _parameters_section(config_class: type) -> str:
             if section not in opened:
                 opened.add(section)
                 rows.append((f"{'    ' + '  ' * depth}{parts[depth]}:", None))
-        unit = f"{spec.unit}, " if spec.unit else ""
+        if spec.minimum is not None or spec.maximum is not None:
+            unit = f"{spec.range_text()}: "
+        else:
+            unit = f"{spec.unit}, " if spec.unit else ""
         indent = "    " + "  " * (len(parts) - 1)
         rows.append((f"{indent}{parts[-1]}: {scalar(spec.default)}", f"# {unit}{spec.doc}"))
     width = max(len(text) for text, comment in rows if comment is not None) + 1

@@ -15,6 +15,8 @@ from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
+from multi_robot_mapper.io.outputs import atomic_file
+
 FloatArray = np.typing.NDArray[np.float64]
 
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2")
@@ -66,10 +68,14 @@ def segments_extent(segment_sets: Sequence[FloatArray]) -> FloatArray:
 def save_figure(fig: Figure, path: str | Path, *more: str | Path) -> Path:
     """Write a figure to each path (format from the suffix: .png, .svg) and close it."""
     paths = [Path(p) for p in (path, *more)]
-    for target in paths:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(target, dpi=150, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        for target in paths:  # each under a temporary name until complete
+            with atomic_file(target, "wb") as stream:
+                fig.savefig(
+                    stream, format=target.suffix.lstrip(".") or "png", dpi=150, bbox_inches="tight"
+                )
+    finally:
+        plt.close(fig)
     return paths[0]
 
 

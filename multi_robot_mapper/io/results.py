@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core.geometry import quaternion_from_yaw, yaw_from_quaternion
+from multi_robot_mapper.io.outputs import atomic_file, atomic_write_text
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -115,12 +116,12 @@ def write_tum(path: Path, stamps: FloatArray, poses: FloatArray) -> None:
     # %.9f for stamps (nanoseconds; exact float64 round trip for epoch stamps), %.17g for the
     # rest (exact float64 round trip).
     fmt = ["%.9f"] + ["%.17g"] * 7
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(path, table, fmt=fmt, header="timestamp x y z qx qy qz qw", comments="# ")
+    with atomic_file(path) as stream:
+        np.savetxt(stream, table, fmt=fmt, header="timestamp x y z qx qy qz qw", comments="# ")
 
 
 def _write_json(path: Path, data: Any) -> None:
-    path.write_text(json.dumps(data, indent=1, default=_json_default) + "\n")
+    atomic_write_text(path, json.dumps(data, indent=1, default=_json_default) + "\n")
 
 
 def _json_default(value: Any) -> Any:

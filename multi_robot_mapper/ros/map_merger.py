@@ -75,15 +75,21 @@ from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.core.merging.occupancy import OccupancyGrid, merge_with_grid
+from multi_robot_mapper.io.inputs import (
+    InputError,
+    MapLimits,
+    partial_map_from_msg,
+    pose_from_checked_msg,
+)
 from multi_robot_mapper.io.messages import (
     partial_map_contents,
     piece_frame,
     piece_of_frame,
-    pose_from_msg,
     pose_stamped,
 )
 from multi_robot_mapper.io.saved_map import SavedMapError, read_saved_map, write_saved_map
 from multi_robot_mapper.ros import diagnostics
+from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
 from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.markers import (
     MarkerCache,
@@ -97,6 +103,7 @@ from multi_robot_mapper.ros.markers import (
     stamp_key,
 )
 from multi_robot_mapper.ros.merger_state import (
+    MergeInputs,
     RobotState,
     after_new_session,
     merge_inputs,
@@ -133,6 +140,10 @@ class MapMerger(Node):
         self.config.require_implemented()
         self.notes = ThrottledWarnings(self.get_logger().info, self.config.warning_period)
         self.warnings = ThrottledWarnings(self.get_logger().warning, self.config.warning_period)
+        # A robot's bad input is rejected (counted per robot and reason, a throttled warning
+        # naming robot and field, its last good map kept); no error escapes a callback.
+        self.rejections = Rejections(self.warnings)
+        self.guard = CallbackGuard(self.warnings)
         self._lock = threading.Lock()
         self.robots: dict[str, RobotState] = {}
         self.result: MergeResult | None = None
@@ -143,6 +154,10 @@ class MapMerger(Node):
         self.global_maps_published = 0
         self._merged_versions: dict[str, int] = {}  # partial map versions of the last merge
         self._new_sessions: list[tuple[str, str]] = []  # (robot, its earlier map's name)
+        # Each robot's map as the last successful merge used it: what a robot whose new map
+        # makes the merge fail falls back to.
+        self._merged_inputs: dict[str, tuple[FloatArray, FloatArray, list[Keyframe]]] = {}
+        self._culprits: set[str] = set()  # robots set back by the last failed merge
         self._worker: ProcessPoolExecutor | None = None  # started on the first merge
         self._shown: tuple[object, ...] | None = None  # what the last global_map showed
         self._marker_ids: set[MarkerKey] = set()  # its markers (deleted once gone)
@@ -167,10 +182,14 @@ class MapMerger(Node):
             ),
         ]
         self._discovery_timer = self.create_timer(
-            self.config.discovery_period, self.discover, callback_group=self._input_groups
+            self.config.discovery_period,
+            self.guard("discover", self.discover),
+            callback_group=self._input_groups,
         )
         self._merge_timer = self.create_timer(
-            self.config.merge_period, self.merge_now, callback_group=self._merge_group
+            self.config.merge_period,
+            self.guard("merge", self.merge_now),
+            callback_group=self._merge_group,
         )
         self._diagnostics_timer = self.create_timer(
             self.config.diagnostics_period,
@@ -213,14 +232,14 @@ class MapMerger(Node):
             self.create_subscription(
                 MarkerArray,
                 f"/{name}/partial_map",
-                lambda msg, n=name: self._on_partial_map(n, msg),
+                self.guard(f"{name}/partial_map", lambda msg, n=name: self._on_partial_map(n, msg)),
                 LATCHED_QOS,
                 callback_group=self._input_groups,
             ),
             self.create_subscription(
                 PoseStamped,
                 f"/{name}/pose",
-                lambda msg, n=name: self._on_pose(n, msg),
+                self.guard(f"{name}/pose", lambda msg, n=name: self._on_pose(n, msg)),
                 POSE_QOS,
                 callback_group=self._input_groups,
             ),
@@ -230,14 +249,18 @@ class MapMerger(Node):
     def _clock_ns(self) -> int:
         return int(self.get_clock().now().nanoseconds)
 
+    def _limits(self) -> MapLimits:
+        config = self.config
+        return MapLimits(
+            config.max_keyframes_per_map, config.max_segments_per_map, config.max_map_extent
+        )
+
     def _on_partial_map(self, name: str, msg: MarkerArray) -> None:
         try:
+            partial_map_from_msg(msg, self._limits())  # checked first: bounded, finite
             contents = partial_map_contents(msg)
-        except Exception:
-            self.warnings.warn(
-                f"bad_map:{name}",
-                f"partial map of '{name}' ignored after an error:\n{traceback.format_exc()}",
-            )
+        except InputError as exc:  # the robot's last good map stays
+            self.rejections.reject(name, exc.kind, exc.field, exc.message, "partial map")
             return
         with self._lock:
             kept = store_partial_map(
@@ -253,7 +276,11 @@ class MapMerger(Node):
             )
 
     def _on_pose(self, name: str, msg: PoseStamped) -> None:
-        pose = pose_from_msg(msg.pose)
+        try:
+            pose = pose_from_checked_msg(msg.pose, self.config.max_map_extent)
+        except InputError as exc:
+            self.rejections.reject(name, exc.kind, exc.field, exc.message, "pose")
+            return
         with self._lock:
             state = self.robots[name]
             state.pose = pose
@@ -292,13 +319,20 @@ class MapMerger(Node):
             began = time.perf_counter()
             try:
                 result, grid = self._merge(inputs.keyframes, config)
+                self._merged_inputs = {
+                    n: (inputs.maps[n], inputs.viewpoints[n], inputs.keyframes[n])
+                    for n in inputs.maps
+                }
             except Exception:
                 self.merge_errors += 1
                 self.warnings.warn(
                     "merge_error",
                     f"merge failed (the last global map stays):\n{traceback.format_exc()}",
                 )
-                return False
+                fallback = self._merge_without_new_maps(inputs, config)
+                if fallback is None:
+                    return False
+                result, grid = fallback
             with self._lock:
                 # A robot that started a new session while this merge ran: its pair results
                 # in this merge are of its old map.
@@ -349,6 +383,51 @@ class MapMerger(Node):
         with self._lock:
             versions = merge_inputs(self.robots).versions
         return bool(versions) and versions == self._merged_versions
+
+    def _merge_without_new_maps(
+        self, inputs: MergeInputs, config: MapMergerConfig
+    ) -> tuple[MergeResult, OccupancyGrid | None] | None:
+        """After a failed merge, merge again with one robot whose map changed since the last
+        good merge set back to its previous map (or left out), the robot that failed before
+        first; failing that, with every changed robot set back. One robot's map that the merge
+        cannot take must not stop the others: the robots set back are rejected (reason
+        ``merge_error``) until they send a new map. The merge that succeeded (None: none did)."""
+        versions = inputs.versions
+        changed = [n for n in inputs.maps if versions[n] != self._merged_versions.get(n)]
+        changed.sort(key=lambda n: n not in self._culprits)
+        trials = [[name] for name in changed] if len(changed) > 1 else []
+        trials.append(changed)
+        for set_back in trials:
+            kept = {
+                n: (inputs.maps[n], inputs.viewpoints[n], inputs.keyframes[n])
+                for n in inputs.maps
+                if n not in set_back
+            }
+            kept.update({n: self._merged_inputs[n] for n in set_back if n in self._merged_inputs})
+            if not kept:
+                continue
+            try:
+                merged = self._merge({n: k for n, (_, _, k) in kept.items()}, config)
+            except Exception:
+                continue
+            self._culprits = set(set_back)
+            for name in set_back:
+                self.rejections.reject(
+                    name,
+                    "merge_error",
+                    "partial_map",
+                    "the merge failed with this robot's new map; its last good map is merged "
+                    "instead until it sends another",
+                    "partial map",
+                )
+                with self._lock:  # the map the merge took stays this robot's map
+                    state = self.robots[name]
+                    state.segments, state.keyframe_poses, state.all_keyframes = kept.get(
+                        name, (np.zeros((0, 4)), np.zeros((0, 3)), [])
+                    )
+            self._merged_inputs = kept
+            return merged
+        return None
 
     def _merge(
         self, keyframes: dict[str, list[Keyframe]], config: MapMergerConfig
@@ -499,9 +578,11 @@ class MapMerger(Node):
         try:
             config = config_from_flat(MapMergerConfig, values)
             config.require_implemented()
+            self._apply_config(config)
         except ConfigError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        self._apply_config(config)
+        except Exception as exc:  # never into the executor
+            return SetParametersResult(successful=False, reason=f"not applied: {exc}")
         return SetParametersResult(successful=True)
 
     def _apply_config(self, config: MapMergerConfig) -> None:
@@ -511,12 +592,16 @@ class MapMerger(Node):
         if config.discovery_period != old.discovery_period:
             self.destroy_timer(self._discovery_timer)
             self._discovery_timer = self.create_timer(
-                config.discovery_period, self.discover, callback_group=self._input_groups
+                config.discovery_period,
+                self.guard("discover", self.discover),
+                callback_group=self._input_groups,
             )
         if config.merge_period != old.merge_period:
             self.destroy_timer(self._merge_timer)
             self._merge_timer = self.create_timer(
-                config.merge_period, self.merge_now, callback_group=self._merge_group
+                config.merge_period,
+                self.guard("merge", self.merge_now),
+                callback_group=self._merge_group,
             )
         if config.diagnostics_period != old.diagnostics_period:
             self.destroy_timer(self._diagnostics_timer)

@@ -1,15 +1,31 @@
-"""Typed configs as ROS parameters: declared with descriptors, validated on load and on set."""
+"""Typed configs as ROS parameters: declared with descriptors, validated on load and on set.
+
+Each parameter's descriptor carries the range declared in its config field (the same table
+``mrm --set`` and ``--config`` are checked against), so ROS tools show it and ROS refuses a
+value outside it; a params-file key the node does not know is refused as the CLI refuses it.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from multi_robot_mapper.core.config import ConfigError, config_from_flat, field_specs
+from multi_robot_mapper.core.config import (
+    ConfigError,
+    FieldSpec,
+    config_from_flat,
+    field_specs,
+    unknown_message,
+)
 
 C = TypeVar("C")
 
@@ -25,19 +41,56 @@ def declare_config(node: Node, cls: type[C]) -> C:
     """Declare every field of ``cls`` as a parameter of ``node`` and return the validated config.
 
     Values from ``--params-file`` or ``parameter_overrides`` apply at declaration; an invalid
-    value raises :class:`ConfigError` naming it.
+    value or a parameter the node does not know raises :class:`ConfigError` naming it.
     """
     values: dict[str, Any] = {}
-    for spec in field_specs(cls):
-        descriptor = ParameterDescriptor(
-            name=spec.name, type=_PARAMETER_TYPES[spec.kind], description=spec.describe()
-        )
+    specs = field_specs(cls)
+    for spec in specs:
         try:
-            param = node.declare_parameter(spec.name, spec.default, descriptor)
+            param = node.declare_parameter(spec.name, spec.default, descriptor(spec))
         except Exception as exc:  # rclpy raises several types for a wrongly typed override
-            raise ConfigError(f"parameter '{spec.name}': {exc}") from exc
+            raise ConfigError(f"parameter '{spec.name}': {_one_line(exc)}") from exc
         values[spec.name] = param.value
+    unknown = unknown_overrides(node)
+    if unknown:
+        message = unknown_message(unknown, [spec.name for spec in specs])
+        raise ConfigError(f"{node.get_name()}: {message} (from --params-file or -p)")
     return config_from_flat(cls, values)
+
+
+def descriptor(spec: FieldSpec) -> ParameterDescriptor:
+    """The ROS descriptor of a config field: type, description and the declared range."""
+    result = ParameterDescriptor(
+        name=spec.name, type=_PARAMETER_TYPES[spec.kind], description=spec.describe()
+    )
+    if spec.kind in (int, float) and spec.minimum is not None and spec.maximum is not None:
+        if spec.kind is int:
+            result.integer_range = [
+                IntegerRange(from_value=int(spec.minimum), to_value=int(spec.maximum), step=1)
+            ]
+        else:
+            result.floating_point_range = [
+                FloatingPointRange(
+                    from_value=float(spec.minimum), to_value=float(spec.maximum), step=0.0
+                )
+            ]
+    return result
+
+
+def unknown_overrides(node: Node) -> list[str]:
+    """Parameters a params file or ``-p`` gave this node that it never declared: a typo there
+    would otherwise be ignored without a word."""
+    # rclpy keeps the overrides meant for this node (its own sections and /**) here.
+    overrides = getattr(node, "_parameter_overrides", {})
+    return sorted(
+        name
+        for name in overrides
+        if not node.has_parameter(name) and not name.startswith("qos_overrides.")
+    )
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def on_config_change(node: Node, cls: type[C], apply: Callable[[C], None]) -> None:
@@ -48,9 +101,11 @@ def on_config_change(node: Node, cls: type[C], apply: Callable[[C], None]) -> No
         values.update({p.name: p.value for p in params})
         try:
             config = config_from_flat(cls, values)
+            apply(config)
         except ConfigError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        apply(config)
+        except Exception as exc:  # a failed apply must not escape into the executor
+            return SetParametersResult(successful=False, reason=f"not applied: {_one_line(exc)}")
         return SetParametersResult(successful=True)
 
     node.add_on_set_parameters_callback(callback)

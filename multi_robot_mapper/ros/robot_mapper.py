@@ -19,7 +19,10 @@ Parameters: the fields of :class:`RobotMapperConfig` (``config/robot_mapper.yaml
 from __future__ import annotations
 
 import sys
+import time
 import traceback
+from collections import Counter
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -39,6 +42,7 @@ from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalUpdate
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import ScanError
+from multi_robot_mapper.io.inputs import ScanStampGate
 from multi_robot_mapper.io.messages import (
     keyframe_marker,
     piece_frame,
@@ -49,9 +53,14 @@ from multi_robot_mapper.io.messages import (
     stamp_from_seconds,
 )
 from multi_robot_mapper.ros import diagnostics
+from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
 from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.parameters import declare_config, on_config_change
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
+
+# Notices about the laser itself (it is mounted upside down, its intensities are of another
+# length): one warning, then only counted.
+_ONCE = frozenset({"negative_increment", "intensities_length"})
 
 POSE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 PARTIAL_MAP_QOS = QoSProfile(
@@ -74,9 +83,20 @@ class RobotMapper(Node):
         super().__init__(node_name, **kwargs)  # type: ignore[arg-type]
         self.config = declare_config(self, RobotMapperConfig)
         self.warnings = ThrottledWarnings(self.get_logger().warning, self.config.warning_period)
+        self.robot = self.get_namespace().strip("/") or self.get_name()
+        # Bad input is rejected (counted per reason, throttled warning naming the field); no
+        # exception escapes a callback.
+        self.rejections = Rejections(self.warnings)
+        self.guard = CallbackGuard(self.warnings)
+        self.stamps = ScanStampGate(self.config.stamp_reset_jump, self.config.max_stamp_lead)
         self.scans_received = 0
         self.scans_rejected = 0  # dropped before mapping: bad scan or front-end error
         self.mapping_errors = 0  # scans the local mapper failed on (map kept as it was)
+        self.map_resets = 0  # maps started over after the stamps jumped back
+        self.beams_dropped: Counter[str] = Counter()  # beams without a return, by kind
+        self.scans_lost = 0  # never delivered (gaps in the publisher's sequence numbers)
+        self.max_queue_delay = 0.0  # longest wait in the queue of a scan that was mapped, s
+        self._last_sequence: int | None = None
         self.partial_maps_published = 0
         self.published_keyframes = 0  # keyframes in the last partial map published
         self.published_stamp: Time | None = None  # header stamp of the last partial map
@@ -102,14 +122,16 @@ class RobotMapper(Node):
         self._pose_pub = self.create_publisher(PoseStamped, "pose", POSE_QOS)
         self._map_pub = self.create_publisher(MarkerArray, "partial_map", PARTIAL_MAP_QOS)
         self._scan_sub = self.create_subscription(
-            LaserScan, "scan", self._on_scan, qos_profile_sensor_data
+            LaserScan, "scan", self.guard("scan", self._receive_scan), qos_profile_sensor_data
         )
-        self._map_timer = self.create_timer(self.config.partial_map_period, self.publish_map)
+        self._map_timer = self.create_timer(
+            self.config.partial_map_period, self.guard("partial_map", self.publish_map)
+        )
         self._diagnostics_pub = self.create_publisher(
             diagnostics.DiagnosticArray, diagnostics.TOPIC, 10
         )
         self._diagnostics_timer = self.create_timer(
-            self.config.diagnostics_period, self.publish_diagnostics
+            self.config.diagnostics_period, self.guard("diagnostics", self.publish_diagnostics)
         )
         on_config_change(self, RobotMapperConfig, self._apply_config)
 
@@ -127,14 +149,20 @@ class RobotMapper(Node):
         old = self.config
         self.config = config
         self.warnings.period = config.warning_period
+        self.stamps.reset_jump, self.stamps.max_lead = (
+            config.stamp_reset_jump,
+            config.max_stamp_lead,
+        )
         self.mapper.reconfigure(config.local_mapping)  # from the next scan; the map is kept
         if config.partial_map_period != old.partial_map_period:
             self.destroy_timer(self._map_timer)
-            self._map_timer = self.create_timer(config.partial_map_period, self.publish_map)
+            self._map_timer = self.create_timer(
+                config.partial_map_period, self.guard("partial_map", self.publish_map)
+            )
         if config.diagnostics_period != old.diagnostics_period:
             self.destroy_timer(self._diagnostics_timer)
             self._diagnostics_timer = self.create_timer(
-                config.diagnostics_period, self.publish_diagnostics
+                config.diagnostics_period, self.guard("diagnostics", self.publish_diagnostics)
             )
         if (config.map_frame, config.segment_marker_width) != (
             old.map_frame,
@@ -143,12 +171,47 @@ class RobotMapper(Node):
             self._marker_cache.clear()
             self.published_version = -1  # republish in the new frame / width
 
+    def _receive_scan(self, msg: LaserScan, info: dict[str, Any]) -> None:
+        """The scan subscription: scans lost on the way are counted, one that waited too long
+        in the queue is dropped (newer ones wait behind it), the others are mapped."""
+        sequence = info.get("publication_sequence_number")
+        if sequence:
+            last = self._last_sequence
+            if last is not None and sequence > last + 1:
+                self.scans_lost += sequence - last - 1
+            self._last_sequence = sequence
+        received = info.get("received_timestamp")
+        delay = (time.time_ns() - received) * 1e-9 if received else 0.0
+        if delay > self.config.scan_max_queue_delay:
+            self.scans_received += 1
+            self._reject(
+                "stale_in_queue",
+                "",
+                f"waited {delay * 1e3:.0f} ms in the queue, more than scan_max_queue_delay "
+                f"({self.config.scan_max_queue_delay:g} s): newer scans come first",
+            )
+            return
+        self.max_queue_delay = max(self.max_queue_delay, delay)
+        self._on_scan(msg)
+
+    def _reject(self, kind: str, field: str, message: str) -> None:
+        self.scans_rejected += 1
+        self.rejected[kind] = self.rejected.get(kind, 0) + 1
+        self.rejections.reject(self.robot, kind, field, message, "scan")
+
+    def _clock_seconds(self) -> float:
+        return float(self.get_clock().now().nanoseconds) * 1e-9
+
     def _on_scan(self, msg: LaserScan) -> None:
         self.scans_received += 1
         stamp = seconds_from_stamp(msg.header.stamp)
         self._last_scan_ns = self.get_clock().now().nanoseconds
         self._last_stamp = msg.header.stamp
         self._scan_rate.add(stamp)
+        verdict = self.stamps.check(stamp, self._clock_seconds())
+        if verdict.action == "reject":
+            self._reject(verdict.kind, "header.stamp", verdict.message)
+            return
         if self._throttled(stamp):
             self.scans_skipped += 1
             return
@@ -156,11 +219,7 @@ class RobotMapper(Node):
             view = scan_from_msg(msg)
             segments, valid = extract_scan(view, self.config.extraction)
         except ScanError as exc:
-            self.scans_rejected += 1
-            self.rejected[exc.kind] = self.rejected.get(exc.kind, 0) + 1
-            self.warnings.warn(
-                exc.kind, f"dropped scan (frame '{msg.header.frame_id}', stamp {stamp:.3f}): {exc}"
-            )
+            self._reject(exc.kind, exc.field, f"(stamp {stamp:.3f}) {exc}")
             return
         except Exception:  # a bug must not take the robot's mapper down with it
             self.scans_rejected += 1
@@ -171,8 +230,17 @@ class RobotMapper(Node):
                 f"{traceback.format_exc()}",
             )
             return
+        if verdict.action == "reset":
+            self._start_over(verdict.message)
+        self.stamps.accepted(stamp)
+        for kind, count in valid.dropped:
+            self.beams_dropped[kind] += count
         for notice in valid.notices:
-            self.warnings.warn(notice.kind, f"scan (stamp {stamp:.3f}): {notice.message}")
+            text = f"{self.robot}: scan (stamp {stamp:.3f}): {notice.message}"
+            if notice.kind in _ONCE:  # a property of the laser: said once, then counted
+                self.warnings.once(notice.kind, text)
+            else:
+                self.warnings.warn(notice.kind, text)
         self._segments_pub.publish(
             segments_marker(
                 segments.segments,
@@ -225,6 +293,19 @@ class RobotMapper(Node):
                 f"the local mapper's back end skipped a step after an internal error ({errors} "
                 f"so far; the map is kept):\n{self.mapper.last_backend_error}",
             )
+
+    def _start_over(self, why: str) -> None:
+        """A new, empty map (the old one stays published until the new one has a keyframe)."""
+        self.map_resets += 1
+        self.warnings.warn("map_reset", f"{self.robot}: {why}")
+        self.mapper.stop_worker()
+        self.mapper = LocalMapper(self.config.local_mapping, backend=False, trajectory=False)
+        self.mapper.start_worker()
+        self._backend_errors_logged = 0
+        self.last_update = None
+        self._keyframe_stamps.clear()
+        self._marker_cache.clear()
+        self.published_version = -1  # the new map's first version is published
 
     def publish_map(self) -> bool:
         """Publish the whole partial map if it changed since the last publication."""

@@ -38,6 +38,16 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import SegmentScan
 from multi_robot_mapper.core.geometry import lines_of
+from multi_robot_mapper.core.local_mapping.attempts import (
+    NEAR,
+    NEAR_ANGLE,
+    Anchor,
+    Attempt,
+    close_to,
+    corroborated,
+    hypotheses_of,
+    pose_of_match,
+)
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeMap, KeyframeScan
 from multi_robot_mapper.core.local_mapping.loop_closer import (
@@ -48,9 +58,6 @@ from multi_robot_mapper.core.local_mapping.loop_closer import (
 )
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
 from multi_robot_mapper.core.matching.confidence import (
-    LIKELY,
-    RIGHT_ANGLE,
-    RIGHT_DISTANCE,
     TRACK_TURNS,
 )
 from multi_robot_mapper.core.matching.refine import match_information
@@ -82,53 +89,6 @@ class LocalUpdate:
     seconds: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Anchor:
-    """Where a scan is: relative to a keyframe, so that its pose follows the graph."""
-
-    keyframe: int
-    T_keyframe_scan: Pose
-
-
-# A tracked scan refined this close to its constant-velocity prediction needs no rivals: a
-# third of the correctness tolerance.
-_NEAR = RIGHT_DISTANCE / 3.0
-_NEAR_ANGLE = RIGHT_ANGLE / 3.0
-
-
-def _close(a: Pose, b: Pose, distance: float, angle: float) -> bool:
-    dx, dy, dtheta = se2.between(b, a)
-    return bool(np.hypot(dx, dy) <= distance and abs(dtheta) <= angle)
-
-
-@dataclasses.dataclass(frozen=True)
-class _Attempt:
-    """One match of the new scan against one reference scan."""
-
-    result: MatchResult
-    anchor: _Anchor  # where the reference scan is (its keyframe, and the offset from it)
-    reference: FloatArray  # the reference scan's segments
-    pose: Pose  # the new scan's pose in the piece, by this match
-    piece: int  # the reference's piece
-    stage: str  # "track", "search" or "recent"
-
-
-def _corroborated(attempts: list[_Attempt]) -> _Attempt | None:
-    """The more confident of two attempts against different reference scans, each more likely
-    right than wrong, that place the scan within the correctness tolerance of each other:
-    wrong matches rarely agree on one placement from two scans (when they do, it is the
-    same structure misleading both, and their confidence is low)."""
-    likely = [a for a in attempts if a.result.confidence >= LIKELY]
-    for i, a in enumerate(likely):
-        for b in likely[i + 1 :]:
-            if a.anchor == b.anchor or a.piece != b.piece:
-                continue  # the same reference scan (not independent), or unrelated frames
-            dx, dy, dtheta = se2.between(a.pose, b.pose)
-            if np.hypot(dx, dy) < RIGHT_DISTANCE and abs(dtheta) < RIGHT_ANGLE:
-                return a if a.result.confidence >= b.result.confidence else b
-    return None
-
-
 @dataclasses.dataclass
 class _Last:
     """The newest accepted scan."""
@@ -136,7 +96,7 @@ class _Last:
     stamp: float
     segments: FloatArray
     view: LaserScanData
-    anchor: _Anchor
+    anchor: Anchor
 
 
 class LocalMapper:
@@ -173,7 +133,7 @@ class LocalMapper:
         self._velocity: FloatArray | None = None  # (x, y, theta) per second, last scan frame
         self._piece_of_last = 0
         # The scans placed so far: (stamp, anchor), for the trajectory.
-        self._placed: list[tuple[float, _Anchor]] | None = [] if trajectory else None
+        self._placed: list[tuple[float, Anchor]] | None = [] if trajectory else None
         self._scans_at: dict[int, int] = {}  # keyframe -> scans placed on it
         # Keyframes the front end made and the back end has not taken yet.
         self._queue: deque[tuple[KeyframeScan, Pose, int, Edge | None, LostFrom | None]] = deque()
@@ -230,7 +190,7 @@ class LocalMapper:
         dt = max(stamp - last.stamp, 0.0)
         chosen, integrated = self._match(last, new, view, dt)
         result, anchor, reference = chosen.result, chosen.anchor, chosen.reference
-        T_keyframe_new = se2.compose(anchor.T_keyframe_scan, _pose(result.T_1_2))
+        T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
         if not integrated:
             # The best match, right or not, is the guess of where the new piece lies: the back
             # end joins the pieces when later keyframes confirm it (or find better).
@@ -240,7 +200,7 @@ class LocalMapper:
         motion = se2.between(self._placed_pose_unlocked(last.anchor), pose)
         if dt > 0.0:
             self._velocity = np.asarray(motion) / dt
-        placed = _Anchor(anchor.keyframe, T_keyframe_new)
+        placed = Anchor(anchor.keyframe, T_keyframe_new)
         keyframe_added = False
         T_keyframe_new_arr = np.asarray(T_keyframe_new)
         known = self._known_view(pose, chosen.piece) if self.config.revisit_keyframes else None
@@ -263,12 +223,12 @@ class LocalMapper:
 
     def _match(
         self, last: _Last, new: FloatArray, view: LaserScanData, dt: float
-    ) -> tuple[_Attempt, bool]:
+    ) -> tuple[Attempt, bool]:
         """The placement of the new scan, and whether to integrate it: against the last
         keyframe from the predictions, else searched against the last scan, until one match
         reaches ``integrate_confidence``; else against up to ``recent_keyframes`` older
         keyframes, until two matches against different scans corroborate each other
-        (:func:`_corroborated`). When none does, the most confident attempt is returned (the
+        (:func:`corroborated`). When none does, the most confident attempt is returned (the
         guess a new piece starts from)."""
         config = self.config
         threshold = config.integrate_confidence
@@ -294,16 +254,16 @@ class LocalMapper:
             older += others[: config.recent_keyframes]
             poses = {k: self._poses[k] for k in (keyframe, *older)}
             pieces = {k: self._pieces[k] for k in (keyframe, *older)}
-        attempts: list[_Attempt] = []
+        attempts: list[Attempt] = []
 
         def attempt(
             stage: str,
             reference: FloatArray,
             ref_view: LaserScanData,
-            anchor: _Anchor,
+            anchor: Anchor,
             search: bool,
             guesses_from_last: list[Pose],
-        ) -> _Attempt:
+        ) -> Attempt:
             started = time.perf_counter()
             # The predictions, from the reference's frame.
             T_ref_last = se2.between(
@@ -315,11 +275,11 @@ class LocalMapper:
                 new,
                 config.integrate,
                 heuristics=HEURISTICS if search else (),
-                extra_hypotheses=_hypotheses(guesses),
+                extra_hypotheses=hypotheses_of(guesses),
                 views=(ref_view, view),
             )
-            T_keyframe_new = se2.compose(anchor.T_keyframe_scan, _pose(result.T_1_2))
-            done = _Attempt(
+            T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
+            done = Attempt(
                 result,
                 anchor,
                 reference,
@@ -333,7 +293,7 @@ class LocalMapper:
             self._count("confidence", checked)
             return done
 
-        def settled() -> _Attempt | None:
+        def settled() -> Attempt | None:
             # A match against the last keyframe or the last scan settles it alone; one against
             # an older keyframe (tried because those failed: the best of several tries) only
             # with another match that corroborates it.
@@ -341,19 +301,19 @@ class LocalMapper:
             best = max(recent, key=lambda a: a.result.confidence, default=None)
             if best is not None and best.result.confidence >= threshold:
                 return best
-            return _corroborated(attempts)
+            return corroborated(attempts)
 
         if self._velocity is not None:
             # Tracking needs a prediction: after a new piece starts nothing is known of the
             # motion, and "did not move" refined in a corridor stays where it started.
             start = self._scans[keyframe]
-            anchor = _Anchor(keyframe, (0.0, 0.0, 0.0))
+            anchor = Anchor(keyframe, (0.0, 0.0, 0.0))
             # A fast laser's prediction is good: refined alone, it lands next to it. When it
             # lands farther, or is not confident, it is refined again with its turned copies
             # (rivals that a wrong minimum cannot hide from).
             quick = attempt("track", start.segments, start.view, anchor, False, motions[:1])
-            if quick.result.confidence >= threshold and _close(
-                se2.between(here, quick.pose), motions[0], _NEAR, _NEAR_ANGLE
+            if quick.result.confidence >= threshold and close_to(
+                se2.between(here, quick.pose), motions[0], NEAR, NEAR_ANGLE
             ):
                 self.scans_tracked += 1
                 return quick, True
@@ -367,13 +327,13 @@ class LocalMapper:
             return done, True
         for k in older:
             candidate = self._scans[k]
-            anchor = _Anchor(k, (0.0, 0.0, 0.0))
+            anchor = Anchor(k, (0.0, 0.0, 0.0))
             attempt("recent", candidate.segments, candidate.view, anchor, True, motions)
             if (done := settled()) is not None:
                 return done, True
         return max(attempts, key=lambda a: a.result.confidence), False
 
-    def _known_view(self, pose: Pose, piece: int) -> _Anchor | None:
+    def _known_view(self, pose: Pose, piece: int) -> Anchor | None:
         """The anchor on the nearest keyframe of ``piece`` within ``keyframe_distance`` and
         ``keyframe_angle`` of ``pose`` (None: none is; the scan would be a view the map
         lacks)."""
@@ -389,17 +349,17 @@ class LocalMapper:
         if not near.any():
             return None
         best = keys[int(np.argmin(np.where(near, moved, np.inf)))]
-        return _Anchor(best, se2.between(tuple(poses[keys.index(best)]), pose))
+        return Anchor(best, se2.between(tuple(poses[keys.index(best)]), pose))
 
     def _new_keyframe(
         self,
         stamp: float,
         segments: FloatArray,
         view: LaserScanData,
-        anchor: _Anchor,
+        anchor: Anchor,
         result: MatchResult,
         reference: FloatArray,
-    ) -> _Anchor:
+    ) -> Anchor:
         """Make the scan a keyframe, with an edge to the keyframe its match started from. The
         edge's information is the match's (against ``reference``, the segments it was matched
         with: a later scan's are composed onto its keyframe with the same information, the
@@ -414,14 +374,14 @@ class LocalMapper:
             (config.edge_sigma_floor, config.edge_angle_floor),
             (10.0, 1.0),
         )
-        T_keyframe_new = se2.compose(anchor.T_keyframe_scan, _pose(result.T_1_2))
+        T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
         index = len(self._scans)
         with self._lock:
             piece = self._pieces[anchor.keyframe]
             pose = se2.compose(self._poses[anchor.keyframe], T_keyframe_new)
         edge = Edge(anchor.keyframe, index, T_keyframe_new, information, robust=False)
         self._add_keyframe(KeyframeScan(index, stamp, segments, view), pose, piece, edge)
-        return _Anchor(index, (0.0, 0.0, 0.0))
+        return Anchor(index, (0.0, 0.0, 0.0))
 
     def _start_piece(
         self,
@@ -437,7 +397,7 @@ class LocalMapper:
         index = len(self._scans)
         scan = KeyframeScan(index, stamp, segments, view)
         self._add_keyframe(scan, (0.0, 0.0, 0.0), index, None, lost_from)
-        anchor = _Anchor(index, (0.0, 0.0, 0.0))
+        anchor = Anchor(index, (0.0, 0.0, 0.0))
         self._last = _Last(stamp, segments, view, anchor)
         self._record(stamp, anchor)
         self._velocity = None
@@ -578,7 +538,7 @@ class LocalMapper:
         ]
         return np.vstack(pieces) if pieces else np.zeros((0, 4))
 
-    def _record(self, stamp: float, anchor: _Anchor) -> None:
+    def _record(self, stamp: float, anchor: Anchor) -> None:
         """A scan placed on ``anchor``: counted on its keyframe, and remembered for the
         trajectory when asked."""
         self._scans_at[anchor.keyframe] = self._scans_at.get(anchor.keyframe, 0) + 1
@@ -633,7 +593,7 @@ class LocalMapper:
     def closures(self) -> list[Closure]:
         return list(self.closer.accepted.values())
 
-    def _placed_pose(self, anchor: _Anchor) -> Pose:
+    def _placed_pose(self, anchor: Anchor) -> Pose:
         return se2.compose(self._poses[anchor.keyframe], anchor.T_keyframe_scan)
 
     _placed_pose_unlocked = _placed_pose
@@ -646,14 +606,3 @@ class LocalMapper:
         self.scans_set_aside += 1
         self.set_aside_reasons[reason] = self.set_aside_reasons.get(reason, 0) + 1
         return LocalUpdate(False, None, False, 0.0, reason, self.piece)
-
-
-def _pose(T_1_2: FloatArray) -> Pose:
-    """INTEGRATE's (theta, tx, ty) as an (x, y, theta) pose."""
-    return (float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0]))
-
-
-def _hypotheses(poses: list[Pose]) -> FloatArray:
-    """(x, y, theta) poses as INTEGRATE hypotheses (theta, tx, ty)."""
-    stacked = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    return np.column_stack((stacked[:, 2], stacked[:, 0], stacked[:, 1]))

@@ -94,28 +94,40 @@ class MatchEvidence:
         )
 
     def features(self) -> FloatArray:
-        """The model's inputs, each bounded and of one meaning (see :data:`FEATURES`)."""
+        """The model's inputs, each bounded and of one meaning (see :data:`FEATURES`).
+
+        Agreement is no evidence of a unique placement when a rival explains the beams as
+        well and nothing constrains the slide between them: the agreement terms are
+        discounted by that ambiguity (a logistic model cannot learn the AND itself; on the
+        logs, ties without support are right 4 % of the time, and a bare corridor, where
+        everything agrees, lies beyond every sample)."""
         both = self.second_in_first + self.first_in_second
         confirmed = np.log1p(both.confirmed)
         score, rival = max(self.score, 0.0), max(self.rival_score, 0.0)
         uniqueness = (score - rival) / score if score > 0.0 else 0.0
         support = np.log1p(max(self.support, 0.0))
         sides = (self.second_in_first, self.first_in_second)
+        margin = _beam_margin(both, self.rival)
+        ambiguity = (1.0 - float(np.clip(margin / TIE_MARGIN, 0.0, 1.0))) / (
+            1.0 + max(self.support, 0.0) / SLIDE_SUPPORT
+        )
+        kept = 1.0 - ambiguity
         return np.array(
             [
-                _agreement(both),
-                confirmed,
-                _possible(both),
+                kept * _agreement(both),
+                kept * confirmed,
+                kept * _possible(both),
                 both.seen_through / both.total if both.total > 0.0 else 0.0,
                 uniqueness,
                 support,
                 float(np.clip(self.fraction, -1.0, 1.0)),
                 float(np.clip(np.log(max(score, 1e-3) / max(rival, 1e-3)), -3.0, 3.0)),
-                min(_agreement(side) for side in sides),
-                min(_possible(side) for side in sides),
-                uniqueness * confirmed,
-                support * confirmed,
-                _beam_margin(both, self.rival),
+                kept * min(_agreement(side) for side in sides),
+                kept * min(_possible(side) for side in sides),
+                kept * uniqueness * confirmed,
+                kept * support * confirmed,
+                margin,
+                ambiguity,
             ]
         )
 
@@ -144,6 +156,13 @@ def _possible(agreement: BeamAgreement) -> float:
     return judged / agreement.total if agreement.total > 0.0 else 0.0
 
 
+# A rival whose share of confirmed returns is within this of the best one's ties with it.
+TIE_MARGIN = 0.1
+# Matched length across the weakest direction (m) at which a slide counts half constrained:
+# most wrong scan matches on the logs have less than this (bench/scan_gate.py).
+SLIDE_SUPPORT = 0.1
+
+# The first three and the agreement products are discounted by the ambiguity (see features).
 FEATURES = (
     "agreement",  # confirmed / (confirmed + seen through), both sides
     "log_confirmed",  # log(1 + metres confirmed)
@@ -158,6 +177,7 @@ FEATURES = (
     "uniqueness_x_log_confirmed",  # a tie is suspect however much agrees
     "log_support_x_log_confirmed",  # a corridor is suspect however much agrees
     "beam_margin",  # how much better the beams explain the best placement than its rival
+    "ambiguity",  # a tie with the rival (beam margin < TIE_MARGIN) and no support to break it
 )
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -35,6 +36,7 @@ class MergeConfig:
         "length of matching segments (more than the walls of one room: a single room or "
         "corner looks alike in many places)",
         minimum=0.0,
+        maximum=1000000.0,
     )
     link_min_fraction: float = param(
         0.3,
@@ -59,6 +61,7 @@ class MergeConfig:
         doc="validity threshold: matched length across the least constrained direction "
         "(parallel walls alone cannot fix the offset along them)",
         minimum=0.0,
+        maximum=1000.0,
     )
     link_min_tight_fraction: float = param(
         0.15,
@@ -80,8 +83,8 @@ class MergeConfig:
         0.05,
         unit="m",
         doc="matching distance of the tight overlap (link_min_tight_fraction)",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.001,
+        maximum=1.0,
     )
     hypothesis_segments: int = param(
         12,
@@ -89,6 +92,7 @@ class MergeConfig:
         doc="the angles between every pair of this many longest segments of each map "
         "propose the transformations",
         minimum=2,
+        maximum=1000,
     )
     coarse_segments: int = param(
         40,
@@ -96,6 +100,7 @@ class MergeConfig:
         doc="hypotheses are ranked on this many longest segments of each map; the best are "
         "then refined and judged on the whole maps",
         minimum=2,
+        maximum=10_000,
     )
     judge_segments: int = param(
         250,
@@ -103,6 +108,7 @@ class MergeConfig:
         doc="the best hypotheses are refined and judged on this many longest segments of each "
         "map (short pieces add cost, not evidence)",
         minimum=2,
+        maximum=100_000,
     )
     correlation_candidates: int = param(
         8,
@@ -111,13 +117,14 @@ class MergeConfig:
         "the wall directions allow) that join INTEGRATE's own hypothesis as candidates; the "
         "best few distinct places among them are refined and judged",
         minimum=1,
+        maximum=1000,
     )
     correlation_cell: float = param(
         0.3,
         unit="m",
         doc="grid cell of the map correlation (its walls are blurred by one cell)",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.05,
+        maximum=10.0,
     )
     free_space_weight: float = param(
         2.0,
@@ -125,6 +132,7 @@ class MergeConfig:
         doc="in the correlation score, a metre of wall lying in the other robot's free space "
         "counts against as this many metres of matched wall",
         minimum=0.0,
+        maximum=100.0,
     )
     link_min_uniqueness: float = param(
         2.0,
@@ -135,12 +143,14 @@ class MergeConfig:
         "that fits twice is ambiguous (symmetric corridors, rows of equal rooms) and is "
         "refused",
         minimum=1.0,
+        maximum=100.0,
     )
     max_hypotheses: int = param(
         150,
         unit="",
         doc="at most this many most-voted INTEGRATE hypotheses are ranked per pair of maps",
         minimum=1,
+        maximum=100_000,
     )
     reuse_length_change: float = param(
         5.0,
@@ -149,6 +159,7 @@ class MergeConfig:
         "this of the length it was computed on (and its segment count within "
         "reuse_count_change)",
         minimum=0.0,
+        maximum=100.0,
     )
     reuse_count_change: float = param(
         10.0,
@@ -156,6 +167,7 @@ class MergeConfig:
         doc="a pair's result is reused while each map's segment count stays within this (or "
         "2 segments) of the count it was computed on",
         minimum=0.0,
+        maximum=100.0,
     )
     stability_margin: float = param(
         0.25,
@@ -163,6 +175,7 @@ class MergeConfig:
         doc="a link of the previous tree stays in the tree unless another link's value "
         "exceeds it by this fraction (placements do not flip between similar links)",
         minimum=0.0,
+        maximum=10.0,
     )
     link_max_seen_through: float = param(
         1.0,
@@ -171,6 +184,7 @@ class MergeConfig:
         "(and more than link_max_seen_through_fraction of its value) lies in free space the "
         "other robot saw from its keyframes (only when keyframe poses are given)",
         minimum=0.0,
+        maximum=1000000.0,
     )
     link_max_seen_through_fraction: float = param(
         0.1,
@@ -178,6 +192,7 @@ class MergeConfig:
         doc="see link_max_seen_through: the allowance as a fraction of the link's value (large "
         "overlaps of drifting maps tolerate a little more)",
         minimum=0.0,
+        maximum=10.0,
     )
     free_space_margin: float = param(
         0.5,
@@ -185,6 +200,7 @@ class MergeConfig:
         doc="a wall of the other map is in a robot's free space when it lies at least this much "
         "nearer a viewpoint than the robot's own map along the same bearing",
         minimum=0.0,
+        maximum=10.0,
     )
     free_space_min_length: float = param(
         1.0,
@@ -193,26 +209,29 @@ class MergeConfig:
         "(walls; short pieces are furniture, exhibits and people, which move or are seen from "
         "one side only)",
         minimum=0.0,
+        maximum=100.0,
     )
     view_spacing: float = param(
         1.0,
         unit="m",
         doc="viewpoints (keyframe poses) closer than this to one already kept add no evidence",
         minimum=0.0,
+        maximum=100.0,
     )
     max_views: int = param(
         60,
         unit="",
         doc="at most this many viewpoints per map, evenly spread over the kept ones",
         minimum=1,
+        maximum=10_000,
     )
     view_range: float = param(
         8.0,
         unit="m",
         doc="free space reaches at most this far from a viewpoint (a wall must be seen in the "
         "robot's own map within it)",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.1,
+        maximum=1000.0,
     )
     view_spread: int = param(
         6,
@@ -220,6 +239,7 @@ class MergeConfig:
         doc="free space along a bearing reaches only the nearest wall within this many "
         "bearings either side (gaps between a map's segments are not seen through)",
         minimum=0,
+        maximum=360,
     )
     view_field: float = param(
         float(np.pi),
@@ -227,23 +247,23 @@ class MergeConfig:
         doc="field of view claimed around each keyframe's heading (the laser's forward "
         "direction; 180 degrees is the narrowest common laser: wider ones claim less than they "
         "saw, never more)",
-        minimum=0.0,
-        exclusive_minimum=True,
-        maximum=2.0 * np.pi,
+        minimum=0.01,
+        maximum=2.0 * math.pi,
     )
     view_beams: int = param(
         360,
         unit="",
         doc="bearings per full turn at which the robot's own map is ray cast",
         minimum=8,
+        maximum=36_000,
     )
     fusion_tolerance: float = param(
         0.05,
         unit="m",
         doc="FUSIONTOLERANCE of the global map: a fused polyline stays this close to every "
         "segment it replaces",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.001,
+        maximum=1.0,
     )
     place_radius: float = param(
         6.0,
@@ -266,6 +286,7 @@ class MergeConfig:
         unit="m",
         doc="a place with less wall than this is never matched (too little to tell places apart)",
         minimum=0.0,
+        maximum=1000.0,
     )
     link_hypotheses: int = param(
         4,
@@ -289,6 +310,7 @@ class MergeConfig:
         doc="a link candidate (a place found on another robot's map) must match at least this "
         "length of wall (link_min_value is for whole maps)",
         minimum=0.0,
+        maximum=1000.0,
     )
     link_confidence: float = param(
         0.9,
@@ -332,6 +354,7 @@ class MergeConfig:
         "fits) at least this many times the best set inconsistent with it: a building that "
         "fits two ways is refused",
         minimum=1.0,
+        maximum=100.0,
     )
     link_pair_slack: float = param(
         0.03,
@@ -370,6 +393,7 @@ class MergeConfig:
         doc="Dynamic Covariance Scaling parameter of the links in the joint graph (squared "
         "Mahalanobis units): a link whose error grows far beyond it is switched off",
         minimum=0.0,
+        maximum=1000.0,
     )
     graph_sigma: float = param(
         0.02,

@@ -91,8 +91,7 @@ class GridConfig:
         doc="field of view marked free around each keyframe's heading: the laser's (270 "
         "degrees: Hokuyo UTM/UST, SICK TiM and LMS1xx; set 3.14 for a 180-degree laser, "
         "which would otherwise mark unseen cells behind it free)",
-        minimum=0.0,
-        exclusive_minimum=True,
+        minimum=0.01,
         maximum=2.0 * math.pi,
     )
 
