@@ -292,6 +292,9 @@ def merger_node() -> Iterator[tuple[MapMerger, list[object], dict]]:
                 Parameter("robots", value=",".join(NAMES)),
                 Parameter("merge_worker", value=False),
                 Parameter("max_segments_per_map", value=3000),
+                # Every place matched in each merge: a time budget would make what a merge
+                # links (and so the good robots' placements) depend on the machine's load.
+                Parameter("merge.update_budget", value=0.0),
             ],
         )
         node.warnings.log = node.notes.log = lambda message: None
@@ -309,9 +312,19 @@ def merger_node() -> Iterator[tuple[MapMerger, list[object], dict]]:
 
 
 def assert_good_robots_unchanged(node: MapMerger, good: dict) -> None:
+    """The good robots' maps untouched, and each still placed where it was: within 5 cm and
+    0.5 deg, not exactly, because the joint graph optimises every robot's keyframes together
+    (a third robot's links move the others' optimum by millimetres; a wrong link would move
+    them by metres)."""
     for name, (segments, placement) in good.items():
         np.testing.assert_array_equal(node.robots[name].segments, segments)
-        assert node.result is not None and node.result.placements[name] == placement
+        assert node.result is not None
+        now = node.result.placements[name]
+        assert now is not None, name
+        assert np.hypot(now[0] - placement[0], now[1] - placement[1]) < 0.05, (name, now)
+        assert abs(np.remainder(now[2] - placement[2] + np.pi, 2 * np.pi) - np.pi) < np.radians(
+            0.5
+        ), (name, now)
 
 
 @fuzz(300)
