@@ -52,6 +52,7 @@ def merger(ros_context) -> Iterator[MapMerger]:
         parameter_overrides=[
             Parameter("robots", value=",".join(NAMES)),
             Parameter("merge_worker", value=False),  # merges in this process: deterministic
+            Parameter("merge.update_budget", value=0.0),  # every place matched: deterministic
             Parameter("max_keyframes_per_map", value=500),
             Parameter("max_segments_per_map", value=5000),
         ],
@@ -161,7 +162,13 @@ def test_a_bad_partial_map_is_rejected_and_the_others_keep_merging(
     np.testing.assert_array_equal(merger.robots["charlie"].segments, good)  # last good map
     assert merger.merge_errors == 0 and merger.guard.errors == {}
     for name in ("alpha", "bravo"):  # the others merge on, as before
-        assert merger.result is not None and merger.result.placements[name] == placements[name]
+        assert merger.result is not None
+        now, before = merger.result.placements[name], placements[name]
+        # Within millimetres, not exactly: the joint graph optimises every robot's keyframes
+        # together, and charlie's last good map is linked into it.
+        assert now is not None and before is not None
+        assert np.hypot(now[0] - before[0], now[1] - before[1]) < 0.05, (name, now, before)
+        assert abs(np.remainder(now[2] - before[2] + np.pi, 2 * np.pi) - np.pi) < np.radians(0.5)
 
 
 def test_oversized_maps_are_refused_before_any_work(merger: MapMerger) -> None:

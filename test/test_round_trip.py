@@ -113,7 +113,7 @@ def test_simulate_replay_pivot_evaluate_merges_the_robots(capsys, tmp_path: Path
     code, _, err = mrm(
         capsys,
         *("replay", bag, "--out", strict, "--method", "pivot", "--merger-config", shipped),
-        *("--set", "merge.link_min_wall=1e6", "--set", "local_mapping.keyframe_distance=0.5"),
+        *("--set", "merge.link_min_wall=1000", "--set", "local_mapping.keyframe_distance=0.5"),
     )
     assert code == 0, err
     frames = json.loads((strict / "robots.json").read_text())
