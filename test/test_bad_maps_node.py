@@ -201,7 +201,7 @@ def test_a_map_the_merge_cannot_take_sets_back_only_its_robot(
     assert merger.merge_now()
     from multi_robot_mapper.ros import map_merger
 
-    real_merge = map_merger.merge
+    real_merge = map_merger.merge_with_grid
     good_size = len(merger.robots["charlie"].segments)
 
     def fragile_merge(maps, *args, **kwargs):
@@ -209,7 +209,7 @@ def test_a_map_the_merge_cannot_take_sets_back_only_its_robot(
             raise ValueError("simulated failure on this map")
         return real_merge(maps, *args, **kwargs)
 
-    monkeypatch.setattr(map_merger, "merge", fragile_merge)
+    monkeypatch.setattr(map_merger, "merge_with_grid", fragile_merge)
     poisoned = copy.deepcopy(message("charlie"))
     poisoned.markers[0].points += [Point(x=0.5, y=0.5, z=0.0), Point(x=1.0, y=0.5, z=0.0)] * 7
     deliver(merger, "charlie", poisoned)
@@ -247,13 +247,13 @@ def test_a_merge_error_after_an_unmerged_note_is_logged_not_raised(ros_context) 
         def broken(*args, **kwargs):
             raise RuntimeError("simulated merge failure")
 
-        original, map_merger.merge = map_merger.merge, broken
+        original, map_merger.merge_with_grid = map_merger.merge_with_grid, broken
         try:
             deliver(node, "alpha", message("alpha"))
             deliver(node, "charlie", message("charlie"))
             node._merge_timer.callback()  # the timer's own callback, as the executor runs it
         finally:
-            map_merger.merge = original
+            map_merger.merge_with_grid = original
         assert node.merge_errors >= 1 and node.guard.errors == {}
     finally:
         node.destroy_node()

@@ -132,7 +132,7 @@ class MapMerger(Node):
         # A robot's bad input is rejected (counted per robot and reason, a throttled warning
         # naming robot and field, its last good map kept); no error escapes a callback.
         self.rejections = Rejections(self.warnings)
-        self.guard = CallbackGuard(self.warnings)
+        self.guard = CallbackGuard(self.warnings, running=self.context.ok)
         self._lock = threading.Lock()
         self.robots: dict[str, RobotState] = {}
         self.result: MergeResult | None = None
@@ -335,12 +335,7 @@ class MapMerger(Node):
         )
         shown = (self.merges, config.map_frame, config.marker_width, pose_key)
         if shown != self._shown:
-            self._map_pub.publish(
-                global_map_markers(
-                    result, map_stamp, inputs.poses, config.map_frame, config.marker_width
-                )
-            )
-            self.global_maps_published += 1
+            self._publish_global_map(result, map_stamp, inputs.poses)
             self._shown = shown
         if merged:
             if self.grid is not None:
@@ -353,6 +348,15 @@ class MapMerger(Node):
                 f"'{result.reference}' yet (nothing published for it)",
             )
         return merged
+
+    def _publish_global_map(
+        self, result: MergeResult, map_stamp: Time, poses: dict[str, tuple[FloatArray, Time]]
+    ) -> None:
+        config = self.config
+        self._map_pub.publish(
+            global_map_markers(result, map_stamp, poses, config.map_frame, config.marker_width)
+        )
+        self.global_maps_published += 1
 
     def up_to_date(self) -> bool:
         """Every partial map received so far is in the last merge (and there was one)."""
