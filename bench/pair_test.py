@@ -39,11 +39,14 @@ import numpy as np  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
+from multi_robot_mapper.core.local_mapping import LocalMapperConfig  # noqa: E402
 from multi_robot_mapper.core.matching import HEURISTICS, IntegrateConfig, integrate  # noqa: E402
 from multi_robot_mapper.core.scan import LaserScanData  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
+# The local mapper's threshold for integrating a scan (LocalMapperConfig.integrate_confidence).
+INTEGRATE_CONFIDENCE = LocalMapperConfig().integrate_confidence
 LOGS = ("intel", "aces", "fhw", "csail")
 COMBINATION = "combination"
 
@@ -74,6 +77,12 @@ class Row:
     recall: float  # valid among correct
     median_ms: float
     p90_ms: float
+    # median ms per stage of INTEGRATE (MatchResult.seconds: hypotheses, prescreen, ...)
+    stage_median_ms: dict[str, float] = dataclasses.field(default_factory=dict)
+    # "confidence >= integrate_confidence" as the validity test (the fitted model includes
+    # these pairs: the held-out figures come from bench/fit_confidence.py)
+    confident_precision: float = float("nan")
+    confident_recall: float = float("nan")
 
 
 def load_log(name: str) -> Log | None:
@@ -102,8 +111,9 @@ def run_log(
     views: bool,
     config: IntegrateConfig,
 ) -> Row:
-    ok = strict = valid = valid_and_ok = 0
+    ok = strict = valid = valid_and_ok = confident = confident_and_ok = 0
     times = []
+    stages: dict[str, list[float]] = {}
     for k in pairs:
         T_world_1 = se2.matrix_from_pose(*log.poses[k])
         T_world_2 = se2.matrix_from_pose(*log.poses[k + 1])
@@ -117,6 +127,8 @@ def run_log(
             views=(log.views[k], log.views[k + 1]) if views else (None, None),
         )
         times.append(time.perf_counter() - start)
+        for stage, seconds in result.seconds.items():
+            stages.setdefault(stage, []).append(seconds)
         dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_1_2) @ result.matrix)
         error, turn = np.hypot(dx, dy), abs(dtheta)
         correct = bool(error < 0.30 and turn < np.radians(5))
@@ -124,6 +136,9 @@ def run_log(
         strict += bool(error < 0.10 and turn < np.radians(2))
         valid += result.valid
         valid_and_ok += result.valid and correct
+        sure = result.confidence >= INTEGRATE_CONFIDENCE
+        confident += sure
+        confident_and_ok += sure and correct
     n = max(len(pairs), 1)
     return Row(
         log=log.name,
@@ -138,6 +153,9 @@ def run_log(
         recall=valid_and_ok / ok if ok else float("nan"),
         median_ms=float(np.median(times)) * 1e3 if times else float("nan"),
         p90_ms=float(np.percentile(times, 90)) * 1e3 if times else float("nan"),
+        stage_median_ms={k: float(np.median(v)) * 1e3 for k, v in stages.items()},
+        confident_precision=confident_and_ok / confident if confident else float("nan"),
+        confident_recall=confident_and_ok / ok if ok else float("nan"),
     )
 
 
@@ -147,7 +165,10 @@ def print_row(row: Row, out: TextIO) -> None:
         f"pairs {row.pairs:4d}  success {row.success:.3f}  strict {row.strict:.3f}  "
         f"valid {row.valid:.3f} (correct among valid {row.precision:.3f}, "
         f"valid among correct {row.recall:.3f})  median {row.median_ms:.1f} ms  "
-        f"p90 {row.p90_ms:.1f} ms",
+        f"p90 {row.p90_ms:.1f} ms\n"
+        f"       confidence >= {INTEGRATE_CONFIDENCE:g}: precision {row.confident_precision:.3f}"
+        f" recall {row.confident_recall:.3f}; median ms per stage: "
+        + ", ".join(f"{k} {v:.2f}" for k, v in row.stage_median_ms.items()),
         file=out,
         flush=True,
     )

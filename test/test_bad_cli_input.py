@@ -284,8 +284,13 @@ def test_simulate_killed_by_a_signal_exits_cleanly_and_can_run_again(
     out = tmp_path / "bag"
     command = [sys.executable, "-m", "multi_robot_mapper.cli.main", "simulate", "--robots", "3"]
     command += ["--out", str(out), "--duration", "600", "--rate", "40"]
+    # The signal must come in the middle of the work, after the imports: as long as they take
+    # on this machine now (seconds on a busy one), then two more seconds.
+    started = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "import multi_robot_mapper.cli.main"], check=True)
+    importing = time.perf_counter() - started
     process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    time.sleep(3.0)  # importing, then simulating: the signal comes in the middle of the work
+    time.sleep(2.0 * importing + 2.0)
     process.send_signal(signum)
     _, err = process.communicate(timeout=60)
     assert process.returncode == (130 if signum == signal.SIGINT else 143), err

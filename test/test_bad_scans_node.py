@@ -303,6 +303,11 @@ def test_nodes_exit_cleanly_on_signals_over_udp_only_dds(ros_context, signum: in
             spin_until(executor, lambda: bool(answers), timeout=0.5)
         assert answers, "no answer from robot_mapper over UDP-only Fast DDS"
         assert len(segments_from_marker(answers[0])) == 5
+        # The merger too is up (its start takes seconds on a busy machine): the signal must
+        # find both nodes spinning.
+        assert spin_until(
+            executor, lambda: client.count_publishers("/global_map") > 0, timeout=60.0
+        )
     finally:
         for process in (mapper, merger):
             process.send_signal(signum)

@@ -117,6 +117,27 @@ def test_empty_and_all_tiny_inputs_give_no_segments() -> None:
     assert len(tiny) == 0 and tiny.dropped_points == 2
 
 
+def test_points_too_far_for_float_precision_still_end_the_refit() -> None:
+    # A corrupt range puts a cluster 4e11 m out, where a double resolves about 0.1 mm and
+    # rounding alone leaves points off their fitted line: the refit used to split the same
+    # two-point segment for ever (found by test_fuzz.py).
+    far = np.array(
+        [
+            [4.2661671935988483e11, 9.9187375346118933e-03],
+            [4.2661671936002716e11, -8.4569439816774436e-02],
+            [4.2661671936007391e11, -3.3866818081813119e-02],
+            [4.2661671936013739e11, -2.6238155437957475e-02],
+            [4.2661671936026160e11, -6.0291812138139042e-02],
+            [4.2661671936032294e11, -2.6060714524581835e-03],
+        ]
+    )
+    room = np.array([[0.0, 1.0], [0.05, 1.05], [0.1, 1.0]])
+    segments = extract_segments(np.vstack((far, room)), ExtractionConfig()).segments
+    assert np.isfinite(segments).all()
+    near = segments[np.abs(segments).max(axis=1) < 10.0]
+    assert len(near) == 2  # the room's corner, fitted as usual
+
+
 def test_duplicate_points_do_not_break_the_fit() -> None:
     points = np.repeat(np.array([[1.0, 1.0], [1.0, 1.1], [1.0, 1.2]]), 3, axis=0)
     result = extract_segments(points, DEFAULT)

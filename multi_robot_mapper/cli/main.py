@@ -25,6 +25,7 @@ from multi_robot_mapper.cli.common import (
     CliError,
     add_config_options,
     check_limits,
+    check_output,
     load_mapper_config,
 )
 from multi_robot_mapper.core.config import ConfigError
@@ -36,6 +37,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     check_limits(args, "seed")
     if not (math.isfinite(args.speed) and 0.0 < args.speed <= 100.0):
         raise CliError(f"--speed must be in (0, 100], got {args.speed:g}")
+    # Checked before the run, not after it; a folder from an earlier demo is written over
+    # (make demo runs again into demo_output).
+    check_output(Path(args.out), kind="folder", overwrite=True)
     scenario = DemoScenario(seed=args.seed, speed=args.speed)
     print(
         f"mrm demo: {scenario.robots} simulated robots in the {scenario.world} world, "

@@ -513,7 +513,10 @@ def refit_segments(
         worst = np.maximum.reduceat(fit.across, fit.start)
         if not enforce_tolerance:
             break
-        over = worst > tol + REFIT_SLACK
+        # A segment of two points lies on its line exactly; beyond the tolerance it is only
+        # rounding (coordinates of a corrupt range near 1e15 m), and it cannot be split: never
+        # split it, or the loop would never end.
+        over = (worst > tol + REFIT_SLACK) & (seg_last - seg_first >= 2)
         if not np.count_nonzero(over):
             break
         # Each offending segment's farthest point (first of ties), as an offset in its range;

@@ -14,6 +14,8 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any, TypeVar
 
+from rclpy.exceptions import InvalidHandle
+
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -46,8 +48,13 @@ class CallbackGuard:
     """Wraps node callbacks so that no exception escapes into the executor: it is logged
     (throttled per callback, with the traceback) and counted, and the node goes on."""
 
-    def __init__(self, warnings: ThrottledWarnings) -> None:
+    def __init__(
+        self, warnings: ThrottledWarnings, running: Callable[[], bool] | None = None
+    ) -> None:
         self.warnings = warnings
+        # False once the node's context is shut down: a timer that fires while the node is
+        # being torn down fails to publish, which is no error of the node's.
+        self.running = running or (lambda: True)
         self.errors: Counter[str] = Counter()  # callback name -> exceptions caught
 
     def __call__(self, name: str, callback: F, fallback: Any = None) -> F:
@@ -55,7 +62,11 @@ class CallbackGuard:
         def guarded(*args: Any) -> Any:
             try:
                 return callback(*args)
+            except InvalidHandle:  # the node is being destroyed: nothing to report
+                return fallback
             except Exception:
+                if not self.running():
+                    return fallback
                 self.errors[name] += 1
                 self.warnings.warn(
                     f"callback_error:{name}",

@@ -143,7 +143,7 @@ class MapMerger(Node):
         # A robot's bad input is rejected (counted per robot and reason, a throttled warning
         # naming robot and field, its last good map kept); no error escapes a callback.
         self.rejections = Rejections(self.warnings)
-        self.guard = CallbackGuard(self.warnings)
+        self.guard = CallbackGuard(self.warnings, running=self.context.ok)
         self._lock = threading.Lock()
         self.robots: dict[str, RobotState] = {}
         self.result: MergeResult | None = None
@@ -352,19 +352,7 @@ class MapMerger(Node):
         )
         shown = (self.merges, config.map_frame, config.marker_width, pose_key)
         if shown != self._shown:
-            array = global_map_markers(
-                result,
-                map_stamp,
-                inputs.poses,
-                config.map_frame,
-                config.marker_width,
-                inputs.pose_pieces,
-                self._marker_ids,
-                self._marker_cache,
-            )
-            self._map_pub.publish(array)
-            self._marker_ids = {(m.ns, m.id) for m in array.markers if m.action == Marker.ADD}
-            self.global_maps_published += 1
+            self._publish_global_map(result, map_stamp, inputs.poses, inputs.pose_pieces)
             self._shown = shown
         if merged:
             if self.grid is not None:
@@ -377,6 +365,30 @@ class MapMerger(Node):
                 f"'{result.reference}' yet (nothing published for it)",
             )
         return merged
+
+    def _publish_global_map(
+        self,
+        result: MergeResult,
+        map_stamp: Time,
+        poses: dict[str, tuple[FloatArray, Time]],
+        pieces: dict[str, int],
+    ) -> None:
+        """One marker per merged keyframe (a keyframe's marker rebuilt only when it changed),
+        DELETEs for what the last publication showed and is gone."""
+        config = self.config
+        array = global_map_markers(
+            result,
+            map_stamp,
+            poses,
+            config.map_frame,
+            config.marker_width,
+            pieces,
+            self._marker_ids,
+            self._marker_cache,
+        )
+        self._map_pub.publish(array)
+        self._marker_ids = {(m.ns, m.id) for m in array.markers if m.action == Marker.ADD}
+        self.global_maps_published += 1
 
     def up_to_date(self) -> bool:
         """Every partial map received so far is in the last merge (and there was one)."""

@@ -87,7 +87,7 @@ class RobotMapper(Node):
         # Bad input is rejected (counted per reason, throttled warning naming the field); no
         # exception escapes a callback.
         self.rejections = Rejections(self.warnings)
-        self.guard = CallbackGuard(self.warnings)
+        self.guard = CallbackGuard(self.warnings, running=self.context.ok)
         self.stamps = ScanStampGate(self.config.stamp_reset_jump, self.config.max_stamp_lead)
         self.scans_received = 0
         self.scans_rejected = 0  # dropped before mapping: bad scan or front-end error
