@@ -208,8 +208,13 @@ def test_save_and_load_services_bring_the_map_back_into_a_merger_without_robots(
     answer = rig.call("/load_map")
     assert answer.success and "alpha" in answer.message and "bravo" in answer.message
     assert rig.spin_until(lambda: rig.merged(*NAMES))
+    # The saved map holds each robot's map and placement, not its keyframes: merged again
+    # as whole maps, the robots land within millimetres of where the keyframe graph put them.
     for name in NAMES:
-        assert np.allclose(merger.result.placements[name], placements[name], atol=1e-6)
+        got, before = merger.result.placements[name], placements[name]
+        assert got is not None and before is not None
+        assert np.hypot(got[0] - before[0], got[1] - before[1]) < 0.01
+        assert abs(got[2] - before[2]) < 0.002
     assert_right_placements(merger, NAMES)
 
     # load_on_start does the same at start-up; a missing file is an answer, not a crash.
