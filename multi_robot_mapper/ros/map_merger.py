@@ -391,10 +391,13 @@ class MapMerger(Node):
         self.global_maps_published += 1
 
     def up_to_date(self) -> bool:
-        """Every partial map received so far is in the last merge (and there was one)."""
+        """Every partial map received so far is in the last merge (and there was one), and
+        that merge left no place unmatched (an update matches places within its budget)."""
         with self._lock:
             versions = merge_inputs(self.robots).versions
-        return bool(versions) and versions == self._merged_versions
+        result = self.result
+        pending = result is not None and result.stats.get("matches_pending", 0) > 0
+        return bool(versions) and versions == self._merged_versions and not pending
 
     def _merge_without_new_maps(
         self, inputs: MergeInputs, config: MapMergerConfig

@@ -450,8 +450,9 @@ class LocalMapper:
         self._worker.start()
         self._wake.set()  # keyframes queued before
 
-    def stop_worker(self, timeout: float = 5.0) -> None:
-        """Stop the back-end thread (the keyframe it is on is finished first)."""
+    def stop_worker(self, timeout: float = 120.0) -> None:
+        """Stop the back-end thread (the keyframe it is on is finished first: a thread left
+        inside gtsam while the interpreter exits can crash the process)."""
         worker, self._worker = self._worker, None
         if worker is None:
             return
