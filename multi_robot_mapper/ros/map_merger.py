@@ -45,14 +45,11 @@ the fields of :class:`MapMergerConfig` (``config/map_merger.yaml``).
 
 from __future__ import annotations
 
-import multiprocessing
 import sys
 import threading
 import time
 import traceback
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import numpy as np
@@ -109,11 +106,13 @@ from multi_robot_mapper.ros.merger_state import (
     merge_inputs,
     restore_saved_map,
     result_of_saved,
+    robot_statuses,
     saved_map_of,
     store_partial_map,
 )
 from multi_robot_mapper.ros.parameters import declare_config
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
+from multi_robot_mapper.ros.worker_process import WorkerProcess
 
 try:  # PyPI has no tf2_ros; with an apt-installed ROS 2 the frames go to TF as well.
     from tf2_ros import StaticTransformBroadcaster
@@ -158,7 +157,7 @@ class MapMerger(Node):
         # makes the merge fail falls back to.
         self._merged_inputs: dict[str, tuple[FloatArray, FloatArray, list[Keyframe]]] = {}
         self._culprits: set[str] = set()  # robots set back by the last failed merge
-        self._worker: ProcessPoolExecutor | None = None  # started on the first merge
+        self._worker = WorkerProcess()  # started on the first merge
         self._shown: tuple[object, ...] | None = None  # what the last global_map showed
         self._marker_ids: set[MarkerKey] = set()  # its markers (deleted once gone)
         self._marker_cache: MarkerCache = {}  # each keyframe's marker, rebuilt when it changes
@@ -449,21 +448,10 @@ class MapMerger(Node):
     ) -> tuple[MergeResult, OccupancyGrid | None]:
         """:func:`merge_with_grid` with the previous result, in the worker process when
         ``merge_worker`` is on (this thread waits without holding the interpreter lock)."""
-        previous = self.result
-        job = (keyframes, config.merge, config.grid, previous)
+        job = (keyframes, config.merge, config.grid, self.result)
         if not config.merge_worker:
             return merge_with_grid(*job)
-        if self._worker is None:
-            # spawn, not fork: forking a process that runs DDS threads is unsafe.
-            context = multiprocessing.get_context("spawn")
-            self._worker = ProcessPoolExecutor(max_workers=1, mp_context=context)
-        try:
-            return self._worker.submit(merge_with_grid, *job).result()
-        except BrokenProcessPool:
-            # The worker died (killed, out of memory): a new one next time.
-            self._worker.shutdown(wait=False, cancel_futures=True)
-            self._worker = None
-            raise
+        return self._worker.run(merge_with_grid, *job)
 
     def destroy_node(self) -> None:
         if self.config.save_on_shutdown:
@@ -472,9 +460,7 @@ class MapMerger(Node):
                 self.get_logger().info(f"map saved to {path} on shutdown")
             except SavedMapError as exc:
                 self.get_logger().error(f"map not saved on shutdown: {exc}")
-        if self._worker is not None:
-            self._worker.shutdown(wait=False, cancel_futures=True)
-            self._worker = None
+        self._worker.shutdown()
         super().destroy_node()
 
     def _publish_frames(self, result: MergeResult, stamp: Time, frames: dict[str, str]) -> None:
@@ -508,32 +494,12 @@ class MapMerger(Node):
 
     def publish_diagnostics(self) -> None:
         """Every robot's status on /diagnostics, stamped with the newest input."""
-        now = self._clock_ns()
         result = self.result
-        scores = diagnostics.link_scores(result)
-        statuses = []
         with self._lock:
             states = list(self.robots.values())
             stamps = [s.map_stamp for s in states if s.map_stamp is not None]
             stamps += [s.pose_stamp for s in states if s.pose_stamp is not None]
-            for state in states:
-                placement = None if result is None else result.placements.get(state.name)
-                link_value, best = scores.get(state.name, (None, 0.0))
-                health = diagnostics.MergerRobotHealth(
-                    robot=state.name,
-                    placement=placement,
-                    reference=result is not None and result.reference == state.name,
-                    link_value=link_value,
-                    best_value=best,
-                    pose_rate=state.pose_rate.rate(),
-                    maps_received=state.version,
-                    keyframes=state.keyframes,
-                    segments=len(state.segments),
-                    silent_for=None if state.heard_ns is None else (now - state.heard_ns) * 1e-9,
-                    stale_timeout=self.config.stale_timeout,
-                    session_of=state.session_of,
-                )
-                statuses.append(diagnostics.merger_status(health))
+            statuses = robot_statuses(states, result, self._clock_ns(), self.config.stale_timeout)
         statuses.insert(
             0,
             diagnostics.merge_status(

@@ -26,6 +26,7 @@ from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.io.messages import PartialMapContents
 from multi_robot_mapper.io.saved_map import SavedMap, SavedRobot
+from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.diagnostics import RateMeter
 from multi_robot_mapper.ros.markers import stamp_key
 
@@ -283,3 +284,31 @@ def result_of_saved(saved: SavedMap) -> MergeResult:
         timings={},
         stats={},
     )
+
+
+def robot_statuses(
+    states: list[RobotState], result: MergeResult | None, now_ns: int, stale_timeout: float
+) -> list[diagnostics.DiagnosticStatus]:
+    """Each robot's /diagnostics status (OK merged, WARN unmerged, STALE silent) from what the
+    merger knows of it (``now_ns``: the node clock)."""
+    scores = diagnostics.link_scores(result)
+    statuses = []
+    for state in states:
+        placement = None if result is None else result.placements.get(state.name)
+        link_value, best = scores.get(state.name, (None, 0.0))
+        health = diagnostics.MergerRobotHealth(
+            robot=state.name,
+            placement=placement,
+            reference=result is not None and result.reference == state.name,
+            link_value=link_value,
+            best_value=best,
+            pose_rate=state.pose_rate.rate(),
+            maps_received=state.version,
+            keyframes=state.keyframes,
+            segments=len(state.segments),
+            silent_for=None if state.heard_ns is None else (now_ns - state.heard_ns) * 1e-9,
+            stale_timeout=stale_timeout,
+            session_of=state.session_of,
+        )
+        statuses.append(diagnostics.merger_status(health))
+    return statuses
