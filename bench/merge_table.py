@@ -69,8 +69,10 @@ def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]
     row: dict[str, Any] = {"log": name, "robots": robots}
     tag = f"{name}_{robots}" + (f"_o{args.overlap_scans}" if args.overlap_scans else "")
     bag, out = args.work / "bags" / tag, args.work / "runs" / tag
-    out.mkdir(parents=True, exist_ok=True)
-    log = out / "mrm.log"
+    # The log lies beside the run folder: replay refuses a folder that holds files unless
+    # --overwrite, which replaces it as a whole at the end.
+    out.parent.mkdir(parents=True, exist_ok=True)
+    log = out.parent / f"{tag}.log"
     log.write_text("")
     try:
         if not bag.exists():
@@ -82,7 +84,8 @@ def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]
             partial.rename(bag)
         overrides = [item for pair in args.set for item in ("--set", pair)]
         row["replay_wall_s"] = mrm(
-            ["replay", str(bag), "--out", str(out), "--method", "pivot", *overrides], log
+            ["replay", str(bag), "--out", str(out), "--method", "pivot", "--overwrite", *overrides],
+            log,
         )
         row["evaluate_wall_s"] = mrm(["evaluate", str(out), "--bag", str(bag), "--json"], log)
         row["stats"] = read_results(out).stats
