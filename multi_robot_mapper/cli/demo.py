@@ -54,6 +54,9 @@ class DemoScenario:
     robots: int = 3
     duration: float = 20.0  # s of driving per robot (0.8 m/s)
     stagger: float = 6.0  # s between one robot's first scan and the next one's
+    # share of a robot's stretch its neighbour drives too: the joint graph links two maps by
+    # at least two places that agree, about 3 m apart
+    overlap: float = 0.45
     seed: int = 0
     speed: float = 1.0  # play speed: 1 = in real time, at the laser's rate
     settle_timeout: float = 30.0  # s after the last scan for the last maps to be merged
@@ -89,7 +92,12 @@ class DemoResult:
 def simulate_scenario(scenario: DemoScenario) -> dict[str, RobotRecording]:
     """The robots' scans and true poses, robot k starting ``k * stagger`` s after robot 1."""
     runs = simulate_robots(
-        scenario.world, scenario.robots, LaserModel(), scenario.seed, scenario.duration
+        scenario.world,
+        scenario.robots,
+        LaserModel(),
+        scenario.seed,
+        scenario.duration,
+        overlap=scenario.overlap,
     )
     late = [
         SimulatedRobot(run.stamps + k * scenario.stagger, run.T_world_laser, run.scans)
