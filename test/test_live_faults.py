@@ -342,7 +342,8 @@ def test_a_silent_robot_turns_stale_and_its_map_stays(rig: Rig) -> None:
     assert rig.spin_until(sending(("alpha", "bravo"), lambda: level("bravo") == OK), 20.0)
     assert rig.spin_until(sending(("alpha",), lambda: level("bravo") == STALE), 20.0)
     silent = {kv.key: kv.value for kv in status_of(rig, "bravo").values}
-    assert float(silent["seconds since last input"]) > 1.0  # not before stale_timeout
+    # not before stale_timeout (the value is shown to 0.01 s: 1.004 s reads "1.00")
+    assert float(silent["seconds since last input"]) >= 1.0
     assert status_of(rig, "alpha").level == OK
     assert "its map stays" in status_of(rig, "bravo").message
     # bravo is still placed and drawn.
