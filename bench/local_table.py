@@ -19,9 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
-import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
@@ -29,6 +27,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+# The same child-process runner as the merge table (bench/ is on the path of a bench script).
+from merge_table import mrm
 
 from multi_robot_mapper.cli.evaluate import METRICS_FILE
 from multi_robot_mapper.core import se2
@@ -38,31 +39,11 @@ from multi_robot_mapper.io.results import read_results
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "carmen"
 LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079", "edmonton")
-ONE_THREAD = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 COLUMNS = (
     "log | robots | scans | pair_success | strict | unposed | pieces left | own-frame ATE per "
     "robot (m) | closures accepted / wrong | joins | per scan median / p95 (ms) | optimisation "
     "p95 (ms) | replay (s)"
 )
-
-
-def mrm(args: list[str], log: Path) -> float:
-    """Run ``mrm ARGS`` in a child process (output appended to ``log``); its wall time in s."""
-    started = time.perf_counter()
-    with log.open("a") as out:
-        out.write(f"$ mrm {' '.join(args)}\n")
-        out.flush()
-        code = subprocess.run(
-            [sys.executable, "-m", "multi_robot_mapper.cli.main", *args],
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            env={**os.environ, **ONE_THREAD},
-            cwd=REPO,
-        ).returncode
-    if code:
-        tail = log.read_text().strip().splitlines()[-1:]
-        raise RuntimeError(f"mrm {args[0]} exited {code}: {' '.join(tail)} (see {log})")
-    return time.perf_counter() - started
 
 
 def wrong_closures(bag: Path, stats: dict[str, Any]) -> tuple[int, int]:
