@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import faulthandler
 import sys
+import threading
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
@@ -20,6 +23,8 @@ def run_nodes(
 ) -> int:
     """Spin the nodes ``make_nodes`` builds, on one executor, until shutdown (Ctrl-C, SIGTERM);
     exit code 2 on invalid parameters. Nodes are destroyed in reverse order of creation."""
+    if not faulthandler.is_enabled():
+        faulthandler.enable()  # a crash in native code names the Python threads it met
     rclpy.init(args=args)
     try:
         nodes = list(make_nodes())
@@ -41,6 +46,7 @@ def run_nodes(
             raise
     finally:
         spinner.shutdown()
+        _finish_callbacks(spinner)
         for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()
@@ -55,3 +61,17 @@ def run_node(
 ) -> int:
     """:func:`run_nodes` for one node (``ros2 run multi_robot_mapper <node>``)."""
     return run_nodes(program, lambda: [make_node()], args, make_executor)
+
+
+def _finish_callbacks(spinner: Executor, timeout: float = 10.0) -> None:
+    """Let callbacks still running on a MultiThreadedExecutor's threads end before their nodes
+    are destroyed. Jazzy's ``MultiThreadedExecutor.shutdown`` leaves its thread pool running
+    (later rclpy joins it there); a callback inside a node being destroyed, or still running as
+    the interpreter exits, can crash the process. Bounded: a stuck callback does not hold the
+    exit for ever."""
+    pool = getattr(spinner, "_executor", None)
+    if not isinstance(pool, ThreadPoolExecutor):
+        return
+    joiner = threading.Thread(target=pool.shutdown, kwargs={"wait": True}, daemon=True)
+    joiner.start()
+    joiner.join(timeout)

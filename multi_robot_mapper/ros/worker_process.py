@@ -4,35 +4,93 @@ keep Python's interpreter lock while it runs."""
 from __future__ import annotations
 
 import multiprocessing
+import threading
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
-from typing import TypeVar
+from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
+from typing import Any, TypeVar, cast
 
 R = TypeVar("R")
 
 
+class WorkerDiedError(RuntimeError):
+    """The worker process ended (killed, out of memory) before it answered."""
+
+
+def _serve(jobs: Connection) -> None:
+    """The worker's loop: a job ``(function, args)`` in, ``(True, result)`` or
+    ``(False, exception)`` out, until the pipe closes."""
+    while True:
+        try:
+            function, args = jobs.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return
+        try:
+            answer: tuple[bool, Any] = (True, function(*args))
+        except Exception as exc:  # the caller re-raises it
+            answer = (False, exc)
+        try:
+            jobs.send(answer)
+        except (OSError, ValueError):
+            return
+
+
 class WorkerProcess:
-    """Runs a module-level function in one spawned process, started on first use; a worker
-    that died (killed, out of memory) is replaced on the next call."""
+    """Runs module-level functions in one spawned process, started on first use; a worker that
+    died is replaced on the next call. :meth:`shutdown` terminates it at once.
+
+    A plain process and pipe rather than ``concurrent.futures.ProcessPoolExecutor``: that pool
+    cannot be stopped without waiting for the job it runs, and one shut down without waiting
+    leaves an exit hook that writes to a closed pipe (``OSError: Bad file descriptor`` as the
+    interpreter exits)."""
 
     def __init__(self) -> None:
-        self._pool: ProcessPoolExecutor | None = None
+        self._process: BaseProcess | None = None
+        self._pipe: Connection | None = None
+        self._lock = threading.Lock()  # one job at a time
 
     def run(self, function: Callable[..., R], *args: object) -> R:
-        """``function(*args)`` in the worker; this thread waits without holding the lock."""
-        if self._pool is None:
-            # spawn, not fork: forking a process that runs DDS threads is unsafe.
-            context = multiprocessing.get_context("spawn")
-            self._pool = ProcessPoolExecutor(max_workers=1, mp_context=context)
-        try:
-            return self._pool.submit(function, *args).result()
-        except BrokenProcessPool:
-            self.shutdown()  # a new one next time
-            raise
+        """``function(*args)`` in the worker; this thread waits without holding the lock.
+        Raises what the function raised, or :class:`WorkerDiedError`."""
+        with self._lock:
+            pipe = self._started()
+            try:
+                pipe.send((function, args))
+                ok, value = pipe.recv()
+            except (EOFError, OSError) as exc:
+                self._stop()  # a new one next time
+                raise WorkerDiedError("the merge worker process ended before it answered") from exc
+        if not ok:
+            raise cast(BaseException, value)
+        return cast(R, value)
+
+    def _started(self) -> Connection:
+        if self._process is not None and self._pipe is not None and self._process.is_alive():
+            return self._pipe
+        self._stop()
+        # spawn, not fork: forking a process that runs DDS threads is unsafe.
+        context = multiprocessing.get_context("spawn")
+        ours, theirs = context.Pipe()
+        process = context.Process(target=_serve, args=(theirs,), name="merge-worker", daemon=True)
+        process.start()
+        theirs.close()  # the worker's end lives in the worker: its death closes the pipe here
+        self._process, self._pipe = process, ours
+        return ours
 
     def shutdown(self) -> None:
-        """Stop the worker (a job it runs is abandoned)."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
+        """Stop the worker at once (a job it runs is abandoned; its caller gets
+        :class:`WorkerDiedError`)."""
+        self._stop()
+
+    def _stop(self) -> None:
+        process, pipe = self._process, self._pipe
+        self._process = self._pipe = None
+        if process is not None:
+            if process.is_alive():
+                process.terminate()
+            process.join(5.0)
+            if process.is_alive():
+                process.kill()
+                process.join()
+        if pipe is not None:
+            pipe.close()
