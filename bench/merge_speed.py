@@ -153,7 +153,9 @@ def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> No
     """``split_runs`` for the joint merger: each run's keyframes built at the reference poses,
     merged with ``merge_joint`` (every place matched); one line: robots placed, worst
     placement error, worst keyframe error in ``map``, links in the graph and how many are
-    wrong (> 0.30 m or 5 deg from the reference), merge time."""
+    wrong (> 0.30 m or 5 deg from the reference), merge time, the time of an update with
+    nothing new and of one bringing every robot's newest keyframe (issue 13: <= 1 s with 8
+    robots of 100 keyframes), keyframes."""
     from multi_robot_mapper.core.merging.joint import merge_joint
 
     path = DATA / f"{name}.log.gz"
@@ -175,6 +177,15 @@ def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> No
     started = time.perf_counter()
     result = merge_joint(keyframes, config, budget=0.0)
     elapsed = time.perf_counter() - started
+    # Updates as a live merger makes them (one core, every new place matched): nothing
+    # changed, and every robot's newest keyframe arriving on the merge of all the others.
+    started = time.perf_counter()
+    merge_joint(keyframes, config, previous=result, budget=0.0)
+    update_same = time.perf_counter() - started
+    before = merge_joint({r: k[:-1] for r, k in keyframes.items()}, config, budget=0.0)
+    started = time.perf_counter()
+    merge_joint(keyframes, config, previous=before, budget=0.0)
+    update_new = time.perf_counter() - started
     assert result.reference is not None
     T_map_world = se2.invert(frames[result.reference])
     worst = worst_keyframe = 0.0
@@ -203,7 +214,8 @@ def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> No
     count = sum(len(k) for k in keyframes.values())
     print(
         f"| {name} | {robots} | {placed}/{robots} | {worst * 100:.1f} cm | "
-        f"{worst_keyframe * 100:.1f} cm | {len(links)} | {wrong} | {elapsed:.1f} | {count} |",
+        f"{worst_keyframe * 100:.1f} cm | {len(links)} | {wrong} | {elapsed:.1f} | "
+        f"{update_same:.2f} | {update_new:.2f} | {count} |",
         flush=True,
     )
 
@@ -243,7 +255,8 @@ def main() -> None:
         action="store_true",
         help="--split with the joint merger: keyframes built at the reference poses, merged "
         "in one graph; prints | log | robots | placed | worst placement | worst keyframe | "
-        "links | wrong | merge (s) | keyframes |",
+        "links | wrong | merge (s) | update, nothing new (s) | "
+        "update, a keyframe per robot (s) | keyframes |",
     )
     parser.add_argument("--logs", nargs="*", default=["intel", "aces", "fhw", "csail"])
     parser.add_argument(

@@ -288,6 +288,29 @@ def test_a_building_that_fits_two_ways_is_refused() -> None:
     assert consistent_set((("a", 0), ("b", 0)), right, units, CONFIG).accepted
 
 
+def test_two_weak_links_agreeing_on_another_offset_do_not_make_a_pair_ambiguous() -> None:
+    # Three places of b link confidently at the truth; two others, unsure (0.64, 0.83), agree
+    # on an offset 0.8 m along the corridor. That rival is no placement the support rule would
+    # believe (two places, no confident link), so it cannot veto the first set, although the
+    # first weighs less than twice as much (what an office of two robots met in a live run).
+    frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.5, 0.2)}
+    units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
+    right = [link(units, frames, "b", k, "a", k + 3, c) for k, c in ((2, 0.97), (7, 0.99))]
+    right.append(link(units, frames, "b", 12, "a", 15, 0.96))
+    weak = [
+        link(units, frames, "b", k, "a", k + 2, c, (0.8, 0.0, 0.0), rank=1)
+        for k, c in ((4, 0.64), (10, 0.83))
+    ]
+    verdict = consistent_set((("a", 0), ("b", 0)), right + weak, units, CONFIG)
+    assert verdict.weight < CONFIG.link_set_uniqueness * verdict.rival_weight
+    assert verdict.accepted, verdict.reason
+    assert sorted(c.centre for c in verdict.links) == [2, 7, 12]
+    # The same rival with a third place is a second way the maps fit: refused as ambiguous.
+    third = link(units, frames, "b", 16, "a", 18, 0.8, (0.8, 0.0, 0.0), rank=1)
+    verdict = consistent_set((("a", 0), ("b", 0)), right + weak + [third], units, CONFIG)
+    assert not verdict.accepted and "ambiguous" in verdict.reason
+
+
 def test_a_link_that_breaks_a_cycle_is_refused() -> None:
     # Three robots in one corridor, each pair linked by a consistent set of two places. a-b
     # and b-c are right; a-c is 2 m off (consistent in itself: both its links are off alike)

@@ -351,8 +351,9 @@ class MergeConfig:
         2.0,
         unit="",
         doc="the accepted set of consistent links of a pair of maps must weigh (sum of link "
-        "fits) at least this many times the best set inconsistent with it: a building that "
-        "fits two ways is refused",
+        "fits) at least this many times the best set inconsistent with it, when that set has the "
+        "support link_min_support / link_confident_support ask: a building that fits two ways "
+        "is refused",
         minimum=1.0,
         maximum=100.0,
     )

@@ -15,7 +15,9 @@ kept, found by growing a clique from each link in turn. It is accepted when
   places, each of low confidence) is accepted when enough of the pair's other places agree
   with one of its placements (the aces corridors), and
 - it is *unique*: it weighs ``link_set_uniqueness`` times as much as the best set of links that
-  contradicts it (a building that fits two ways is refused, however well it fits).
+  contradicts it, when that set is itself supported by the rule above (a building that fits
+  two ways is refused, however well it fits; two weak links agreeing on another offset are
+  not a second way).
 
 **Cycles over pairs** (:func:`accept_pairs`). Pairs are taken by weight, best first (Kruskal).
 A pair joining two groups of maps joins them; a pair whose maps are already joined closes a
@@ -172,20 +174,38 @@ def consistent_set(
     chosen = heaviest_clique(agree, weights)
     members = [usable[i] for i in chosen]
     weight = float(weights[chosen].sum())
-    # Rivals: links that contradict some member; their heaviest consistent set.
+    # Rivals: links that contradict some member; their heaviest consistent set. It makes the
+    # pair ambiguous only if it is itself a placement the support rule would believe: a
+    # second way the maps fit needs the same evidence as the first (two weak links that
+    # agree on an offset along a corridor are not a second building).
     contradicting = np.asarray(~agree[chosen].all(axis=0), dtype=bool)
     rival = heaviest_clique(agree, weights, contradicting)
+    rival_members = [usable[i] for i in rival]
     rival_weight = float(weights[rival].sum()) if rival else 0.0
-    places = len({(c.source, c.centre) for c in members})
-    confident = any(c.confidence >= config.link_confidence for c in members)
-    reason = ""
-    if confident and places < config.link_confident_support:
-        reason = "too few consistent places"
-    elif not confident and places < config.link_min_support:
-        reason = "too few consistent places and no confident link"
-    elif weight < config.link_set_uniqueness * rival_weight:
+    reason = _support_shortfall(members, config)
+    rival_believable = not _support_shortfall(rival_members, config)
+    if not reason and rival_believable and weight < config.link_set_uniqueness * rival_weight:
         reason = "ambiguous: a contradicting set of links weighs about as much"
+    places = _places(members)
     return PairVerdict(pair, members, weight, rival_weight, places, not reason, reason)
+
+
+def _places(links: Sequence[LinkCandidate]) -> int:
+    return len({(c.source, c.centre) for c in links})
+
+
+def _support_shortfall(links: Sequence[LinkCandidate], config: MergeConfig) -> str:
+    """Why a consistent set of links is too little evidence for a placement ("" when it is
+    enough): ``link_confident_support`` places with a confident link, else
+    ``link_min_support``."""
+    if not links:
+        return "no link fits"
+    places = _places(links)
+    if any(c.confidence >= config.link_confidence for c in links):
+        return "" if places >= config.link_confident_support else "too few consistent places"
+    if places >= config.link_min_support:
+        return ""
+    return "too few consistent places and no confident link"
 
 
 def cycle_error(
