@@ -77,17 +77,24 @@ def test_build_system_applies_the_params_file_to_every_robot_and_the_merger(
             assert sorted(system.merger.robots) == ["robot1", "robot2"]
         finally:
             system.destroy()
-        with pytest.raises(ConfigError, match="not implemented"):
-            build_system(["robot1"], method="ffs", context=context)
+        with pytest.raises(ConfigError, match="icp"):
+            build_system(["robot1"], method="icp", context=context)
+        system = build_system(["robot1"], method="ffs", context=context)
+        try:
+            assert system.merger.config.method == "ffs"
+        finally:
+            system.destroy()
     finally:
         context.try_shutdown()
 
 
-def test_mrm_run_refuses_ffs_and_missing_params_files_with_exit_2(mrm, capsys, tmp_path) -> None:
+def test_mrm_run_refuses_unknown_methods_and_missing_params_files_with_exit_2(
+    mrm, capsys, tmp_path
+) -> None:
     os.environ.setdefault("ROS_DOMAIN_ID", str(default_domain_id()))
-    assert mrm(["run", "--robots", "robot1", "--method", "ffs"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "ffs" in err and "not implemented" in err
+    with pytest.raises(SystemExit) as exited:  # argparse's choices
+        mrm(["run", "--robots", "robot1", "--method", "icp"])
+    assert exited.value.code == 2 and "icp" in capsys.readouterr().err
     assert mrm(["run", "--robots", "robot1", "--params-file", str(tmp_path / "no.yaml")]) == 2
     assert "no such params file" in capsys.readouterr().err
     assert mrm(["run", "--robots", "9lives"]) == 2

@@ -27,7 +27,6 @@ from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.config import ConfigError
 from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.simulation import (
@@ -363,13 +362,13 @@ def test_listed_robots_are_subscribed_without_discovery(ros_context) -> None:
         node.destroy_node()
 
 
-def test_method_ffs_is_refused_and_runtime_changes_are_validated(ros_context) -> None:
-    with pytest.raises(ConfigError, match=r"ffs.*not implemented yet"):
-        MapMerger(context=ros_context, parameter_overrides=[Parameter("method", value="ffs")])
+def test_runtime_parameter_changes_are_validated(ros_context) -> None:
     node = MapMerger(context=ros_context, node_name="merger_two")
     try:
-        results = node.set_parameters([Parameter("method", value="ffs")])
-        assert not results[0].successful and "not implemented" in results[0].reason
+        results = node.set_parameters([Parameter("method", value="icp")])
+        assert not results[0].successful and "icp" in results[0].reason
+        results = node.set_parameters([Parameter("merge.ffs.sigma_end", value=1.0)])
+        assert not results[0].successful and "sigma_end" in results[0].reason
         results = node.set_parameters([Parameter("merge.link_min_value", value=-1.0)])
         assert not results[0].successful and "link_min_value" in results[0].reason
         results = node.set_parameters([Parameter("merge_period", value=0.25)])
@@ -379,14 +378,14 @@ def test_method_ffs_is_refused_and_runtime_changes_are_validated(ros_context) ->
         node.destroy_node()
 
 
-def test_main_exits_2_with_one_line_for_ffs(
+def test_main_exits_2_with_one_line_for_an_unknown_method(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.setenv("ROS_DOMAIN_ID", str(default_domain_id()))
-    code = main(["map_merger", "--ros-args", "-p", "method:=ffs"])
+    code = main(["map_merger", "--ros-args", "-p", "method:=icp"])
     assert code == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "ffs" in err and "not implemented yet" in err
+    assert len(err.splitlines()) == 1 and "icp" in err
 
 
 def _partial_map_message(segments: np.ndarray, laser_poses: np.ndarray, name: str) -> MarkerArray:

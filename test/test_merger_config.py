@@ -40,8 +40,10 @@ def test_bad_values_are_refused_by_name() -> None:
         config_from_flat(MapMergerConfig, {"merge_period": 0.0})
 
 
-def test_ffs_is_a_known_method_but_not_implemented_yet() -> None:
-    config = MapMergerConfig(method="ffs")  # documented in the params file...
-    with pytest.raises(ConfigError, match="not implemented yet"):
-        config.require_implemented()  # ...and refused where a merger would run it
-    MapMergerConfig().require_implemented()
+def test_both_methods_run_and_ffs_settings_are_validated() -> None:
+    for method in ("pivot", "ffs"):
+        MapMergerConfig(method=method).require_implemented()
+    config = config_from_flat(MapMergerConfig, {"method": "ffs", "merge.ffs.spacing": 0.05})
+    assert config.merge.ffs.spacing == 0.05
+    with pytest.raises(ConfigError, match="sigma_end"):
+        config_from_flat(MapMergerConfig, {"merge.ffs.sigma_end": 0.5})

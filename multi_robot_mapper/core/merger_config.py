@@ -9,7 +9,7 @@ from multi_robot_mapper.core.merging import MergeConfig
 from multi_robot_mapper.core.merging.occupancy import GridConfig
 
 METHODS = ("pivot", "ffs")
-IMPLEMENTED_METHODS = ("pivot",)
+IMPLEMENTED_METHODS = ("pivot", "ffs")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,8 +46,9 @@ class MapMergerConfig:
     method: str = param(
         "pivot",
         unit="",
-        doc="merging method: 'pivot' (INTEGRATE on every pair, spanning tree of the valid "
-        "links) or 'ffs' (Force Field Simulation, not implemented yet: refused at start-up)",
+        doc="merging method: 'pivot' (the joint graph: every robot's keyframes linked where "
+        "their places match, consistent links only, optimised together) or 'ffs' (the same, "
+        "then Force Field Simulation moves every merged keyframe at once: merge.ffs.*)",
         choices=METHODS,
     )
     marker_width: float = param(

@@ -12,7 +12,8 @@ front end (scan -> segments), then a placement method. Methods:
   graph (:func:`multi_robot_mapper.core.merging.joint.merge_joint`: places of each map
   searched on the others, consistent links only, every keyframe optimised together); a robot
   whose map was linked to no other stays ``"unmerged"``.
-- ``ffs``: its own issue; until it exists it raises :class:`MethodNotImplementedError`.
+- ``ffs``: ``pivot``, then Force Field Simulation moves every merged keyframe at once
+  (:func:`multi_robot_mapper.core.ffs.merge.merge_ffs`).
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import ExtractionConfig, SegmentScan, extract_scan
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalMapperConfig
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult, merge
-from multi_robot_mapper.core.merging.joint import JointState, merge_joint, place_scans
+from multi_robot_mapper.core.merging.joint import JointState, place_scans
+from multi_robot_mapper.core.merging.methods import merge_method
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
 
 FloatArray = NDArray[np.float64]
@@ -36,7 +38,7 @@ IntArray = NDArray[np.int64]
 Pose = tuple[float, float, float]
 
 METHODS = ("reference", "local", "pivot", "ffs")
-IMPLEMENTED_METHODS = ("reference", "local", "pivot")
+IMPLEMENTED_METHODS = ("reference", "local", "pivot", "ffs")
 
 
 class MethodNotImplementedError(NotImplementedError):
@@ -130,9 +132,9 @@ def run_offline(
 ) -> OfflineMap:
     """Run the front end on every scan of every robot, then place them with ``method``."""
     require_method(method)
-    if method in ("local", "pivot"):
+    if method in ("local", "pivot", "ffs"):
         local = _run_local(recordings, extraction, local_mapping or LocalMapperConfig(), progress)
-        return local if method == "local" else _merged(local, merging or MergeConfig())
+        return local if method == "local" else _merged(local, merging or MergeConfig(), method)
     robots = sorted(recordings)
     front_end = _FrontEnd(extraction, progress, sum(len(recordings[r]) for r in robots))
     segment_sets: list[FloatArray] = []
@@ -294,12 +296,12 @@ def _run_local(
     )
 
 
-def _merged(local: OfflineMap, config: MergeConfig) -> OfflineMap:
+def _merged(local: OfflineMap, config: MergeConfig, method: str = "pivot") -> OfflineMap:
     """Place the robots of a ``local`` run in one ``map`` frame (the merging stage): the joint
     graph of every robot's keyframes (:func:`merge_joint`, every place matched), or, for maps
     without keyframes, every map moved as one rigid body (:func:`merge`)."""
     if local.keyframes:
-        return _merged_joint(local, config)
+        return _merged_joint(local, config, method)
     started = time.perf_counter()
     maps = {
         robot: local.map_segments[local.segment_robot == index]
@@ -332,16 +334,18 @@ def _merged(local: OfflineMap, config: MergeConfig) -> OfflineMap:
     )
 
 
-def _merged_joint(local: OfflineMap, config: MergeConfig) -> OfflineMap:
+def _merged_joint(local: OfflineMap, config: MergeConfig, method: str = "pivot") -> OfflineMap:
     """The joint merge of a ``local`` run: every place matched (no time budget), then one more
     update with nothing changed (what a merger pays per update once its matches are made).
     A merged robot's trajectory is every scan whose keyframe was merged, placed through its
-    keyframe's optimised pose; an unmerged robot keeps its own frame."""
+    keyframe's optimised pose; an unmerged robot keeps its own frame. ``method``: 'pivot' or
+    'ffs' (:data:`MERGE_METHODS`)."""
+    merge_keyframes = merge_method(method)
     started = time.perf_counter()
-    result = merge_joint(local.keyframes, config, budget=0.0)
+    result = merge_keyframes(local.keyframes, config, budget=0.0)
     first_s = time.perf_counter() - started
     again = time.perf_counter()
-    merge_joint(local.keyframes, config, previous=result, budget=0.0)
+    merge_keyframes(local.keyframes, config, previous=result, budget=0.0)
     update_s = time.perf_counter() - again
     # A robot's frame is its main piece's (local mapping's trajectory and map are in it).
     frames: dict[str, Pose | None] = {}

@@ -448,7 +448,7 @@ class MapMerger(Node):
     ) -> tuple[MergeResult, OccupancyGrid | None]:
         """:func:`merge_with_grid` with the previous result, in the worker process when
         ``merge_worker`` is on (this thread waits without holding the interpreter lock)."""
-        job = (keyframes, config.merge, config.grid, self.result)
+        job = (keyframes, config.merge, config.grid, self.result, config.method)
         if not config.merge_worker:
             return merge_with_grid(*job)
         return self._worker.run(merge_with_grid, *job)

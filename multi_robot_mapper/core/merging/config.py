@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from multi_robot_mapper.core.config import param, validate
+from multi_robot_mapper.core.ffs.config import FfsConfig
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.merging.correlation import CorrelationConfig
 
@@ -444,6 +445,8 @@ class MergeConfig:
         maximum=3600.0,
     )
     integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
+    # Force Field Simulation after the joint graph's placement (method 'ffs' only)
+    ffs: FfsConfig = dataclasses.field(default_factory=FfsConfig)
 
     def __post_init__(self) -> None:
         validate(self)

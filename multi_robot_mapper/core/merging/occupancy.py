@@ -30,8 +30,8 @@ from multi_robot_mapper.core.geometry import sample_segments
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import MapViews
-from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.merging.link_graph import MergeResult
+from multi_robot_mapper.core.merging.methods import merge_method
 
 FloatArray = NDArray[np.float64]
 CellArray = NDArray[np.int8]
@@ -303,11 +303,13 @@ def merge_with_grid(
     config: MergeConfig,
     grid: GridConfig,
     previous: MergeResult | None = None,
+    method: str = "pivot",
 ) -> tuple[MergeResult, OccupancyGrid | None]:
-    """:func:`merge_joint` (one merge update, within ``config.update_budget``) and, when
+    """One merge update by ``method`` ('pivot': :func:`merge_joint`, within
+    ``config.update_budget``; 'ffs': the same, then Force Field Simulation) and, when
     ``grid.enabled``, the :func:`global_grid` of its result: what ``map_merger`` computes in
     its worker process after each change of a partial map."""
-    result = merge_joint(keyframes, config, previous=previous)
+    result = merge_method(method)(keyframes, config, previous=previous)
     if not grid.enabled:
         return result, None
     return result, global_grid(result, {}, {}, grid, config)

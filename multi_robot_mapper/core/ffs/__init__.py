@@ -1,0 +1,12 @@
+"""Force Field Simulation (Lakaemper, Adluru, Latecki & Madhavan 2007): all keyframes of all
+robots aligned at once as rigid bodies in a Gaussian force field.
+
+Modules: ``config`` (FfsConfig, units), ``bodies`` (resampling, regions of interest),
+``simulation`` (the force field and Algorithm 1), ``merge`` (FFS after the joint merger's
+placement: the ``ffs`` merging method)."""
+
+from multi_robot_mapper.core.ffs.bodies import Bodies, make_bodies, resample
+from multi_robot_mapper.core.ffs.config import FfsConfig
+from multi_robot_mapper.core.ffs.simulation import FfsResult, force_field, run_ffs
+
+__all__ = ["Bodies", "FfsConfig", "FfsResult", "force_field", "make_bodies", "resample", "run_ffs"]

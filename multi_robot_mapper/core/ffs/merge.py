@@ -1,0 +1,169 @@
+"""The ``ffs`` merging method: the joint graph places every robot's keyframes
+(:func:`merge_joint`, FFS Sec. 3.7's pre-alignment, found with no pose information), then
+Force Field Simulation moves every merged keyframe at once to where the walls of all robots
+agree best. The reference robot's keyframes, taken together, hold the ``map`` frame: after
+the simulation the whole map is moved back so that their rigid fit is unchanged."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.ffs.bodies import make_bodies
+from multi_robot_mapper.core.ffs.simulation import FfsResult, run_ffs
+from multi_robot_mapper.core.local_mapping import Keyframe
+from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.joint import merge_joint
+from multi_robot_mapper.core.merging.link_graph import MergeResult
+
+FloatArray = NDArray[np.float64]
+
+
+def merge_ffs(
+    keyframes: Mapping[str, Sequence[Keyframe]],
+    config: MergeConfig | None = None,
+    previous: MergeResult | None = None,
+    *,
+    budget: float | None = None,
+) -> MergeResult:
+    """:func:`merge_joint`, then FFS over every merged keyframe (module doc). The result's
+    ``stats`` add ``ffs_iterations`` and ``ffs_converged``, its ``timings`` ``ffs_s``."""
+    config = config if config is not None else MergeConfig()
+    joint = merge_joint(keyframes, config, previous=previous, budget=budget)
+    return refine_with_ffs(joint, config)
+
+
+def refine_with_ffs(result: MergeResult, config: MergeConfig) -> MergeResult:
+    """The merge ``result`` with its keyframes moved by FFS: keyframe poses, the global map
+    (each segment moves with the keyframe that owns it) and every robot's frames (by the
+    rigid motion that best carries its keyframes to their new poses)."""
+    robots = [r for r in result.robots if len(result.keyframe_index.get(r, ())) > 0]
+    if len(robots) == 0 or result.segment_keyframe is None:
+        return result
+    views = {robot: result.keyframe_maps(robot) for robot in robots}
+    owners = [(robot, row) for robot in robots for row in range(len(views[robot]))]
+    start = np.array([views[robot][row][1] for robot, row in owners], dtype=np.float64)
+    ffs = config.ffs
+    chunks = _chunks(views, owners, ffs.body_length)
+    # A body's frame is its first keyframe's; its segments are its keyframes' own.
+    body_start = np.array([start[members[0]] for members in chunks])
+    segment_sets = []
+    for members, T_map_body in zip(chunks, se2.matrices_from_poses(body_start), strict=True):
+        T_body_map = se2.invert(T_map_body)
+        parts = [
+            se2.transform_segments(
+                T_body_map @ se2.matrix_from_pose(*start[k]), views[owners[k][0]][owners[k][1]][2]
+            )
+            for k in members
+        ]
+        segment_sets.append(np.vstack(parts) if parts else np.zeros((0, 4)))
+    bodies = make_bodies(segment_sets, ffs.spacing, ffs.roi_radius, ffs.roi_mass)
+    simulated = run_ffs(bodies, body_start, ffs)
+    # Every keyframe moves with its body.
+    poses = start.copy()
+    moved = se2.matrices_from_poses(simulated.poses)
+    for members, T_new, T_old in zip(
+        chunks, moved, se2.matrices_from_poses(body_start), strict=True
+    ):
+        T_motion = T_new @ se2.invert(T_old)
+        for k in members:
+            poses[k] = se2.pose_from_matrix(T_motion @ se2.matrix_from_pose(*start[k]))
+    poses = _regauged(poses, start, owners, result.reference)
+    return _moved(result, robots, owners, start, poses, simulated)
+
+
+def _chunks(
+    views: Mapping[str, list[tuple[int, FloatArray, FloatArray]]],
+    owners: list[tuple[str, int]],
+    body_length: float,
+) -> list[list[int]]:
+    """Rows of ``owners`` grouped into bodies: a robot's consecutive keyframes until they own
+    ``body_length`` of wall (a short rest joins the robot's last body)."""
+    chunks: list[list[int]] = []
+    current: list[int] = []
+    owned = 0.0
+    for k, (robot, row) in enumerate(owners):
+        if current and owners[current[0]][0] != robot:
+            _close_chunk(chunks, current, owners)
+            current, owned = [], 0.0
+        segments = views[robot][row][2]
+        current.append(k)
+        owned += float(np.hypot(*(segments[:, 2:] - segments[:, :2]).T).sum())
+        if owned >= body_length:
+            chunks.append(current)
+            current, owned = [], 0.0
+    if current:
+        _close_chunk(chunks, current, owners)
+    return chunks
+
+
+def _close_chunk(chunks: list[list[int]], rest: list[int], owners: list[tuple[str, int]]) -> None:
+    """A robot's last keyframes, short of a body's wall: into its previous body if it has one."""
+    if chunks and owners[chunks[-1][0]][0] == owners[rest[0]][0]:
+        chunks[-1].extend(rest)
+    else:
+        chunks.append(rest)
+
+
+def _regauged(
+    poses: FloatArray,
+    start: FloatArray,
+    owners: list[tuple[str, int]],
+    reference: str | None,
+) -> FloatArray:
+    """The simulated poses moved so that the reference robot's keyframes keep their rigid fit
+    (FFS fixes no body: the whole map may drift a little while it settles)."""
+    rows = [k for k, (robot, _) in enumerate(owners) if robot == reference] or list(
+        range(len(owners))
+    )
+    T_fix = se2.rigid_fit(poses[rows], start[rows])
+    moved = se2.matrices_from_poses(poses)
+    return np.array([se2.pose_from_matrix(T_fix @ T) for T in moved])
+
+
+def _moved(
+    result: MergeResult,
+    robots: list[str],
+    owners: list[tuple[str, int]],
+    start: FloatArray,
+    poses: FloatArray,
+    simulated: FfsResult,
+) -> MergeResult:
+    keyframe_poses = dict(result.keyframe_poses)
+    frames = {robot: dict(pieces) for robot, pieces in result.frames.items()}
+    placements = dict(result.placements)
+    segments = result.segments.copy()
+    assert result.segment_keyframe is not None
+    for robot in robots:
+        rows = [k for k, (owner, _) in enumerate(owners) if owner == robot]
+        keyframe_poses[robot] = poses[rows]
+        # Every frame of the robot (its pieces) moves with the best fit of its keyframes.
+        T_new_old = se2.rigid_fit(start[rows], poses[rows])
+        for piece, pose in frames.get(robot, {}).items():
+            frames[robot][piece] = se2.pose_from_matrix(T_new_old @ se2.matrix_from_pose(*pose))
+        if placements.get(robot) is not None:
+            placements[robot] = frames[robot].get(0, placements[robot])
+        # Each segment moves with its keyframe: T_new . T_old^-1.
+        mine = np.flatnonzero(result.segment_robot == result.robots.index(robot))
+        index = result.keyframe_index[robot]
+        row = np.searchsorted(index, np.asarray(result.segment_keyframe)[mine])
+        local = se2.inverse_transform_segments_each(start[rows][row], segments[mine])
+        segments[mine] = se2.transform_segments_each(poses[rows][row], local)
+    stats = dict(result.stats)
+    stats.update(ffs_iterations=simulated.iterations, ffs_converged=int(simulated.converged))
+    timings = dict(result.timings)
+    timings["ffs_s"] = simulated.seconds
+    timings["total_s"] = timings.get("total_s", 0.0) + simulated.seconds
+    return dataclasses.replace(
+        result,
+        keyframe_poses=keyframe_poses,
+        frames=frames,
+        placements=placements,
+        segments=segments,
+        stats=stats,
+        timings=timings,
+    )
