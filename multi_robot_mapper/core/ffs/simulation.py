@@ -91,7 +91,7 @@ def force_field(
     force[:, 0] = np.bincount(owner, pulls[:, 0], count)
     force[:, 1] = np.bincount(owner, pulls[:, 1], count)
     arm = points[ends] - centres[owner]
-    torque = np.bincount(owner, arm[:, 0] * pulls[:, 1] - arm[:, 1] * pulls[:, 0], count)
+    torque[:] = np.bincount(owner, arm[:, 0] * pulls[:, 1] - arm[:, 1] * pulls[:, 0], count)
     return FieldStep(force, torque, float(-w.sum()), len(i))
 
 
