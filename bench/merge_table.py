@@ -2,7 +2,7 @@
 
 For every log and robot count K the real pipeline runs end to end, each step in its own ``mrm``
 process: ``mrm import-carmen LOG --robots K`` (the bag is cached under ``--work`` and reused),
-``mrm replay BAG --method pivot`` (local mapping per robot, then merging of the partial maps)
+``mrm replay BAG --method pivot|ffs`` (``--method``; local mapping per robot, then merging)
 and ``mrm evaluate`` against the log's reference poses.
 
     .venv/bin/python bench/merge_table.py [--logs intel aces fhw csail] [--robots 2 4 8]
@@ -65,7 +65,8 @@ def mrm(args: list[str], log: Path) -> float:
 
 
 def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]:
-    """Import (or reuse) the bag, replay with pivot, evaluate; every figure as one dict."""
+    """Import (or reuse) the bag, replay with ``--method``, evaluate; every figure as one
+    dict."""
     row: dict[str, Any] = {"log": name, "robots": robots}
     tag = f"{name}_{robots}" + (f"_o{args.overlap_scans}" if args.overlap_scans else "")
     bag, out = args.work / "bags" / tag, args.work / "runs" / tag
@@ -83,10 +84,8 @@ def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]
             mrm(["import-carmen", *imported], log)
             partial.rename(bag)
         overrides = [item for pair in args.set for item in ("--set", pair)]
-        row["replay_wall_s"] = mrm(
-            ["replay", str(bag), "--out", str(out), "--method", "pivot", "--overwrite", *overrides],
-            log,
-        )
+        replay = ["replay", str(bag), "--out", str(out), "--method", args.method]
+        row["replay_wall_s"] = mrm([*replay, "--overwrite", *overrides], log)
         row["evaluate_wall_s"] = mrm(["evaluate", str(out), "--bag", str(bag), "--json"], log)
         row["stats"] = read_results(out).stats
         row["metrics"] = json.loads((out / METRICS_FILE).read_text())
@@ -168,6 +167,7 @@ def main() -> None:
     parser.add_argument("--overlap-scans", type=int, default=0)
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     parser.add_argument("--quick", action="store_true", help="intel, 2 robots only")
+    parser.add_argument("--method", choices=("pivot", "ffs"), default="pivot")
     args = parser.parse_args()
     if args.quick:
         args.logs, args.robots = ["intel"], [2]
