@@ -401,10 +401,12 @@ def _partial_map_message(segments: np.ndarray, laser_poses: np.ndarray, name: st
     return partial_map_markers(keyframes, stamp_from_seconds(SIM_START_S + 99), f"{name}/map", 0.03)
 
 
-def test_a_merge_in_the_worker_process_is_the_merge_in_the_node(ros_context) -> None:
+@pytest.mark.parametrize("method", ["pivot", "ffs"])
+def test_a_merge_in_the_worker_process_is_the_merge_in_the_node(ros_context, method) -> None:
     # Two office robots' maps in frames anywhere: merged in the worker process (the default)
-    # and in the node's own thread, the placements are the same and where the truth has them
-    # (every place matched in one update: a time budget would make the two differ).
+    # and in the node's own thread, by either method, the placements are the same and where
+    # the truth has them (every place matched in one update and FFS run to its end: a time
+    # budget would make the two differ).
     from test_merging import in_own_frames, poses_in_own_frames, random_frames, world_runs
 
     runs = world_runs("office", 2)
@@ -421,6 +423,8 @@ def test_a_merge_in_the_worker_process_is_the_merge_in_the_node(ros_context) -> 
                 Parameter("robots", value="alpha,bravo"),
                 Parameter("merge_worker", value=worker),
                 Parameter("merge.update_budget", value=0.0),
+                Parameter("method", value=method),
+                Parameter("merge.ffs.time_budget", value=0.0),
             ],
         )
         try:
