@@ -122,14 +122,22 @@ def test_simulate_replay_pivot_evaluate_merges_the_robots(capsys, tmp_path: Path
     assert code == 2 and "merge.link_min_value" in err
 
 
-def test_methods_not_built_yet_exit_2_and_say_so(capsys, tmp_path: Path) -> None:
+def test_replay_ffs_merges_and_an_unknown_method_exits_2(capsys, tmp_path: Path) -> None:
     bag = tmp_path / "sim"
-    assert mrm(capsys, "simulate", "--robots", 1, "--out", bag, "--duration", 1)[0] == 0
-    for method in ("ffs",):
-        code, _, err = mrm(capsys, "replay", bag, "--out", tmp_path / method, "--method", method)
-        assert code == 2
-        assert "not implemented yet" in err and err.count("\n") == 1
-        assert not (tmp_path / method / "map.json").exists()
+    args = ("--robots", 2, "--out", bag, "--duration", 8, "--rate", 10, "--seed", 3)
+    assert mrm(capsys, "simulate", *args)[0] == 0
+    out = tmp_path / "ffs"
+    code, _, err = mrm(capsys, "replay", bag, "--out", out, "--method", "ffs")
+    assert code == 0, err
+    robots = json.loads((out / "robots.json").read_text())
+    assert all(frame != "unmerged" for frame in robots.values()), robots
+    assert mrm(capsys, "evaluate", out, "--bag", bag, "--json")[0] == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["robots_merged"] == 2 and metrics["ate_rmse_m"] < 0.15
+    with pytest.raises(SystemExit) as exited:  # argparse's choices name the known ones
+        mrm(capsys, "replay", bag, "--out", tmp_path / "icp", "--method", "icp")
+    assert exited.value.code == 2 and "icp" in capsys.readouterr().err
+    assert not (tmp_path / "icp").exists()
 
 
 def bad_bags(tmp_path: Path) -> dict[str, Path]:

@@ -187,9 +187,15 @@ def _match_places(
     signatures = {key: MapSignature.of(units[key].segments) for key in keys}
     records: dict[MatchKey, MatchRecord] = {}
     work: list[tuple[int, int, int, MatchKey, Place]] = []
+    matched = {(key[0], key[2]) for key in old}
     for i, a in enumerate(keys):
         for b in keys[i + 1 :]:
             source, target = _direction(units[a], units[b])
+            if (source.key, target.key) not in matched and (target.key, source.key) in matched:
+                # Keep the direction the pair was matched in: when the smaller map outgrows
+                # the other, switching would drop every link of the pair until all its places
+                # were matched again (robots unmerged for updates, then merged again).
+                source, target = target, source
             for rank, place in enumerate(places[source.key]):
                 key = (source.key, place.centre, target.key)
                 record = old.get(key)
