@@ -144,8 +144,10 @@ def run_ffs(
         # the whole step such a body needs, and a body touching others at a few points only
         # moves that much less (the paper's F / m).
         contact = np.sqrt(2.0 * np.pi) * sigma / config.spacing / sigma**2
-        arm_local = bodies.points - (1.0 - cooled) * com_local[bodies.body]
-        inertia = np.bincount(bodies.body, bodies.masses * np.sum(arm_local**2, axis=1), count)
+        # Moment of inertia about the centre a * com (a = 1 - cooled), from the body's second
+        # moment: sum m |p - a com|^2 = M (r^2 - (2a - a^2) |com|^2), no pass over the points.
+        a = 1.0 - cooled
+        inertia = mass * (radius**2 - (2.0 * a - a * a) * np.sum(com_local**2, axis=1))
         translation = field.force / (mass[:, None] * contact)
         rotation = np.where(
             inertia > 1e-12, field.torque / (np.maximum(inertia, 1e-12) * contact), 0.0
