@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 from conftest import carmen_log
@@ -92,17 +93,23 @@ def test_simulate_replay_local_evaluate_scores_each_robot_in_its_own_frame(
         assert robot["reported_unmerged"]
 
 
-def test_simulate_replay_pivot_evaluate_merges_the_robots(capsys, tmp_path: Path) -> None:
+def replayed_and_evaluated(capsys, tmp_path: Path, method: str) -> tuple[Path, dict[str, Any]]:
+    """Two simulated robots replayed by ``method`` (every robot must be merged) and evaluated:
+    the bag and the metrics."""
     bag = tmp_path / "sim"
     args = ("--robots", 2, "--out", bag, "--duration", 8, "--rate", 10, "--seed", 3)
     assert mrm(capsys, "simulate", *args)[0] == 0
-    out = tmp_path / "pivot"
-    code, _, err = mrm(capsys, "replay", bag, "--out", out, "--method", "pivot")
+    out = tmp_path / method
+    code, _, err = mrm(capsys, "replay", bag, "--out", out, "--method", method)
     assert code == 0, err
     robots = json.loads((out / "robots.json").read_text())
     assert all(frame != "unmerged" for frame in robots.values()), robots
     assert mrm(capsys, "evaluate", out, "--bag", bag, "--json")[0] == 0
-    metrics = json.loads((out / "metrics.json").read_text())
+    return bag, json.loads((out / "metrics.json").read_text())
+
+
+def test_simulate_replay_pivot_evaluate_merges_the_robots(capsys, tmp_path: Path) -> None:
+    bag, metrics = replayed_and_evaluated(capsys, tmp_path, "pivot")
     assert metrics["robots_merged"] == metrics["robots_total"] == 2
     assert metrics["ate_rmse_m"] < 0.15
     assert metrics["map_precision"] > 0.9
@@ -123,16 +130,7 @@ def test_simulate_replay_pivot_evaluate_merges_the_robots(capsys, tmp_path: Path
 
 
 def test_replay_ffs_merges_and_an_unknown_method_exits_2(capsys, tmp_path: Path) -> None:
-    bag = tmp_path / "sim"
-    args = ("--robots", 2, "--out", bag, "--duration", 8, "--rate", 10, "--seed", 3)
-    assert mrm(capsys, "simulate", *args)[0] == 0
-    out = tmp_path / "ffs"
-    code, _, err = mrm(capsys, "replay", bag, "--out", out, "--method", "ffs")
-    assert code == 0, err
-    robots = json.loads((out / "robots.json").read_text())
-    assert all(frame != "unmerged" for frame in robots.values()), robots
-    assert mrm(capsys, "evaluate", out, "--bag", bag, "--json")[0] == 0
-    metrics = json.loads((out / "metrics.json").read_text())
+    bag, metrics = replayed_and_evaluated(capsys, tmp_path, "ffs")
     assert metrics["robots_merged"] == 2 and metrics["ate_rmse_m"] < 0.15
     with pytest.raises(SystemExit) as exited:  # argparse's choices name the known ones
         mrm(capsys, "replay", bag, "--out", tmp_path / "icp", "--method", "icp")
