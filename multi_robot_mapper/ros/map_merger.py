@@ -49,7 +49,6 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -84,7 +83,7 @@ from multi_robot_mapper.io.messages import (
     piece_of_frame,
     pose_stamped,
 )
-from multi_robot_mapper.io.saved_map import SavedMapError, read_saved_map, write_saved_map
+from multi_robot_mapper.io.saved_map import SavedMapError
 from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
 from multi_robot_mapper.ros.entry import run_node
@@ -104,13 +103,11 @@ from multi_robot_mapper.ros.merger_state import (
     RobotState,
     after_new_session,
     merge_inputs,
-    restore_saved_map,
-    result_of_saved,
     robot_statuses,
-    saved_map_of,
     store_partial_map,
 )
 from multi_robot_mapper.ros.parameters import declare_config
+from multi_robot_mapper.ros.saved_map_services import SavedMapServices
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
 from multi_robot_mapper.ros.worker_process import WorkerProcess
 
@@ -130,7 +127,7 @@ POSE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 PARTIAL_MAP_TYPE = "visualization_msgs/msg/MarkerArray"
 
 
-class MapMerger(Node):
+class MapMerger(SavedMapServices, Node):
     """Merges the partial maps of robots whose relative poses are unknown."""
 
     def __init__(self, node_name: str = "map_merger", **kwargs: object) -> None:
@@ -509,46 +506,6 @@ class MapMerger(Node):
         if statuses:
             self._diagnostics_pub.publish(diagnostics.diagnostic_array(statuses, newest(stamps)))
 
-    # --- Saved maps -------------------------------------------------------------------------
-
-    def save_map(self, path: str | None = None) -> str:
-        """Write every robot's partial map and placement and the global map to ``path``
-        (default ``map_file``); raises :class:`SavedMapError`."""
-        with self._lock:
-            saved = saved_map_of(self.robots, self.result, self.config.map_frame)
-        return str(write_saved_map(path or self.config.map_file, saved))
-
-    def load_map(self, path: str | None = None) -> list[str]:
-        """Read a saved map (default ``map_file``) and merge its robots with the live ones;
-        returns the robots loaded. Raises :class:`SavedMapError`."""
-        saved = read_saved_map(path or self.config.map_file)
-        with self._lock:
-            loaded = restore_saved_map(self.robots, saved, self.config.keep_sessions)
-            if self.result is None:
-                self.result = result_of_saved(saved)  # its reference stays the map frame
-            self._merged_versions = {}
-        return loaded
-
-    def _on_save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        return _answer(response, lambda: f"map saved to {self.save_map()}")
-
-    def _on_load(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        def load() -> str:
-            loaded = self.load_map()
-            return f"loaded {len(loaded)} robots' maps: {', '.join(loaded) or 'none'}"
-
-        return _answer(response, load)
-
-    def _load_at_start(self) -> None:
-        try:
-            loaded = self.load_map()
-        except SavedMapError as exc:
-            self.get_logger().warning(f"load_on_start: nothing loaded: {exc}")
-            return
-        self.get_logger().info(
-            f"loaded {', '.join(loaded) or 'no robot'} from {self.config.map_file}"
-        )
-
     # --- Parameters -------------------------------------------------------------------------
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
@@ -593,16 +550,6 @@ class MapMerger(Node):
             )
         if (config.merge, config.grid) != (old.merge, old.grid):
             self._merged_versions = {}  # merge again with the new settings
-
-
-def _answer(response: Trigger.Response, action: Callable[[], str]) -> Trigger.Response:
-    """A Trigger answer: success and what ``action`` says, or failure and why."""
-    try:
-        response.message = action()
-        response.success = True
-    except SavedMapError as exc:
-        response.success, response.message = False, str(exc)
-    return response
 
 
 def main(args: list[str] | None = None) -> int:
