@@ -284,3 +284,74 @@ def test_a_cluttered_office_is_tracked_within_centimetres() -> None:
         expected = _relative(run.T_world_laser[0], true_pose)
         assert np.hypot(update.pose[0] - expected[0], update.pose[1] - expected[1]) < 0.05
         assert abs(se2.wrap_angle(update.pose[2] - expected[2])) < np.radians(1.0)
+
+
+def _degenerate(kind: str, pose: np.ndarray, seed: int) -> LaserScanData:
+    """A 1081-beam scan from ``pose`` (world frame) whose angles make no sensible laser.
+
+    ``misreported_*``: a real UTM-30LX scan (270 degrees) whose driver reports that tiny
+    angle_increment, so its 1081 returns land in a wedge of 6 degrees (1e-4), on one ray
+    (1e-8, 1e-30) or on one ray at the smallest increment a float holds (5e-324: every
+    bearing divided by it overflows). ``narrow``: what a laser of 1081 beams at 1e-4 rad
+    really sees (a piece of one wall). ``spot``: every range the same, on one ray.
+    """
+    rng = np.random.default_rng(seed)
+    if kind == "narrow":
+        return simulate_scan(
+            WORLDS["office"](), tuple(pose), LaserModel(field_of_view=1e-4 * 1080), rng
+        )
+    real = simulate_scan(WORLDS["office"](), tuple(pose), LaserModel(), rng)
+    ranges = 3.0 + rng.normal(0.0, 0.001, 1081) if kind == "spot" else real.ranges
+    increment = {
+        "misreported_1e-4": 1e-4,
+        "misreported_1e-8": 1e-8,
+        "misreported_1e-30": 1e-30,
+        "misreported_5e-324": 5e-324,
+        "spot": 1e-8,
+    }[kind]
+    # angle_min 0: at 5e-324 any other start would swallow the increments (angle_max ==
+    # angle_min), a scan the boundary refuses for its beam count before it gets here.
+    return LaserScanData(ranges, 0.0, increment * 1080, increment, real.range_min, real.range_max)
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_degenerate_scans_let_through_are_never_placed_in_the_map() -> None:
+    # The boundary's field-of-view check turned off (min_field_of_view 0): the local mapper
+    # on its own must not integrate a placement that such a scan cannot constrain. One
+    # degenerate scan after every tenth scan of the drive, halfway to the next: each is set
+    # aside or starts a piece of its own, none is placed in the map, and the drive is
+    # tracked as well as without them (the person-blocking test's 2 cm).
+    open_gate = dataclasses.replace(EXTRACTION, min_field_of_view=0.0)
+    kinds = (
+        "misreported_1e-4",
+        "misreported_1e-8",
+        "misreported_1e-30",
+        "misreported_5e-324",
+        "narrow",
+        "spot",
+    )
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
+    local = LocalMapper()
+    degenerate: dict[float, tuple[str, LocalUpdate]] = {}
+    for k, (t, s) in enumerate(zip(stamps, scans, strict=True)):
+        local.add_scan(float(t), extract_scan(s, open_gate)[0], s)
+        if k % 10 == 9 and k + 1 < len(stamps):
+            kind = kinds[(k // 10) % len(kinds)]
+            scan = _degenerate(kind, 0.5 * (truth[k] + truth[k + 1]), seed=k)
+            stamp = 0.5 * float(stamps[k] + stamps[k + 1])
+            update = local.add_scan(stamp, extract_scan(scan, open_gate)[0], scan)
+            degenerate[stamp] = (kind, update)
+    assert set(kind for kind, _ in degenerate.values()) == set(kinds)
+    for kind, update in degenerate.values():
+        # Set aside, or placed where nothing depends on it: a new piece of its own.
+        assert not update.accepted or update.new_piece, kind
+    assert local.main_piece() == 0
+    times, poses = local.trajectory()
+    assert not set(times.tolist()) & set(degenerate), "a degenerate scan is in the map"
+    # Every good scan is in the map (the pieces the degenerate scans started do not take
+    # them), where the simulator put it.
+    np.testing.assert_array_equal(times, stamps)
+    truth_at = {
+        float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
+    }
+    assert _ate(times, poses, truth_at) < 0.02

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 from collections import OrderedDict
 
@@ -30,6 +31,16 @@ def seen_through(
     return _beam_evidence(view, points, margin, spread)[0]
 
 
+def _beam_position(view: LaserScanData, bearing: FloatArray) -> FloatArray:
+    """Each bearing's position in beams from the view's first beam, clipped to one beam
+    outside either end (-1 or the beam count): a tiny angle_increment (a broken driver
+    let through with ``min_field_of_view`` 0) puts bearings up to 1e300 beams away or at
+    infinity, which the integer cast of the callers would overflow."""
+    with np.errstate(over="ignore"):
+        position = (bearing - view.angle_min) / view.angle_increment
+    return np.clip(position, -1.0, float(np.asarray(view.ranges).size))
+
+
 def _beam_evidence(
     view: LaserScanData, points: FloatArray, margin: float, spread: int
 ) -> tuple[BoolArray, BoolArray]:
@@ -48,7 +59,7 @@ def _beam_evidence(
         nearest = np.where(valid, window, -np.inf)
     bearing = np.arctan2(points[:, 1], points[:, 0])
     distance = np.hypot(points[:, 0], points[:, 1])
-    beam = np.rint((bearing - view.angle_min) / view.angle_increment).astype(np.int64)
+    beam = np.rint(_beam_position(view, bearing)).astype(np.int64)
     outside = (beam < 0) | (beam >= ranges.size)
     beam[outside] = 0
     free = np.where(outside, -np.inf, nearest[beam])
@@ -121,7 +132,10 @@ def scan_returns(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArra
 
 def _scan_returns(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArray]:
     points = scan_points(view).points
-    points = points[:: max(1, round(np.radians(1.0) / abs(view.angle_increment)))]
+    # About one return per degree; a tiny increment asks for a stride beyond the scan (at
+    # 5e-324 rad an infinite one, which round() refuses): the first return is then kept.
+    stride = min(math.radians(1.0) / abs(view.angle_increment), max(len(points), 1))
+    points = points[:: max(1, round(stride))]
     if len(points) < 2:
         return points, np.full(len(points), cap)
     gap = np.hypot(*np.diff(points, axis=0).T)
@@ -187,7 +201,7 @@ def beam_categories(
         nearest = np.where(valid, window, -np.inf)
     bearing = np.arctan2(points[:, 1], points[:, 0])
     distance = np.hypot(points[:, 0], points[:, 1])
-    position = (bearing - view.angle_min) / view.angle_increment
+    position = _beam_position(view, bearing)
     beam = np.rint(position).astype(np.int64)
     inside = (beam >= 0) & (beam < count)
     beam = np.clip(beam, 0, count - 1)
