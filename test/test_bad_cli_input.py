@@ -170,10 +170,12 @@ def test_unwritable_out_is_found_before_any_work(
 ) -> None:
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
+    # cli.demo imports simulate_robots by name: imported (by forbidding its run_demo) before
+    # core's is forbidden, or it would keep the forbidden one after this test.
+    _forbid(monkeypatch, "multi_robot_mapper.cli.demo.run_demo")
     _forbid(monkeypatch, "multi_robot_mapper.core.pipeline.run_offline")
     _forbid(monkeypatch, "multi_robot_mapper.core.simulation.simulate_robots")
     _forbid(monkeypatch, "multi_robot_mapper.cli.simulate.simulate_robots")
-    _forbid(monkeypatch, "multi_robot_mapper.cli.demo.run_demo")
     cases = {
         "replay": ("replay", small_bag, "--out", blocker / "out", "--method", "reference"),
         "simulate": ("simulate", "--robots", 1, "--out", blocker / "bag"),
