@@ -302,6 +302,99 @@ def test_simulate_killed_by_a_signal_exits_cleanly_and_can_run_again(
     assert rerun.returncode == 0 and (out / "metadata.yaml").is_file()
 
 
+def _quick_demo(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``mrm demo`` without its expensive parts: 1 s per robot instead of 20, and instead of
+    playing live to the nodes, the merger's saved map as a stub and the truth as the result
+    (every robot merged). Simulating, writing the bag and the result, scoring and drawing are
+    the demo's own."""
+    import dataclasses
+
+    import numpy as np
+
+    from multi_robot_mapper.cli import demo
+    from multi_robot_mapper.core.simulation import WORLDS
+    from multi_robot_mapper.io.results import ReplayResult
+    from multi_robot_mapper.ros.live import PlayStats
+
+    recorded: dict[str, object] = {}
+    simulate = demo.simulate_scenario
+
+    def short(scenario: demo.DemoScenario) -> object:
+        recorded.update(simulate(dataclasses.replace(scenario, duration=1.0, stagger=0.5)))
+        return recorded
+
+    def played(recordings: dict, scenario: object, saved_map: Path, logs: object) -> object:
+        atomic_write_text(saved_map, json.dumps({"seed": len(recorded)}))
+        observer = type("Observer", (), {"diagnostics": {}})()
+        sent = {r: len(rec.scans) for r, rec in recordings.items()}
+        return demo.LiveOutcome(observer, PlayStats(sent, [], 1.0), 0.0, sent, True)
+
+    def truth(observer: object) -> ReplayResult:
+        robots = sorted(recorded)
+        paths = {}
+        for robot in robots:
+            poses = recorded[robot].ground_truth  # type: ignore[attr-defined]
+            paths[robot] = (np.array([p.stamp for p in poses]), np.array([p.pose for p in poses]))
+        walls = WORLDS["office"]()
+        owners = np.zeros(len(walls), dtype=np.int64)
+        frames = {r: (0.0, 0.0, 0.0) for r in robots}
+        return ReplayResult("truth", robots, walls, owners, paths, frames, {})
+
+    def drawn(out_dir: Path, *args: object) -> dict[str, Path]:
+        atomic_write_text(out_dir / "global_map.png", "a picture")
+        return {"global map": out_dir / "global_map.png"}
+
+    monkeypatch.setattr(demo, "simulate_scenario", short)
+    monkeypatch.setattr(demo, "play_live", played)
+    monkeypatch.setattr(demo, "live_results", truth)
+    monkeypatch.setattr(demo, "draw_demo", drawn)
+
+
+def _contents(folder: Path) -> dict[Path, bytes]:
+    return {p.relative_to(folder): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def test_an_interrupted_demo_leaves_the_old_outputs_and_a_rerun_replaces_them(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    from multi_robot_mapper.cli import demo
+
+    _quick_demo(monkeypatch)
+    out = tmp_path / "demo"
+    out.mkdir()
+    (out / "notes.txt").write_text("the user's own file")  # --out is shared: kept
+    code, _, err = mrm(capsys, "demo", "--out", out, "--seed", 0)
+    assert code == 0, err
+    before = _contents(out)
+    assert {"bag/metadata.yaml", "result/metrics.json", "saved_map.json"} <= {
+        str(p) for p in before
+    }
+
+    # Ctrl-C while the nodes map (the new bag, of another seed, already written), and while
+    # the pictures are drawn (bag, result, metrics and saved map all new by then): the old
+    # outputs stay, byte for byte, and nothing half-made is left beside them.
+    def interrupt(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    for stage in ("play_live", "draw_demo"):
+        with monkeypatch.context() as patch:
+            patch.setattr(demo, stage, interrupt)
+            code, _, err = mrm(capsys, "demo", "--out", out, "--seed", 1)
+        assert code == 130 and "nothing half-written" in err, (stage, err)
+        assert _contents(out) == before, stage
+        assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == [], stage
+    # Run to the end, the new outputs replace the old ones; the user's file is kept.
+    code, _, err = mrm(capsys, "demo", "--out", out, "--seed", 1)
+    assert code == 0, err
+    after = _contents(out)
+    assert set(after) == set(before) and after[Path("notes.txt")] == before[Path("notes.txt")]
+    for name in ("bag", "result"):  # another seed: other scans, other paths
+        assert {p: b for p, b in after.items() if p.parts[0] == name} != {
+            p: b for p, b in before.items() if p.parts[0] == name
+        }, name
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
+
+
 def test_atomic_outputs_keep_the_old_file_or_folder_when_interrupted(tmp_path: Path) -> None:
     path = tmp_path / "x.json"
     atomic_write_text(path, "old")

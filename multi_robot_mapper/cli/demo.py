@@ -19,7 +19,6 @@ join), ``joining.gif``, ``global_grid.png`` and ``saved_map.json`` (the merger's
 from __future__ import annotations
 
 import dataclasses
-import shutil
 import threading
 import time
 from collections.abc import Sequence
@@ -35,6 +34,7 @@ from multi_robot_mapper.core.simulation import WORLDS, LaserModel, SimulatedRobo
 from multi_robot_mapper.evaluation.metrics import Metrics, evaluate
 from multi_robot_mapper.io import pictures
 from multi_robot_mapper.io.bags import RobotRecording, recording_of, write_recordings
+from multi_robot_mapper.io.outputs import atomic_write_text, staged_entries
 from multi_robot_mapper.io.results import ReplayResult, write_results
 from multi_robot_mapper.ros.live import GlobalMapView, Observer, PlayStats, ScanPlayer, timeline
 from multi_robot_mapper.ros.map_merger import MapMerger
@@ -216,33 +216,38 @@ def _moved(T_map_robot: FloatArray, poses: FloatArray) -> FloatArray:
 
 def run_demo(out_dir: Path, scenario: DemoScenario | None = None) -> DemoResult:
     """The whole demo: simulate, play live, collect, score, draw."""
+    import json
+
     from multi_robot_mapper.cli.evaluate import build_inputs, format_table
 
     begun = time.monotonic()
     scenario = scenario or DemoScenario()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    recordings = simulate_scenario(scenario)
-    bag = out_dir / "bag"
-    if bag.exists():
-        shutil.rmtree(bag)  # the demo's own bag from an earlier run
-    write_recordings(bag, recordings)
-    files = {"bag": bag, "saved map": out_dir / "saved_map.json"}
-    files["logs"] = out_dir / "logs"
-    live = play_live(recordings, scenario, files["saved map"], files["logs"])
+    # Every output is made in a fresh folder inside --out and moved into place when the demo
+    # is done: an interrupted demo (Ctrl-C, an error) leaves the old outputs whole, not an
+    # old bag gone and a new one half-written. The logs are written in place as the nodes
+    # run: they are no result, and most wanted when the demo fails.
+    logs = out_dir / "logs"
+    with staged_entries(out_dir) as staging:
+        recordings = simulate_scenario(scenario)
+        made = {"bag": write_recordings(staging / "bag", recordings)}
+        made["saved map"] = staging / "saved_map.json"
+        live = play_live(recordings, scenario, made["saved map"], logs)
 
-    result = live_results(live.observer)
-    files["result"] = out_dir / "result"
-    write_results(files["result"], result)
-    inputs = build_inputs(result, recordings)
-    metrics = evaluate(
-        inputs.tracks, result.map_segments, inputs.reference_points, result.robot_frames
-    )
-    import json
-
-    (files["result"] / "metrics.json").write_text(json.dumps(metrics.to_dict(), indent=1) + "\n")
-    table = format_table(metrics, result.method)
-    files.update(draw_demo(out_dir, scenario, live, result, metrics))
+        result = live_results(live.observer)
+        made["result"] = staging / "result"
+        write_results(made["result"], result)
+        inputs = build_inputs(result, recordings)
+        metrics = evaluate(
+            inputs.tracks, result.map_segments, inputs.reference_points, result.robot_frames
+        )
+        atomic_write_text(
+            made["result"] / "metrics.json", json.dumps(metrics.to_dict(), indent=1) + "\n"
+        )
+        table = format_table(metrics, result.method)
+        made.update(draw_demo(staging, scenario, live, result, metrics))
+    files = {name: out_dir / path.relative_to(staging) for name, path in made.items()}
+    files["logs"] = logs
     merged = [r for r in result.robots if result.robot_frames[r] is not None]
     statuses = [
         f"{status.name}: {LEVELS.get(status.level[0], '?')} - {status.message}"

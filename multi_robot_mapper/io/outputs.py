@@ -74,16 +74,45 @@ def staged_folder(final: str | Path) -> Iterator[Path]:
     staging.chmod(0o755)  # mkdtemp's 0700 would be the result's
     try:
         yield staging
-        old = None
-        if final.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{final.name}.old-", dir=final.parent))
-            final.rename(old / final.name)
-        staging.rename(final)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        _replace(staging, final)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
+
+
+@contextlib.contextmanager
+def staged_entries(folder: str | Path) -> Iterator[Path]:
+    """A fresh temporary folder inside ``folder``, for outputs that share it with other
+    files (``mrm demo``'s in ``--out``, beside its logs and whatever the user keeps there).
+    On success each entry made in it replaces the entry of the same name in ``folder``, all
+    at the end (one rename each), so the long work before never touches the old entries; on
+    any error or interruption it is removed and ``folder`` is left as it was. Entries of
+    ``folder`` that the run does not make are kept."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=".partial-", dir=folder))
+    try:
+        yield staging
+        for entry in sorted(staging.iterdir()):
+            _replace(entry, folder / entry.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def _replace(new: Path, final: Path) -> None:
+    """Put ``new`` (a file or a folder) at ``final``, on the same file system. A file
+    replaces a file in one atomic rename; otherwise an old ``final`` is moved aside first and
+    removed only after the new one is in place."""
+    if not (new.is_dir() or final.is_dir()):
+        os.replace(new, final)
+        return
+    old = None
+    if final.exists() or final.is_symlink():
+        old = Path(tempfile.mkdtemp(prefix=f".{final.name}.old-", dir=final.parent))
+        final.rename(old / final.name)
+    new.rename(final)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
 
 
 @contextlib.contextmanager
