@@ -128,7 +128,8 @@ def test_broken_config_files_give_one_line_naming_file_and_key(
         ("--noise", "nan", "--noise must be in [0, 1] m"),
         ("--seed", "-1", "--seed must be in"),
         ("--robots", "100000", "--robots must be in [1, 100]"),
-        ("--beams", "1000000", "--beams must be in [2,"),
+        ("--beams", "1000000", "--beams must be in [2, 100000] beams, got 1e+06"),
+        ("--beams", "1", "--beams must be in [2, 100000] beams, got 1"),
     ],
 )
 def test_simulate_refuses_numbers_outside_their_range(
@@ -141,6 +142,48 @@ def test_simulate_refuses_numbers_outside_their_range(
     one_line_error(err, "simulate")
     assert words in err
     assert not out.exists()
+
+
+def _numeric_options() -> list[tuple[str, str, object]]:
+    """(command, option dest, default) of every option of every mrm command that takes a
+    number."""
+    import argparse
+
+    from multi_robot_mapper.cli.main import build_parser
+
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return [
+        (command, action.dest, action.default)
+        for command, parser in commands.choices.items()
+        for action in parser._actions
+        if action.type in (int, float)
+    ]
+
+
+def test_every_cli_number_has_one_declared_range() -> None:
+    from multi_robot_mapper.cli.common import CLI_LIMITS
+
+    options = _numeric_options()
+    assert {"speed", "beams", "seed", "duration"} <= {dest for _, dest, _ in options}
+    for command, dest, default in options:
+        assert dest in CLI_LIMITS, f"mrm {command} --{dest} has no range in CLI_LIMITS"
+        low, high, _ = CLI_LIMITS[dest]
+        assert default is None or low <= default <= high, (command, dest)  # type: ignore[operator]
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "0.005", "inf", "nan", "101"])
+def test_demo_refuses_a_speed_outside_its_range_before_any_work(
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+    value: str,
+) -> None:
+    _forbid(monkeypatch, "multi_robot_mapper.cli.demo.run_demo")
+    code, _, err = mrm(capsys, "demo", "--out", tmp_path / "demo", "--speed", value)
+    assert code == 2
+    one_line_error(err, "demo")
+    assert f"--speed must be in [0.01, 100] times real time, got {float(value):g}" in err
+    assert not (tmp_path / "demo").exists()
 
 
 def test_simulate_refuses_a_run_too_large_to_hold(

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from multi_robot_mapper.core.extraction import ExtractionConfig
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 
@@ -23,7 +24,11 @@ CLI_LIMITS: dict[str, tuple[float, float, str]] = {
     "robots": (1, 100, "robots"),
     "seed": (0, 2**32 - 1, ""),
     "rate": (0.1, 1000.0, "Hz"),
-    "beams": (2, 100_000, "beams"),
+    # simulate: no more than the front end takes (larger scans are refused as corrupt)
+    "beams": (2, ExtractionConfig().max_beams, "beams"),
+    # demo: 100 times slower plays its 38 s of scans in an hour (duration's bound); faster
+    # than 100 times, every mapper drops nearly every scan
+    "speed": (0.01, 100.0, "times real time"),
     "noise": (0.0, 1.0, "m"),
     "duration": (0.1, 3600.0, "s"),
     "clutter": (0.0, 2.0, "objects/m^2"),

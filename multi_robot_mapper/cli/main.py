@@ -12,7 +12,6 @@ mrm run            robot_mappers and a map_merger in one process, live (no launc
 from __future__ import annotations
 
 import argparse
-import math
 import signal
 import sys
 import threading
@@ -34,9 +33,7 @@ from multi_robot_mapper.core.config import ConfigError
 def _cmd_demo(args: argparse.Namespace) -> int:
     from multi_robot_mapper.cli.demo import DemoScenario, run_demo
 
-    check_limits(args, "seed")
-    if not (math.isfinite(args.speed) and 0.0 < args.speed <= 100.0):
-        raise CliError(f"--speed must be in (0, 100], got {args.speed:g}")
+    check_limits(args, "seed", "speed")
     # Checked before the run, not after it; a folder from an earlier demo is written over
     # (make demo runs again into demo_output).
     check_output(Path(args.out), kind="folder", overwrite=True)

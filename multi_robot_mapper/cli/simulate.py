@@ -18,13 +18,11 @@ from multi_robot_mapper.cli.common import (
     check_limits,
     check_output,
 )
-from multi_robot_mapper.core.extraction import ExtractionConfig
 from multi_robot_mapper.core.simulation import ROUTES, LaserModel, clutter_for, simulate_robots
 
 DEFAULT_LASER = LaserModel()  # Hokuyo UTM-30LX
 DEFAULT_DURATION_S = 20.0  # about 16 m of driving per robot at the default speed
 SPEED_M_S = 0.8  # a walking-pace indoor robot
-MAX_BEAMS = ExtractionConfig().max_beams  # the front end refuses larger scans as corrupt
 
 
 def register(subparsers: Any) -> None:
@@ -76,8 +74,6 @@ def run(args: argparse.Namespace) -> int:
     check_limits(args, "robots", "seed", "rate", "beams", "noise", "duration", "clutter")
     if args.world not in ROUTES:
         raise CliError(f"unknown world {args.world!r}; known: {', '.join(ROUTES)}")
-    if args.beams > MAX_BEAMS:
-        raise CliError(f"--beams must be in [2, {MAX_BEAMS}] (the front end's max_beams)")
     readings = args.robots * args.rate * args.duration * args.beams
     if readings > MAX_SIMULATED_READINGS:
         raise CliError(
