@@ -120,7 +120,8 @@ def test_intel_as_four_robots(mrm: Mrm, tmp_path: Path, storage: str) -> None:
     ("argv", "words"),
     [
         (["{tmp}/missing.log", "--robots", "2"], "no such log file"),
-        (["{log}", "--robots", "0"], "--robots must be at least 1"),
+        (["{log}", "--robots", "0"], "--robots must be in [1, 100] robots, got 0"),
+        (["{log}", "--robots", "101"], "--robots must be in [1, 100] robots, got 101"),
         (["{log}", "--robots", "13"], "more than the 12 scans"),
         (["{log}", "--robots", "2", "--overlap-scans", "-1"], "--overlap-scans"),
         (["{bad}", "--robots", "2"], "no usable FLASER scan (FLASER lines skipped: 1 malformed"),

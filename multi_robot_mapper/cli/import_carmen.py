@@ -72,9 +72,7 @@ def run(args: argparse.Namespace) -> int:
     log = Path(args.log)
     if not log.is_file():
         raise CliError(f"no such log file: {log}")
-    if args.robots < 1:
-        raise CliError(f"--robots must be at least 1, got {args.robots}")
-    check_limits(args, "overlap_scans", "range_max")
+    check_limits(args, "robots", "overlap_scans", "range_max")
     out = check_output(Path(args.out), kind="new")
     try:
         scans = read_carmen(log, range_max=args.range_max)
