@@ -7,13 +7,15 @@ get random bytes, truncations and bit flips. Properties:
 
 - no exception reaches a callback's guard or an internal-error branch: every bad input is a
   clean rejection with a reason;
-- nothing published holds NaN or inf;
+- nothing published holds NaN or inf, and the occupancy grid holds only -1, 0..100 in
+  width x height cells;
 - memory stays bounded: refused inputs allocate almost nothing, and state never grows from them;
 - one robot's garbage leaves a good robot's map (and its placement) unchanged;
 - a file gives clean data (every number finite) or its reader's own error, never a traceback.
 
-``make test`` runs the default profile (a fixed seed, under a minute); ``make fuzz`` runs the
-``fuzz`` profile (many more examples, random seeds): see ``conftest.py``.
+Each test's settings come from :func:`fuzz` below: ``make test`` runs its examples on a fixed
+seed (the same examples every run, under a minute in all); ``make fuzz`` (``MRM_FUZZ=1``) runs
+``MRM_FUZZ_SCALE`` (default 25) times as many, on a new random seed each run.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import pytest
 from geometry_msgs.msg import Point, PoseStamped
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
+from nav_msgs.msg import OccupancyGrid
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -172,6 +175,16 @@ def finite_message(msg: object) -> bool:
         )
     if isinstance(msg, PoseStamped):
         return bool(np.isfinite(_pose_values(msg.pose)).all())
+    if isinstance(msg, OccupancyGrid):  # cells -1 (unknown), 0 (free) .. 100 (occupied)
+        cells = np.frombuffer(msg.data, dtype=np.int8)
+        info = msg.info
+        return (
+            len(cells) == info.width * info.height
+            and bool(((cells == -1) | ((cells >= 0) & (cells <= 100))).all())
+            and math.isfinite(info.resolution)
+            and info.resolution > 0.0
+            and bool(np.isfinite(_pose_values(info.origin)).all())
+        )
     raise AssertionError(f"no finiteness check for {type(msg).__name__}")
 
 
@@ -184,7 +197,7 @@ def record_publications(node: Node) -> list[object]:
     """Every message ``node`` publishes from now on (its publishers' ``publish`` wrapped)."""
     sent: list[object] = []
     for publisher in node.publishers:
-        if publisher.msg_type not in (Marker, MarkerArray, PoseStamped):
+        if publisher.msg_type not in (Marker, MarkerArray, PoseStamped, OccupancyGrid):
             continue  # parameter events and the like: not the node's output
         original = publisher.publish
 
@@ -307,6 +320,9 @@ def merger_node() -> Iterator[tuple[MapMerger, list[object], dict]]:
             for name in ("alpha", "bravo")
         }
         assert all(placement is not None for _, placement in good.values())
+        # The checks of every later publication cover the grid too.
+        assert any(isinstance(m, OccupancyGrid) for m in sent)
+        assert all(finite_message(m) for m in sent)
         yield node, sent, good
         node.destroy_node()
 
