@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.geometry import quaternion_from_yaw, yaw_from_quaternion
 
 coord = st.floats(-50, 50, allow_nan=False)
 angle = st.floats(-10, 10, allow_nan=False)
@@ -50,3 +53,17 @@ def test_rigid_fit_recovers_the_motion_between_two_frames() -> None:
     np.testing.assert_allclose(se2.rigid_fit(poses, moved), T_to_from, atol=1e-9)
     # One pose (or all at one point): exactly onto it, heading included.
     np.testing.assert_allclose(se2.rigid_fit(poses[:1], moved[:1]), T_to_from, atol=1e-9)
+
+
+@given(
+    yaw=st.floats(-np.pi + 1e-6, np.pi - 1e-6),
+    scale=st.floats(1e-300, 1e300),
+)
+def test_yaw_of_a_quaternion_does_not_depend_on_its_scale(yaw: float, scale: float) -> None:
+    # A sender's quaternion need not be unit (1e300 components reach the merger's boundary,
+    # which refuses them only after reading the yaw): the yaw is the same, with no overflow.
+    x, y, z, w = quaternion_from_yaw(yaw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        found = float(yaw_from_quaternion(x * scale, y * scale, z * scale, w * scale))
+    assert abs(se2.wrap_angle(found - yaw)) < 1e-9

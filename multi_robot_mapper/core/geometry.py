@@ -100,9 +100,16 @@ def stamp_seconds(sec: int, nanosec: int) -> float:
 
 
 def yaw_from_quaternion(x: ArrayLike, y: ArrayLike, z: ArrayLike, w: ArrayLike) -> FloatArray:
-    """Rotation about z of quaternions (element-wise; other axes ignored)."""
+    """Rotation about z of quaternions (element-wise; other axes ignored). Quaternions need
+    not be unit: each is scaled by its largest component first (the yaw does not change, and
+    a sender's 1e300 components do not overflow), and the cosine term is w² + x² - y² - z²,
+    which equals 1 - 2(y² + z²) only for unit quaternions."""
     x, y, z, w = (np.asarray(v, dtype=np.float64) for v in (x, y, z, w))
-    return np.asarray(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+    with np.errstate(invalid="ignore"):  # inf / inf: a NaN yaw, refused by the callers
+        scale = np.maximum.reduce([np.abs(x), np.abs(y), np.abs(z), np.abs(w)])
+        scale = np.where(scale > 0.0, scale, 1.0)
+        x, y, z, w = x / scale, y / scale, z / scale, w / scale
+    return np.asarray(np.arctan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z))
 
 
 def quaternion_from_yaw(yaw: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
