@@ -26,6 +26,7 @@ from multi_robot_mapper.core.merging.consistency import (
     PairVerdict,
     accept_pairs,
     consistent_set,
+    placement_weights,
 )
 from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
@@ -276,16 +277,50 @@ def test_an_ambiguous_link_is_accepted_when_consistent_links_support_one_placeme
 
 def test_a_building_that_fits_two_ways_is_refused() -> None:
     # Every place of b fits a at the truth and 5 m further along, each set consistent in
-    # itself: the two sets weigh about the same, and the pair is refused as ambiguous.
+    # itself. Places that each fit both ways alike (INTEGRATE, judging each placement against
+    # the other, is unsure of both: 0.5) weigh the same either way: refused as ambiguous.
     frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.5, 0.2)}
     units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
-    right = [link(units, frames, "b", k, "a", k + 3, 0.95) for k in (2, 7, 12)]
+    pair = (("a", 0), ("b", 0))
+    right = [link(units, frames, "b", k, "a", k + 3, 0.5) for k in (2, 7, 12)]
     shifted = [
-        link(units, frames, "b", k, "a", k + 3, 0.9, (5.0, 0.0, 0.0), rank=1) for k in (2, 7, 12)
+        link(units, frames, "b", k, "a", k + 3, 0.5, (5.0, 0.0, 0.0), rank=1) for k in (2, 7, 12)
     ]
-    verdict = consistent_set((("a", 0), ("b", 0)), right + shifted, units, CONFIG)
+    verdict = consistent_set(pair, right + shifted, units, CONFIG)
     assert not verdict.accepted and "ambiguous" in verdict.reason
-    assert consistent_set((("a", 0), ("b", 0)), right, units, CONFIG).accepted
+    assert consistent_set(pair, right, units, CONFIG).accepted
+    # Different places, each sure of its own placement, that put the maps 5 m apart: the two
+    # sets weigh about the same (2.85 and 2.7), refused as ambiguous too.
+    sure = [dataclasses.replace(c, confidence=0.95) for c in right]
+    elsewhere = [link(units, frames, "b", k, "a", k + 3, 0.9, (5.0, 0.0, 0.0)) for k in (4, 9, 14)]
+    verdict = consistent_set(pair, sure + elsewhere, units, CONFIG)
+    assert not verdict.accepted and "ambiguous" in verdict.reason
+
+
+def test_a_places_own_rival_placements_do_not_veto_it() -> None:
+    # What the office's node test met: three places of b link confidently at the truth (1.0,
+    # 0.99, 0.97); each place's own rival lies 6 m along the corridor (0.2, 0.68, 0.74), and
+    # the rivals agree with each other. Each confidence was judged against the other
+    # placement of the same place, so the rivals are the same ambiguity counted again: by
+    # raw confidences 2.96 against 1.62 (ambiguous within the factor 2); weighed as exclusive
+    # placements of one place each, 2.9 against 0.1: accepted, with the right links.
+    frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.5, 0.2)}
+    units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
+    right = [
+        link(units, frames, "b", k, "a", k + 3, c) for k, c in ((2, 1.0), (7, 0.99), (12, 0.97))
+    ]
+    rivals = [
+        link(units, frames, "b", k, "a", k + 3, c, (6.0, 0.0, 0.0), rank=1)
+        for k, c in ((2, 0.2), (7, 0.68), (12, 0.74))
+    ]
+    verdict = consistent_set((("a", 0), ("b", 0)), right + rivals, units, CONFIG)
+    assert verdict.accepted, verdict.reason
+    assert sorted((c.centre, c.rank) for c in verdict.links) == [(2, 0), (7, 0), (12, 0)]
+    assert verdict.weight > 2.8 and verdict.rival_weight < 0.2
+    # A lone candidate weighs its confidence; two of one place share one probability.
+    weights = placement_weights(right[:1] + rivals[1:2] + right[1:2])
+    np.testing.assert_allclose(weights[0], 1.0, atol=1e-5)
+    np.testing.assert_allclose(weights[1:].sum(), (99 + 2.125) / (1 + 99 + 2.125))
 
 
 def test_two_weak_links_agreeing_on_another_offset_do_not_make_a_pair_ambiguous() -> None:

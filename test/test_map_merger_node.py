@@ -180,7 +180,9 @@ def outcome(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Outcome]:
                 all_office_merged()
 
             def settled() -> bool:
-                """Every final partial map published, received and merged."""
+                """Every final partial map published, received and merged, every place
+                matched (no further merge will change the result the last global map
+                shows)."""
                 all_office_merged()
                 local_done = all(m.map_published for m in mappers.values())
                 with merger._lock:
@@ -197,6 +199,7 @@ def outcome(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Outcome]:
                     and received
                     and set(versions) == set(runs)
                     and merger._merged_versions == versions
+                    and merger.up_to_date()
                     and bool(merged_at)
                 )
 
