@@ -46,6 +46,16 @@ def test_matrices_from_poses_are_matrix_from_pose_each() -> None:
     assert se2.matrices_from_poses(np.zeros((0, 3))).shape == (0, 3, 3)
 
 
+@given(st.lists(st.tuples(coord, coord, angle, coord, coord, angle), min_size=1, max_size=8))
+def test_between_each_is_between_row_by_row(pairs: list[tuple[float, ...]]) -> None:
+    rows = np.array(pairs)
+    got = se2.between_each(rows[:, :3], rows[:, 3:])
+    for row, (x, y, th) in zip(rows, got, strict=True):
+        want = se2.between(row[:3], row[3:])
+        np.testing.assert_allclose([x, y], want[:2], atol=1e-9)
+        assert abs(se2.wrap_angle(th - want[2])) < 1e-9
+
+
 def test_rigid_fit_recovers_the_motion_between_two_frames() -> None:
     T_to_from = se2.matrix_from_pose(3.0, -1.0, 2.5)
     poses = np.array([[0.0, 0.0, 0.1], [2.0, 1.0, 0.5], [4.0, -3.0, -1.0], [1.0, 5.0, 3.0]])

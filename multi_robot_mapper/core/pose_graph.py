@@ -69,10 +69,12 @@ class PoseGraph:
         self._factor_index: dict[int, int] = {}  # edge id -> ISAM2 factor index
         self._next_edge = 0
         self._isam = gtsam.ISAM2(self._params())
-        self._new_factors = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
-        self._pending_anchors: list[int] = []  # keys whose prior leads _new_factors
-        self._pending_edges: list[int] = []  # edge ids in _new_factors after them, in order
+        # What the next ISAM2 update adds: anchors' priors first, then edges, in this order.
+        # Their factors are built only then (a graph built and solved in one batch, as the
+        # merger's, never builds them for ISAM2 at all).
+        self._pending_anchors: list[int] = []
+        self._pending_edges: list[int] = []
         self._removed: list[int] = []  # ISAM2 factor indices to remove at the next update
 
     @staticmethod
@@ -99,7 +101,6 @@ class PoseGraph:
         if anchored:
             self._anchors[key] = pose
             self._pending_anchors.append(key)
-            self._batch()
 
     def add_edge(self, edge: Edge) -> int:
         """Add a measured relative pose; returns its id (for :meth:`remove_edge`)."""
@@ -110,7 +111,6 @@ class PoseGraph:
         self._next_edge += 1
         self.edges[edge_id] = edge
         self._pending_edges.append(edge_id)
-        self._new_factors.push_back(self._factor(edge))
         return edge_id
 
     def remove_edge(self, edge_id: int) -> None:
@@ -121,9 +121,8 @@ class PoseGraph:
             self._removed.append(index)
         else:  # never reached the solver
             self._pending_edges.remove(edge_id)
-            self._batch()
 
-    def _batch(self) -> None:
+    def _batch(self) -> gtsam.NonlinearFactorGraph:
         """The factors not yet given to the solver: anchors first, then edges (the order
         :meth:`optimize` reads their solver indices in)."""
         factors = gtsam.NonlinearFactorGraph()
@@ -131,7 +130,7 @@ class PoseGraph:
             factors.push_back(self._anchor_factor(key, self._anchors[key]))
         for edge_id in self._pending_edges:
             factors.push_back(self._factor(self.edges[edge_id]))
-        self._new_factors = factors
+        return factors
 
     def _anchor_factor(self, key: int, pose: Pose) -> gtsam.PriorFactorPose2:
         return gtsam.PriorFactorPose2(
@@ -153,7 +152,7 @@ class PoseGraph:
     def optimize(self, iterations: int = 1) -> None:
         """Bring the estimate up to date with every node and edge added since the last call
         (ISAM2: one incremental step, plus ``iterations - 1`` relinearising steps)."""
-        result = self._isam.update(self._new_factors, self._new_values, self._removed)
+        result = self._isam.update(self._batch(), self._new_values, self._removed)
         indices = result.getNewFactorsIndices()
         # New factors get their indices in insertion order: the anchors first, then the edges.
         offset = len(self._pending_anchors)
@@ -161,7 +160,6 @@ class PoseGraph:
             self._factor_index[edge_id] = int(indices[offset + position])
         for _ in range(iterations - 1):
             self._isam.update()
-        self._new_factors = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
         self._pending_edges, self._pending_anchors, self._removed = [], [], []
         values = self._isam.calculateEstimate()
@@ -222,7 +220,6 @@ class PoseGraph:
             self._new_values.insert(key, gtsam.Pose2(*pose))
         self._pending_anchors = list(self._anchors)
         self._pending_edges = list(self.edges)
-        self._batch()
 
     # --- pieces -----------------------------------------------------------------------------
 

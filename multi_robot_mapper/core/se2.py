@@ -95,6 +95,16 @@ def between(T_a_b: ArrayLike, T_a_c: ArrayLike) -> tuple[float, float, float]:
     return pose_from_matrix(invert(matrix_from_pose(*ab)) @ matrix_from_pose(*ac))
 
 
+def between_each(T_a_b: ArrayLike, T_a_c: ArrayLike) -> FloatArray:
+    """``(N, 3)`` rows ``T_b_c`` of ``(N, 3)`` pose pairs in the same frame a (:func:`between`
+    row by row, at once)."""
+    ab, ac = np.asarray(T_a_b, dtype=np.float64), np.asarray(T_a_c, dtype=np.float64)
+    c, s = np.cos(ab[:, 2]), np.sin(ab[:, 2])
+    dx, dy = ac[:, 0] - ab[:, 0], ac[:, 1] - ab[:, 1]
+    theta = wrap_angle(ac[:, 2] - ab[:, 2])
+    return np.column_stack((c * dx + s * dy, -s * dx + c * dy, theta))
+
+
 def rigid_fit(poses_from: FloatArray, poses_to: FloatArray) -> FloatArray:
     """``T_to_from`` (3x3): the rigid motion that best carries ``(K, 3)`` poses given in frame
     ``from`` onto the same poses given in frame ``to`` (least squares on their positions,

@@ -25,7 +25,8 @@ segments in its own frame). Each piece of each robot is a map of its own (a
 5. **output**: every merged keyframe's pose in ``map`` (the reference robot's map frame),
    each map's ``T_map_piece`` as the rigid fit of its keyframes, and the global map: every
    merged keyframe's segments at its optimised pose, fused (Amigoni Alg. 5), each fused
-   segment owned by one keyframe.
+   segment owned by one keyframe (:mod:`~multi_robot_mapper.core.merging.global_map`, which
+   fuses again only from the first map that changed or moved).
 """
 
 from __future__ import annotations
@@ -42,7 +43,6 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping import Keyframe
-from multi_robot_mapper.core.merging.compose import fuse_maps
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.consistency import (
     Accepted,
@@ -52,6 +52,7 @@ from multi_robot_mapper.core.merging.consistency import (
     oriented,
 )
 from multi_robot_mapper.core.merging.correlation import Drawing
+from multi_robot_mapper.core.merging.global_map import fuse_keyframes
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
 from multi_robot_mapper.core.merging.place_links import (
@@ -91,6 +92,7 @@ class JointState:
 # many updates (one robot's map changes at a time). Keyed by map, content and settings.
 _TARGETS: OrderedDict[tuple[UnitKey, str, MergeConfig], Target] = OrderedDict()
 _PLACES: OrderedDict[tuple[UnitKey, str, MergeConfig], list[Place]] = OrderedDict()
+_INTRA: OrderedDict[tuple[UnitKey, str, MergeConfig], Any] = OrderedDict()
 _KEPT = 32
 
 
@@ -338,8 +340,8 @@ def _solve(
             anchored = key == ref_unit and row == 0
             x, y, theta = (float(v) for v in placed)
             graph.add_node(offsets[key] + row, (x, y, theta), anchored=anchored)
-        for first, second in _intra_pairs(unit, config.graph_radius):
-            graph.add_edge(_intra_edge(unit, first, second, offsets[key], config))
+        for edge in _intra_edges(unit, offsets[key], config):
+            graph.add_edge(edge)
     accepted_links: list[LinkCandidate] = []
     placed_units = set(order)
     for verdict in accepted.pairs:
@@ -409,15 +411,34 @@ def _intra_pairs(unit: MapUnit, radius: float) -> list[tuple[int, int]]:
     return pairs
 
 
-def _intra_edge(unit: MapUnit, first: int, second: int, offset: int, config: MergeConfig) -> Edge:
-    """An edge between two keyframes of one map, from their published poses."""
-    a, b = unit.poses[first], unit.poses[second]
-    T = se2.between(a, b)
-    distance = float(np.hypot(*(b[:2] - a[:2])))
+def _intra_edges(unit: MapUnit, offset: int, config: MergeConfig) -> list[Edge]:
+    """The edges between keyframes of one map (:func:`_intra_pairs`), from their published
+    poses, with a standard deviation growing with the distance between them; the same map
+    seen again (most maps, most updates) reuses them."""
+    content = hashlib.sha1(unit.poses.tobytes()).hexdigest()
+    key = (unit.key, content, config)
+    pairs, relative, information = cast(
+        tuple[IntArray, FloatArray, FloatArray],
+        _cached(_INTRA, key, lambda: _intra_arrays(unit, config)),
+    )
+    return [
+        Edge(offset + int(a), offset + int(b), (x, y, t), info, robust=False)
+        for (a, b), (x, y, t), info in zip(pairs, relative.tolist(), information, strict=True)
+    ]
+
+
+def _intra_arrays(unit: MapUnit, config: MergeConfig) -> tuple[IntArray, FloatArray, FloatArray]:
+    """Rows joined, their relative poses and information matrices (vectorised)."""
+    pairs = np.array(_intra_pairs(unit, config.graph_radius), dtype=np.int64).reshape(-1, 2)
+    a, b = unit.poses[pairs[:, 0]], unit.poses[pairs[:, 1]]
+    relative = se2.between_each(a, b)
+    distance = np.hypot(*(b[:, :2] - a[:, :2]).T)
     sigma = config.graph_sigma + config.graph_drift * distance
     angle = config.graph_angle_sigma + config.graph_angle_drift * distance
-    information = np.diag([sigma**-2, sigma**-2, angle**-2])
-    return Edge(offset + first, offset + second, T, information, robust=False)
+    information = np.zeros((len(pairs), 3, 3))
+    information[:, 0, 0] = information[:, 1, 1] = sigma**-2
+    information[:, 2, 2] = angle**-2
+    return pairs, relative, information
 
 
 # --- the result ---------------------------------------------------------------------------
@@ -447,7 +468,9 @@ def _result(
         poses = np.vstack([solved.poses[key] for key in keys])
         order = np.argsort(index, kind="stable")
         keyframe_index[robot], keyframe_poses[robot] = index[order], poses[order]
-    segments, owner_robot, owner_keyframe = _global_map(robots, units, solved, config)
+    segments, owner_robot, owner_keyframe = fuse_keyframes(
+        robots, units, solved.order, solved.poses, config
+    )
     links = _robot_links(accepted, solved, units)
     pairs = _robot_pairs(verdicts, units)
     result = MergeResult(
@@ -477,32 +500,6 @@ def _result(
     )
     result.verdicts = dict(verdicts)
     return result
-
-
-def _global_map(
-    robots: list[str],
-    units: Mapping[UnitKey, MapUnit],
-    solved: _Solution,
-    config: MergeConfig,
-) -> tuple[FloatArray, IntArray, IntArray]:
-    """Every merged keyframe's segments at its optimised pose, fused map by map in placing
-    order; each fused segment's robot (index into ``robots``) and owning keyframe."""
-    segments = np.zeros((0, 4))
-    owner = np.zeros(0, dtype=np.int64)
-    base: list[tuple[int, int]] = []  # global owner id -> (robot index, keyframe index)
-    for key in solved.order:
-        unit = units[key]
-        if len(unit.segments) == 0:
-            continue
-        stacked = np.vstack(unit.local)
-        moved = se2.transform_segments_each(solved.poses[key][unit.owner], stacked)
-        ids = len(base) + unit.owner
-        base += [(robots.index(key[0]), int(k)) for k in unit.index]
-        segments, owner = fuse_maps(segments, owner, moved, ids.astype(np.int64), config)
-    table = np.array(base, dtype=np.int64).reshape(-1, 2)
-    if len(owner) == 0:
-        return segments.reshape(-1, 4), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    return segments, table[owner, 0], table[owner, 1]
 
 
 def _robot_links(
