@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from multi_robot_mapper.core.merging import MergeResult
+from multi_robot_mapper.core.merging.consistency import PairVerdict
 from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
 from multi_robot_mapper.io.messages import stamp_from_seconds
 from multi_robot_mapper.ros.diagnostics import (
@@ -19,6 +22,7 @@ from multi_robot_mapper.ros.diagnostics import (
     link_scores,
     mapper_status,
     merger_status,
+    unmerged_reasons,
 )
 
 
@@ -139,3 +143,39 @@ def test_each_robot_scores_the_tree_edge_it_was_reached_by() -> None:
     scores = link_scores(result)
     assert scores == {"a": (50.0, 50.0), "b": (30.0, 30.0), "c": (None, 50.0), "d": (None, 7.0)}
     assert link_scores(None) == {}
+
+
+def test_an_unmerged_robot_says_why_its_best_pair_placed_it_nowhere() -> None:
+    # The joint merger's verdicts: d's best pair (with b, 40 m of matched wall) was refused as
+    # ambiguous, its pair with a (10 m) for too few places; e's pair was accepted within
+    # itself but did not join it to the reference's group; merged robots get no reason.
+    def verdict(a: str, b: str, value: float, reason: str) -> PairVerdict:
+        candidate = SimpleNamespace(value=value)
+        links = [candidate] if value else []
+        return PairVerdict(((a, 0), (b, 0)), links, 1.0, 0.0, 1, not reason, reason)  # type: ignore[arg-type]
+
+    verdicts = [
+        verdict("b", "d", 40.0, "ambiguous: a contradicting set of links weighs about as much"),
+        verdict("a", "d", 10.0, "too few consistent places"),
+        verdict("a", "b", 30.0, ""),
+        verdict("c", "e", 20.0, ""),
+    ]
+    result = MergeResult(
+        robots=["a", "b", "c", "d", "e"],
+        placements={"a": (0, 0, 0), "b": (0, 0, 0), "c": None, "d": None, "e": None},
+        reference="a",
+        links=[],
+        pairs={},
+        segments=np.zeros((0, 4)),
+        segment_robot=np.zeros(0, dtype=np.int64),
+        timings={},
+        stats={},
+    )
+    result.verdicts = {v.pair: v for v in verdicts}
+    reasons = unmerged_reasons(result)
+    assert reasons["d"].startswith("ambiguous")
+    assert "not joined to the reference" in reasons["e"] and "c" in reasons
+    assert "a" not in reasons and "b" not in reasons
+    assert unmerged_reasons(None) == {}
+    status = merger_status(merger(placement=None, link_value=None, why_unmerged=reasons["d"]))
+    assert status.message.endswith("weighs about as much"), status.message

@@ -124,6 +124,7 @@ class MergerRobotHealth:
     silent_for: float | None  # s since its last partial map or pose (None: none yet)
     stale_timeout: float
     session_of: str | None = None  # an earlier session of this robot, kept (not updated)
+    why_unmerged: str = ""  # the joint merger's verdict on its best pair ("": none known)
 
 
 def merger_status(health: MergerRobotHealth) -> DiagnosticStatus:
@@ -150,6 +151,8 @@ def merger_status(health: MergerRobotHealth) -> DiagnosticStatus:
     else:
         level = WARN
         message = f"unmerged: no valid link yet (best pair value {health.best_value:.1f} m)"
+        if health.why_unmerged:
+            message += f": {health.why_unmerged}"
     placement = (
         "unmerged" if health.placement is None else " ".join(f"{v:.3f}" for v in health.placement)
     )
@@ -193,6 +196,27 @@ def merge_status(
         ("global map segments", "0" if result is None else str(len(result.segments))),
     ]
     return _status("map_merger", "map_merger", level, message, values)
+
+
+def unmerged_reasons(result: MergeResult | None) -> dict[str, str]:
+    """Per unmerged robot, why its best pair of maps (most matched wall) placed it nowhere,
+    as the joint merger's verdict says: the pair's own reason when it was refused ("too few
+    consistent places", "ambiguous: ..."), else that the accepted pair did not join it to
+    the reference's group. Empty without verdicts (the whole-map merger)."""
+    if result is None:
+        return {}
+    best: dict[str, tuple[float, str]] = {}
+    for pair, verdict in result.verdicts.items():
+        robots = {key[0] for key in pair}  # type: ignore[attr-defined]  # (robot, piece)
+        value = float(sum(c.value for c in getattr(verdict, "links", ())))
+        reason = str(getattr(verdict, "reason", "")) or (
+            "its pair was accepted but not joined to the reference's group (it breaks a "
+            "cycle, or the group is not the largest)"
+        )
+        for robot in robots if len(robots) == 2 else ():
+            if result.placements.get(robot) is None and value > best.get(robot, (-1.0, ""))[0]:
+                best[robot] = (value, reason)
+    return {robot: reason for robot, (_, reason) in best.items()}
 
 
 def link_scores(result: MergeResult | None) -> dict[str, tuple[float | None, float]]:

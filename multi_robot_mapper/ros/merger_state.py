@@ -292,6 +292,7 @@ def robot_statuses(
     """Each robot's /diagnostics status (OK merged, WARN unmerged, STALE silent) from what the
     merger knows of it (``now_ns``: the node clock)."""
     scores = diagnostics.link_scores(result)
+    reasons = diagnostics.unmerged_reasons(result)
     statuses = []
     for state in states:
         placement = None if result is None else result.placements.get(state.name)
@@ -309,6 +310,7 @@ def robot_statuses(
             silent_for=None if state.heard_ns is None else (now_ns - state.heard_ns) * 1e-9,
             stale_timeout=stale_timeout,
             session_of=state.session_of,
+            why_unmerged=reasons.get(state.name, ""),
         )
         statuses.append(diagnostics.merger_status(health))
     return statuses
