@@ -22,7 +22,7 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -138,7 +138,15 @@ def outcome(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Outcome]:
             for name in runs
         }
         global_maps: list[MarkerArray] = []
-        driver.create_subscription(MarkerArray, "/global_map", global_maps.append, LATCHED_QOS)
+        # Every global map kept for the DELETE check below: a depth of 1 (the merger's latched
+        # QoS) lets a new message replace one the busy executor has not taken yet, and the
+        # check then sees markers vanish without the DELETE that message carried.
+        every_map = QoSProfile(
+            depth=100,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+        driver.create_subscription(MarkerArray, "/global_map", global_maps.append, every_map)
         frames: dict[str, list[PoseStamped]] = {name: [] for name in runs}
         for name in runs:
             driver.create_subscription(
