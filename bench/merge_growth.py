@@ -36,10 +36,9 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from merge_speed import DATA, reference_keyframes  # noqa: E402
+from merge_speed import DATA, add_merge_overrides, joint_cut, merge_config_of  # noqa: E402
 
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult  # noqa: E402
 from multi_robot_mapper.core.merging.joint import merge_joint  # noqa: E402
 from multi_robot_mapper.io.carmen import read_carmen  # noqa: E402
@@ -62,13 +61,7 @@ def grow(
     if not path.is_file():
         print(f"| {name} | {robots} | skipped: {path} not found |", flush=True)
         return
-    scans = list(read_carmen(path))
-    size = len(scans) // robots
-    frames, keyframes = {}, {}
-    for k in range(robots):
-        run = scans[max(0, k * size - overlap) : (k + 1) * size]
-        frames[f"robot{k}"] = se2.matrix_from_pose(*run[0].reference_pose)
-        keyframes[f"robot{k}"] = reference_keyframes(run, 0.5, 0.35)
+    frames, keyframes = joint_cut(list(read_carmen(path)), robots, overlap)
     result: MergeResult | None = None
     placed_before: dict[str, np.ndarray] = {}
     previous_reference: str | None = None
@@ -110,16 +103,9 @@ def main() -> None:
     parser.add_argument(
         "--budget", type=float, default=0.0, help="seconds of place matching per update (0: all)"
     )
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="override a MergeConfig field, e.g. --set link_set_uniqueness=3",
-    )
+    add_merge_overrides(parser)
     args = parser.parse_args()
-    config = config_from_flat(MergeConfig, dict(parse_override(o) for o in args.overrides))
+    config = merge_config_of(args)
     print(
         "| log | robots | updates | placed at the end | flips | wrong placements | moves "
         "| update median (s) | update max (s) |"

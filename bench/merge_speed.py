@@ -149,6 +149,37 @@ def reference_keyframes(scans: list[CarmenScan], spacing: float, turn: float) ->
     return keyframes
 
 
+def joint_cut(
+    scans: list[CarmenScan], robots: int, overlap: int
+) -> tuple[dict[str, np.ndarray], dict[str, list[Keyframe]]]:
+    """A log cut into ``robots`` contiguous runs (each starting ``overlap`` scans before its
+    predecessor ends): each run's T_world_robotmap (its first scan's reference pose) and its
+    keyframes built at the reference poses (:func:`reference_keyframes`)."""
+    size = len(scans) // robots
+    frames, keyframes = {}, {}
+    for k in range(robots):
+        run = scans[max(0, k * size - overlap) : (k + 1) * size]
+        frames[f"robot{k}"] = se2.matrix_from_pose(*run[0].reference_pose)
+        keyframes[f"robot{k}"] = reference_keyframes(run, 0.5, 0.35)
+    return frames, keyframes
+
+
+def add_merge_overrides(parser: argparse.ArgumentParser) -> None:
+    """``--set NAME=VALUE`` (repeatable): a MergeConfig field; read by :func:`merge_config_of`."""
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override a MergeConfig field, e.g. --set link_set_uniqueness=3",
+    )
+
+
+def merge_config_of(args: argparse.Namespace) -> MergeConfig:
+    return config_from_flat(MergeConfig, dict(parse_override(o) for o in args.overrides))
+
+
 def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> None:
     """``split_runs`` for the joint merger: each run's keyframes built at the reference poses,
     merged with ``merge_joint`` (every place matched); one line: robots placed, worst
@@ -163,14 +194,9 @@ def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> No
     if not path.is_file():
         print(f"{name}: skipped, {path} not found")
         return
-    scans = list(read_carmen(path))
-    size = len(scans) // robots
-    frames, keyframes, world = {}, {}, {}
-    for k in range(robots):
-        run = scans[max(0, k * size - overlap) : (k + 1) * size]
-        robot = f"robot{k}"
-        frames[robot] = se2.matrix_from_pose(*run[0].reference_pose)
-        keyframes[robot] = reference_keyframes(run, 0.5, 0.35)
+    frames, keyframes = joint_cut(list(read_carmen(path)), robots, overlap)
+    world = {}
+    for robot in keyframes:
         world[robot] = {
             kf.index: frames[robot] @ se2.matrix_from_pose(*kf.T_robotmap_keyframe)
             for kf in keyframes[robot]
@@ -276,16 +302,9 @@ def main() -> None:
         action="store_true",
         help="merge on segments alone, without the scans' poses as viewpoints (free space)",
     )
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="override a MergeConfig field, e.g. --set link_min_fraction=0.2",
-    )
+    add_merge_overrides(parser)
     args = parser.parse_args()
-    base = config_from_flat(MergeConfig, dict(parse_override(o) for o in args.overrides))
+    base = merge_config_of(args)
     if args.split:
         for name in args.logs:
             for robots in args.split:

@@ -207,7 +207,7 @@ def unmerged_reasons(result: MergeResult | None) -> dict[str, str]:
         return {}
     best: dict[str, tuple[float, str]] = {}
     for pair, verdict in result.verdicts.items():
-        robots = {key[0] for key in pair}  # type: ignore[attr-defined]  # (robot, piece)
+        robots = {key[0] for key in pair}  # keys are (robot, piece) units
         value = float(sum(c.value for c in getattr(verdict, "links", ())))
         reason = str(getattr(verdict, "reason", "")) or (
             "its pair was accepted but not joined to the reference's group (it breaks a "
