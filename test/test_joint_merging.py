@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Sequence
 
 import numpy as np
 from test_merging import LASER, random_frames, stranger_walls
@@ -27,15 +28,20 @@ from multi_robot_mapper.core.merging.consistency import (
     accept_pairs,
     consistent_set,
     placement_weights,
+    seen_through_near,
 )
+from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.places import MapUnit, units_of
+from multi_robot_mapper.core.pipeline import TimedLaserScan, run_offline
 from multi_robot_mapper.core.simulation import (
     ROUTES,
     WORLDS,
+    LaserModel,
     drive_path,
     plan_paths,
+    simulate_robots,
     simulate_scan,
 )
 
@@ -188,6 +194,33 @@ def test_a_corridor_is_merged_through_a_consistent_set_of_links() -> None:
     assert again.stats["matches_computed"] == 0
     for name in world:
         np.testing.assert_allclose(again.placements[name], result.placements[name], atol=1e-6)  # type: ignore[arg-type]
+
+
+def test_robots_whose_overlap_ends_one_map_and_starts_the_next_are_merged() -> None:
+    # `make demo`'s scenario (three robots in the office, neighbours sharing 45 % of their
+    # stretches) mapped by the local mapper with 60 % of the scans lost, as in transit on a
+    # busy machine. robot1's places at the end of its stretch reach past robot2's map and fit
+    # a corridor robot2 mapped whole better than the right placement (ranked 5th-15th), while
+    # robot2's first places lie inside robot1's map and find it first. Searching only the
+    # smaller map's places (robot1's) left robot1 unmerged; each map's places are searched.
+    runs = simulate_robots("office", 3, LaserModel(), seed=0, duration=20.0, overlap=0.45)
+    rng = np.random.default_rng(1)
+    scans, frames = {}, {}
+    for k, run in enumerate(runs):
+        kept = np.flatnonzero(rng.random(len(run.scans)) > 0.6)
+        scans[f"robot{k + 1}"] = [TimedLaserScan(run.stamps[i], run.scans[i]) for i in kept]
+        frames[f"robot{k + 1}"] = se2.matrix_from_pose(*run.T_world_laser[kept[0]])
+    local = run_offline(scans, "local", ExtractionConfig())
+    result = merge_joint(local.keyframes, CONFIG, budget=0.0)
+    assert result.unmerged == []
+    assert result.reference is not None
+    T_map_world = se2.invert(frames[result.reference])
+    for name, T_world_robot in frames.items():
+        want = se2.pose_from_matrix(T_map_world @ T_world_robot)
+        got = result.placements[name]
+        assert got is not None
+        assert np.hypot(got[0] - want[0], got[1] - want[1]) < TOLERANCE_M, (name, got, want)
+        assert abs(float(se2.wrap_angle(got[2] - want[2]))) < TOLERANCE_RAD, name
 
 
 def test_a_time_budget_leaves_places_for_the_next_update() -> None:
@@ -344,6 +377,29 @@ def test_two_weak_links_agreeing_on_another_offset_do_not_make_a_pair_ambiguous(
     third = link(units, frames, "b", 16, "a", 18, 0.8, (0.8, 0.0, 0.0), rank=1)
     verdict = consistent_set((("a", 0), ("b", 0)), right + weak + [third], units, CONFIG)
     assert not verdict.accepted and "ambiguous" in verdict.reason
+
+
+def test_a_placement_that_puts_walls_in_the_other_robots_free_space_is_refused() -> None:
+    # Three confident, mutually consistent links that turn b's corridor a quarter round across
+    # a's (a look-alike that fits a few places): b's walls stand where a's laser saw through
+    # its corridor, and a's where b's did. The right placement leaves none there.
+    frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.0, 0.0)}
+    units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
+    views = {key: MapViews.of(u.segments, u.poses, CONFIG) for key, u in units.items()}
+
+    def seen_through(links: Sequence[LinkCandidate]) -> float:
+        return seen_through_near(links, units, views.get, CONFIG)
+
+    pair = (("a", 0), ("b", 0))
+    right = [link(units, frames, "b", k, "a", k + 3, 0.95) for k in (2, 7, 12)]
+    verdict = consistent_set(pair, right, units, CONFIG, seen_through)
+    assert verdict.accepted and verdict.seen_through == 0.0
+    across = {"a": frames["a"], "b": se2.matrix_from_pose(10.0, -10.0, np.pi / 2)}
+    wrong = [link(units, across, "b", k, "a", 10, 0.95) for k in (8, 10, 12)]
+    assert consistent_set(pair, wrong, units, CONFIG).accepted  # links alone cannot tell
+    verdict = consistent_set(pair, wrong, units, CONFIG, seen_through)
+    assert not verdict.accepted and "free space" in verdict.reason
+    assert verdict.seen_through > CONFIG.link_max_seen_through
 
 
 def test_a_link_that_breaks_a_cycle_is_refused() -> None:

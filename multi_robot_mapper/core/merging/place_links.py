@@ -89,6 +89,7 @@ class Target:
     drawing: Drawing
     correlation: CorrelationTarget
     view_poses: FloatArray  # (V, 3) keyframe poses thinned to view_spacing
+    views: MapViews | None  # the free space the robot saw (None: no keyframe poses)
 
     @staticmethod
     def of(unit: MapUnit, config: MergeConfig) -> Target:
@@ -100,7 +101,7 @@ class Target:
         reach = 2.0 * config.place_radius
         prepared = CorrelationTarget.of(drawing, reach, correlation.cell, correlation.blur)
         poses = unit.poses[thin(unit.poses, config.view_spacing)]
-        return Target(unit, MapSignature.of(unit.segments), drawing, prepared, poses)
+        return Target(unit, MapSignature.of(unit.segments), drawing, prepared, poses, views)
 
 
 def place_drawing(place: Place, config: MergeConfig) -> Drawing:
@@ -159,7 +160,7 @@ def match_place(
     hypotheses = peaks[chosen]
     # The target's walls and viewpoints around every placement tried, in the target's frame.
     crop = longest(
-        _near(unit.segments, hypotheses[:, 1:], config.place_radius + _CROP_MARGIN),
+        segments_near(unit.segments, hypotheses[:, 1:], config.place_radius + _CROP_MARGIN),
         _VERIFY_SEGMENTS,
     )
     own = longest(place.segments, _VERIFY_SEGMENTS)
@@ -291,7 +292,7 @@ def _close_to_any(points: FloatArray, centres: FloatArray, radius: float) -> NDA
     return np.asarray((gap <= radius).any(axis=1))
 
 
-def _near(segments: FloatArray, centres: FloatArray, radius: float) -> FloatArray:
+def segments_near(segments: FloatArray, centres: FloatArray, radius: float) -> FloatArray:
     """Segments passing within ``radius`` of any centre."""
     if len(segments) == 0:
         return segments.reshape(0, 4)
