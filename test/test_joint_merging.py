@@ -387,19 +387,25 @@ def test_a_placement_that_puts_walls_in_the_other_robots_free_space_is_refused()
     units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
     views = {key: MapViews.of(u.segments, u.poses, CONFIG) for key, u in units.items()}
 
-    def seen_through(links: Sequence[LinkCandidate]) -> float:
+    def seen_through(links: Sequence[LinkCandidate]) -> tuple[float, float]:
         return seen_through_near(links, units, views.get, CONFIG)
 
     pair = (("a", 0), ("b", 0))
     right = [link(units, frames, "b", k, "a", k + 3, 0.95) for k in (2, 7, 12)]
     verdict = consistent_set(pair, right, units, CONFIG, seen_through)
-    assert verdict.accepted and verdict.seen_through == 0.0
+    assert verdict.accepted and verdict.seen_through == (0.0, 0.0)
     across = {"a": frames["a"], "b": se2.matrix_from_pose(10.0, -10.0, np.pi / 2)}
     wrong = [link(units, across, "b", k, "a", 10, 0.95) for k in (8, 10, 12)]
     assert consistent_set(pair, wrong, units, CONFIG).accepted  # links alone cannot tell
     verdict = consistent_set(pair, wrong, units, CONFIG, seen_through)
     assert not verdict.accepted and "free space" in verdict.reason
-    assert verdict.seen_through > CONFIG.link_max_seen_through
+    assert verdict.seen_through[0] > CONFIG.link_max_seen_through
+    # As a rival, that placement must pass the same test: it does not make the right set
+    # ambiguous (without the views, the two weigh the same and both are refused).
+    both = right + wrong
+    assert "ambiguous" in consistent_set(pair, both, units, CONFIG).reason
+    verdict = consistent_set(pair, both, units, CONFIG, seen_through)
+    assert verdict.accepted and sorted(c.centre for c in verdict.links) == [2, 7, 12]
 
 
 def test_a_link_that_breaks_a_cycle_is_refused() -> None:

@@ -16,15 +16,16 @@ growing a clique from each link in turn. It is accepted when
   places, each of low confidence) is accepted when enough of the pair's other places agree
   with one of its placements (the aces corridors), and
 - it is *unique*: it weighs ``link_set_uniqueness`` times as much as the best set of links that
-  contradicts it, when that set is itself supported by the rule above (a building that fits
-  two ways is refused, however well it fits; two weak links agreeing on another offset are
-  not a second way).
+  contradicts it, when that set itself passes the tests here (support, and free space below)
+  (a building that fits two ways is refused, however well it fits; two weak links agreeing
+  on another offset are not a second way).
 - its placement (the two maps as rigid bodies, at its best-fitting link) puts at most
   ``link_max_seen_through`` metres of either map's walls near its places (within twice
-  ``place_radius`` of the linked keyframes) in free space the other robot saw
+  ``place_radius`` of the linked keyframes) in free space the other robot saw, and of all
+  their walls at most that or ``link_max_seen_through_fraction`` of the set's matched wall
   (:func:`seen_through_near`): links check their own places; a look-alike that fits a few
   places along a corridor leaves the maps side by side, with walls across each other's
-  corridors around them.
+  corridors around them or further off.
 
 **Cycles over pairs** (:func:`accept_pairs`). Pairs are taken by weight, best first (Kruskal).
 A pair joining two groups of maps joins them; a pair whose maps are already joined closes a
@@ -45,7 +46,11 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.free_space import MapViews, seen_through_length
+from multi_robot_mapper.core.merging.free_space import (
+    MapViews,
+    seen_through_allowance,
+    seen_through_length,
+)
 from multi_robot_mapper.core.merging.place_links import LinkCandidate, segments_near
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
 
@@ -54,7 +59,7 @@ BoolArray = NDArray[np.bool_]
 Pair = tuple[UnitKey, UnitKey]  # sorted
 ViewsOf = Callable[[UnitKey], "MapViews | None"]  # a map's free space, as its robot saw it
 # metres of wall a consistent set's placement puts in free space (seen_through_near)
-SeenThrough = Callable[[Sequence[LinkCandidate]], float]
+SeenThrough = Callable[[Sequence[LinkCandidate]], tuple[float, float]]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,7 +103,8 @@ class PairVerdict:
     places: int  # distinct places the set links
     accepted: bool
     reason: str  # why refused ("" when accepted)
-    seen_through: float = 0.0  # m of wall near its places in the other's free space
+    # m of wall in the other's free space: near its places, of the whole maps
+    seen_through: tuple[float, float] = (0.0, 0.0)
 
 
 def _poses(unit: MapUnit, keyframes: Sequence[int]) -> FloatArray:
@@ -199,16 +205,39 @@ def consistent_set(
     rival_members = [usable[i] for i in rival]
     rival_weight = float(weights[rival].sum()) if rival else 0.0
     reason = _support_shortfall(members, config)
-    rival_believable = not _support_shortfall(rival_members, config)
-    if not reason and rival_believable and weight < config.link_set_uniqueness * rival_weight:
-        reason = "ambiguous: a contradicting set of links weighs about as much"
-    through = 0.0
+    through = (0.0, 0.0)
     if not reason and seen_through is not None:
         through = seen_through(members)
-        if through > config.link_max_seen_through:
-            reason = f"walls in the other robot's free space ({through:.1f} m near the places)"
+        reason = _free_space_shortfall(members, through, config)
+    if not reason and weight < config.link_set_uniqueness * rival_weight:
+        # The rival must pass the same tests as the set itself, free space included: in the
+        # bringup test's office a robot's first places (beyond the other's map) fit 6 m
+        # along the corridor, confidently, and that placement puts 1.6 m of wall where the
+        # other robot saw through its doors.
+        rival_believable = not _support_shortfall(rival_members, config) and (
+            seen_through is None
+            or not _free_space_shortfall(rival_members, seen_through(rival_members), config)
+        )
+        if rival_believable:
+            reason = "ambiguous: a contradicting set of links weighs about as much"
     places = _places(members)
     return PairVerdict(pair, members, weight, rival_weight, places, not reason, reason, through)
+
+
+def _free_space_shortfall(
+    links: Sequence[LinkCandidate], through: tuple[float, float], config: MergeConfig
+) -> str:
+    """Why a set's placement is refused by the other robot's free space ("" when it is not):
+    more than ``link_max_seen_through`` of the walls near its places, or of all the walls
+    more than that or ``link_max_seen_through_fraction`` of the set's matched wall
+    (:func:`seen_through_near`)."""
+    near, whole = through
+    if near > config.link_max_seen_through:
+        return f"walls in the other robot's free space ({near:.1f} m near the places)"
+    allowed = seen_through_allowance(sum(c.value for c in links), config)
+    if whole > allowed:
+        return f"walls in the other robot's free space ({whole:.1f} m, {allowed:.1f} m allowed)"
+    return ""
 
 
 def seen_through_near(
@@ -216,35 +245,41 @@ def seen_through_near(
     units: Mapping[UnitKey, MapUnit],
     views_of: ViewsOf,
     config: MergeConfig,
-) -> float:
+) -> tuple[float, float]:
     """Metres of wall that the set's placement (its best-fitting link, the two maps as rigid
-    bodies) puts in free space the other robot saw, either way, counting the walls within
-    twice ``place_radius`` of the linked keyframes: there the maps' own drift is far below
-    ``free_space_margin``, so a right placement leaves next to none (0.0 m for every right
-    pair of the reference-built cuts of aces and edmonton), while a look-alike that fits a
-    few places along a corridor puts the walls around them where the other robot saw through
-    (1.4-2.2 m there, 1.8 m for the test's look-alike building)."""
+    bodies) puts in free space the other robot saw, either way: (of the walls within twice
+    ``place_radius`` of the linked keyframes, of all the walls).
+
+    Near the places the maps' own drift is far below ``free_space_margin``, so a right
+    placement leaves next to none there (0.0 m for every right pair of the reference-built
+    cuts of aces and edmonton), while a look-alike that fits a few places along a corridor
+    puts the walls around them where the other robot saw through (1.4-2.2 m there, 1.8 m for
+    the test's look-alike building on one office robot). Over the whole maps a drifting map
+    puts some wall in the other's free space even where it is placed right, hence the
+    allowance in proportion to the set's matched wall; the look-alike building fits another
+    office robot's map cleanly near its places, but puts 5.6 m of wall in its free space
+    elsewhere (4.4 m allowed)."""
     best = oriented(max(links, key=lambda c: c.fit), links[0].source)
     first, second = units[best.first], units[best.second]
     a, b = _poses(first, [best.k_first]), _poses(second, [best.k_second])
     T_first_second = se2.matrix_from_pose(*a[0]) @ best.T @ se2.invert(se2.matrix_from_pose(*b[0]))
     reach = 2.0 * config.place_radius
     sides = [oriented(c, best.first) for c in links]
-    near_first = segments_near(
-        first.segments, _poses(first, [lk.k_first for lk in sides])[:, :2], reach
-    )
-    near_second = segments_near(
-        second.segments, _poses(second, [lk.k_second for lk in sides])[:, :2], reach
-    )
-    through = 0.0
+    near_first = _poses(first, [lk.k_first for lk in sides])[:, :2]
+    near_second = _poses(second, [lk.k_second for lk in sides])[:, :2]
+    near = whole = 0.0
     views_first, views_second = views_of(best.first), views_of(best.second)
-    if views_first is not None:
-        moved = se2.transform_segments(T_first_second, near_second)
-        through = seen_through_length(views_first, moved, config)
-    if views_second is not None:
-        moved = se2.transform_segments(se2.invert(T_first_second), near_first)
-        through = max(through, seen_through_length(views_second, moved, config))
-    return through
+    for views, walls, centres, T in (
+        (views_first, second.segments, near_second, T_first_second),
+        (views_second, first.segments, near_first, se2.invert(T_first_second)),
+    ):
+        if views is None:
+            continue
+        moved = se2.transform_segments(T, walls)
+        whole = max(whole, seen_through_length(views, moved, config))
+        close = se2.transform_segments(T, segments_near(walls, centres, reach))
+        near = max(near, seen_through_length(views, close, config))
+    return near, whole
 
 
 def placement_weights(links: Sequence[LinkCandidate]) -> FloatArray:

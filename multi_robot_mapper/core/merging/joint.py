@@ -99,7 +99,7 @@ class JointState:
 _TARGETS: OrderedDict[tuple[UnitKey, str, MergeConfig], Target] = OrderedDict()
 _PLACES: OrderedDict[tuple[UnitKey, str, MergeConfig], list[Place]] = OrderedDict()
 _INTRA: OrderedDict[tuple[UnitKey, str, MergeConfig], Any] = OrderedDict()
-_SEEN: OrderedDict[Any, float] = OrderedDict()  # seen_through_near of a pair's set
+_SEEN: OrderedDict[Any, tuple[float, float]] = OrderedDict()  # seen_through_near of a pair's set
 _KEPT = 32
 
 
@@ -296,7 +296,7 @@ def _verdicts(
     def views_of(key: UnitKey) -> MapViews | None:
         return _target(units[key], config).views
 
-    def seen_through(links: Sequence[LinkCandidate]) -> float:
+    def seen_through(links: Sequence[LinkCandidate]) -> tuple[float, float]:
         # The same set on the same maps from one update to the next: measured once.
         members = tuple(
             sorted((c.source, c.centre, c.target, c.keyframe, c.T_keyframe_centre) for c in links)
@@ -304,7 +304,7 @@ def _verdicts(
         maps = tuple(sorted({c.source for c in links} | {c.target for c in links}))
         key = (maps, tuple(_content(units[m]) for m in maps), members, config)
         return cast(
-            float,
+            tuple[float, float],
             _cached(_SEEN, key, lambda: seen_through_near(links, units, views_of, config)),
         )
 
