@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import resource
 import signal
 import subprocess
 import sys
@@ -322,6 +324,13 @@ def test_an_interrupted_bag_write_leaves_nothing_and_a_rerun_works(
     assert code == 0, err
 
 
+def _cpu_seconds(pid: int) -> float:
+    """User and system CPU time a running process has used (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_simulate_killed_by_a_signal_exits_cleanly_and_can_run_again(
     tmp_path: Path, signum: int
@@ -329,13 +338,18 @@ def test_simulate_killed_by_a_signal_exits_cleanly_and_can_run_again(
     out = tmp_path / "bag"
     command = [sys.executable, "-m", "multi_robot_mapper.cli.main", "simulate", "--robots", "3"]
     command += ["--out", str(out), "--duration", "600", "--rate", "40"]
-    # The signal must come in the middle of the work, after the imports: as long as they take
-    # on this machine now (seconds on a busy one), then two more seconds.
-    started = time.perf_counter()
+    # The signal must come in the middle of the work, after the imports. Judged by the CPU
+    # time the process has used, not by the clock: on a busy machine a wait of twice the
+    # imports' wall time let the whole work (about 40 CPU seconds) finish first.
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run([sys.executable, "-c", "import multi_robot_mapper.cli.main"], check=True)
-    importing = time.perf_counter() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    importing = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    time.sleep(2.0 * importing + 2.0)
+    deadline = time.monotonic() + 300.0
+    while _cpu_seconds(process.pid) < 2.0 * importing + 1.0:
+        assert process.poll() is None and time.monotonic() < deadline, process.returncode
+        time.sleep(0.05)
     process.send_signal(signum)
     _, err = process.communicate(timeout=60)
     assert process.returncode == (130 if signum == signal.SIGINT else 143), err
