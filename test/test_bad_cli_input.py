@@ -345,7 +345,15 @@ def test_simulate_killed_by_a_signal_exits_cleanly_and_can_run_again(
     subprocess.run([sys.executable, "-c", "import multi_robot_mapper.cli.main"], check=True)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     importing = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
-    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    # As from a terminal: a test run started in the background (`make test &`) ignores
+    # SIGINT, and its children inherit that (the work then finished: exit 0).
+    process = subprocess.Popen(
+        command,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     deadline = time.monotonic() + 300.0
     while _cpu_seconds(process.pid) < 2.0 * importing + 1.0:
         assert process.poll() is None and time.monotonic() < deadline, process.returncode
