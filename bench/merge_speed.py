@@ -40,6 +40,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from multi_robot_mapper.cli.common import add_set_option  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
@@ -166,14 +167,7 @@ def joint_cut(
 
 def add_merge_overrides(parser: argparse.ArgumentParser) -> None:
     """``--set NAME=VALUE`` (repeatable): a MergeConfig field; read by :func:`merge_config_of`."""
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="override a MergeConfig field, e.g. --set link_set_uniqueness=3",
-    )
+    add_set_option(parser, "override a MergeConfig field, e.g. --set link_set_uniqueness=3")
 
 
 def merge_config_of(args: argparse.Namespace) -> MergeConfig:

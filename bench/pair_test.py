@@ -36,6 +36,7 @@ from typing import TextIO  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from multi_robot_mapper.cli.common import add_set_option  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
@@ -233,14 +234,7 @@ def main() -> None:
         "(default: --limit)",
     )
     parser.add_argument("--json", metavar="PATH", help="write every row's figures ('-': stdout)")
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="override an IntegrateConfig field, e.g. --set refine_candidates=8",
-    )
+    add_set_option(parser, "override an IntegrateConfig field, e.g. --set refine_candidates=8")
     args = parser.parse_args()
     flat = dict(parse_override(o) for o in args.overrides)
     if args.no_refine:

@@ -86,14 +86,23 @@ def add_config_options(parser: argparse.ArgumentParser, merging: bool = False) -
             help="YAML merging parameters (config/map_merger.yaml; its merge.* section is used)",
         )
     merge_example = " or --set merge.link_min_value=20" if merging else ""
+    add_set_option(
+        parser,
+        "override one parameter, e.g. --set extraction.split_tolerance=0.03"
+        f"{merge_example} (repeatable)",
+    )
+
+
+def add_set_option(parser: argparse.ArgumentParser, help_text: str) -> None:
+    """``--set NAME=VALUE`` (repeatable), collected in ``args.overrides`` (read them with
+    :func:`~multi_robot_mapper.core.config.parse_override`); the CLI and the benches share it."""
     parser.add_argument(
         "--set",
         dest="overrides",
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="override one parameter, e.g. --set extraction.split_tolerance=0.03"
-        f"{merge_example} (repeatable)",
+        help=help_text,
     )
 
 

@@ -6,7 +6,8 @@ segments in its own frame). Each piece of each robot is a map of its own (a
 (:func:`merge_joint`):
 
 1. **places** of every map (a keyframe and its map around it, ``place_*``);
-2. **links**: each place of each map of every pair searched for on the other map
+2. **links** (:mod:`~multi_robot_mapper.core.merging.place_matching`): each place of each map
+   of every pair searched for on the other map
    (:func:`~multi_robot_mapper.core.merging.place_links.match_place`), results kept from one
    update to the next: a place is matched again only when its keyframes or segments changed,
    or the other map grew by ``reuse_*``; at most ``update_budget`` seconds per update, places
@@ -36,7 +37,7 @@ import dataclasses
 import hashlib
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, cast
 
 import numpy as np
@@ -53,36 +54,25 @@ from multi_robot_mapper.core.merging.consistency import (
     oriented,
     seen_through_near,
 )
-from multi_robot_mapper.core.merging.correlation import Drawing
 from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.global_map import fuse_keyframes
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
-from multi_robot_mapper.core.merging.place_links import (
-    LinkCandidate,
-    Target,
-    match_place,
-    place_drawing,
+from multi_robot_mapper.core.merging.place_links import LinkCandidate
+from multi_robot_mapper.core.merging.place_matching import (
+    MatchKey,
+    MatchRecord,
+    cached,
+    content_digest,
+    match_places,
+    target_of,
 )
-from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, places_of, units_of
+from multi_robot_mapper.core.merging.places import MapUnit, UnitKey, units_of
 from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 Pose = tuple[float, float, float]
-MatchKey = tuple[UnitKey, int, UnitKey]  # (source map, place centre keyframe, target map)
-# A place match to make: (priority, 0 for the smaller map's places, the place's rank in its
-# map, order queued, key, place)
-Work = tuple[int, int, int, int, MatchKey, Place]
-
-
-@dataclasses.dataclass(frozen=True)
-class MatchRecord:
-    """One place searched for on one map, and what the search was made on."""
-
-    place: str  # the place's digest
-    target: MapSignature  # the target map's
-    candidates: list[LinkCandidate]
 
 
 @dataclasses.dataclass
@@ -93,41 +83,9 @@ class JointState:
     links: list[LinkCandidate] = dataclasses.field(default_factory=list)  # in the graph
 
 
-# Targets (a map transformed for the correlation) and places of the maps seen most recently:
-# building them costs more than a place match, and a merger process sees the same maps for
-# many updates (one robot's map changes at a time). Keyed by map, content and settings.
-_TARGETS: OrderedDict[tuple[UnitKey, str, MergeConfig], Target] = OrderedDict()
-_PLACES: OrderedDict[tuple[UnitKey, str, MergeConfig], list[Place]] = OrderedDict()
+# Each map's edges, and seen_through_near of a pair's set, kept per content (place_matching.cached).
 _INTRA: OrderedDict[tuple[UnitKey, str, MergeConfig], Any] = OrderedDict()
-_SEEN: OrderedDict[Any, tuple[float, float]] = OrderedDict()  # seen_through_near of a pair's set
-_KEPT = 32
-
-
-def _cached(store: OrderedDict[Any, Any], key: Any, make: Callable[[], Any]) -> Any:
-    """``store[key]``, made (and the oldest entry beyond :data:`_KEPT` dropped) if absent."""
-    found = store.get(key)
-    if found is None:
-        found = store[key] = make()
-        if len(store) > _KEPT:
-            store.popitem(last=False)
-    else:
-        store.move_to_end(key)
-    return found
-
-
-def _target(unit: MapUnit, config: MergeConfig) -> Target:
-    key = (unit.key, MapSignature.of(unit.segments).digest, config)
-    return cast(Target, _cached(_TARGETS, key, lambda: Target.of(unit, config)))
-
-
-def _content(unit: MapUnit) -> str:
-    """A digest of a map's keyframe poses and segments."""
-    return hashlib.sha1(unit.poses.tobytes() + unit.segments.tobytes()).hexdigest()
-
-
-def _places(unit: MapUnit, config: MergeConfig) -> list[Place]:
-    key = (unit.key, _content(unit), config)
-    return cast(list[Place], _cached(_PLACES, key, lambda: places_of(unit, config)))
+_SEEN: OrderedDict[Any, tuple[float, float]] = OrderedDict()
 
 
 def merge_joint(
@@ -151,8 +109,11 @@ def merge_joint(
     state = (
         previous.state if previous is not None and isinstance(previous.state, JointState) else None
     )
-    matches, counts = _match_places(
-        units, config, state, config.update_budget if budget is None else budget
+    matches, counts = match_places(
+        units,
+        config,
+        state.matches if state is not None else {},
+        config.update_budget if budget is None else budget,
     )
     matched = time.perf_counter()
     verdicts = _verdicts(units, matches, config)
@@ -176,102 +137,7 @@ def merge_joint(
     return result
 
 
-# --- links --------------------------------------------------------------------------------
-
-
-def _directions(a: MapUnit, b: MapUnit) -> list[tuple[MapUnit, MapUnit]]:
-    """(source, target) of a pair, both ways, the smaller map's places first. Where two maps
-    overlap, the places that lie wholly inside the other map find it best: at the end of
-    one robot's stretch its places reach past the other's map and score less there than on a
-    look-alike corridor the other robot mapped whole (the demo's office: robot1's places
-    ranked the right placement 5th to 15th on robot2's map, robot2's places ranked it 0th to
-    2nd on robot1's). Searching one way only left such pairs unmerged."""
-    first = (a, b) if (a.length, a.key) <= (b.length, b.key) else (b, a)
-    return [first, (first[1], first[0])]
-
-
-def _match_places(
-    units: Mapping[UnitKey, MapUnit],
-    config: MergeConfig,
-    state: JointState | None,
-    budget: float | None,
-) -> tuple[dict[MatchKey, MatchRecord], dict[str, int]]:
-    """Every place of each map of every pair searched on the other map: results kept while
-    the place and the target map are unchanged, the rest matched within ``budget`` seconds,
-    places never matched first, then changed places, then places of grown targets; the
-    smaller maps' places before the larger maps', each pair's k-th place before any pair's
-    (k+1)-th."""
-    old = state.matches if state is not None else {}
-    keys = sorted(k for k, u in units.items() if u.length >= config.place_min_length)
-    places = {key: _places(units[key], config) for key in keys}
-    signatures = {key: MapSignature.of(units[key].segments) for key in keys}
-    records: dict[MatchKey, MatchRecord] = {}
-    work: list[Work] = []
-    for i, a in enumerate(keys):
-        for b in keys[i + 1 :]:
-            for way, (source, target) in enumerate(_directions(units[a], units[b])):
-                _plan_matches(
-                    places[source.key],
-                    source.key,
-                    target.key,
-                    way,
-                    old,
-                    signatures[target.key],
-                    records,
-                    work,
-                    config,
-                )
-    work.sort(key=lambda item: item[:4])
-    started = time.perf_counter()
-    computed = 0
-    drawings: dict[str, Drawing] = {}
-    for *_, key, place in work:
-        if budget and computed and time.perf_counter() - started >= budget:
-            break  # out of time (after one match at least: every update makes progress)
-        drawing = drawings.get(place.digest)
-        if drawing is None:
-            drawing = drawings[place.digest] = place_drawing(place, config)
-        found = match_place(place, _target(units[key[2]], config), config, drawing)
-        records[key] = MatchRecord(place.digest, signatures[key[2]], found)
-        computed += 1
-    counts = {
-        "maps": len(units),
-        "places": sum(len(p) for p in places.values()),
-        "place_matches": len({w[4] for w in work} | set(records)),
-        "matches_computed": computed,
-        "matches_pending": len(work) - computed,
-    }
-    return records, counts
-
-
-def _plan_matches(
-    places: Sequence[Place],
-    source: UnitKey,
-    target: UnitKey,
-    way: int,
-    old: Mapping[MatchKey, MatchRecord],
-    signature: MapSignature,
-    records: dict[MatchKey, MatchRecord],
-    work: list[Work],
-    config: MergeConfig,
-) -> None:
-    """Each place of ``source`` on ``target``: its record kept in ``records`` when still
-    fresh, else queued in ``work`` (and its old record kept until it is matched again)."""
-    for rank, place in enumerate(places):
-        key = (source, place.centre, target)
-        record = old.get(key)
-        if record is None:
-            priority = 0
-        elif record.place != place.digest:
-            priority = 1
-        elif not signature.close_to(record.target, config):
-            priority = 2
-        else:
-            records[key] = record  # fresh
-            continue
-        if record is not None:
-            records[key] = record  # kept until matched again
-        work.append((priority, way, rank, len(work), key, place))
+# --- links ----------------------------------------------------------------------------------
 
 
 def _verdicts(
@@ -294,7 +160,7 @@ def _verdicts(
             by_pair.setdefault(pair, []).append(candidate)
 
     def views_of(key: UnitKey) -> MapViews | None:
-        return _target(units[key], config).views
+        return target_of(units[key], config).views
 
     def seen_through(links: Sequence[LinkCandidate]) -> tuple[float, float]:
         # The same set on the same maps from one update to the next: measured once.
@@ -302,10 +168,10 @@ def _verdicts(
             sorted((c.source, c.centre, c.target, c.keyframe, c.T_keyframe_centre) for c in links)
         )
         maps = tuple(sorted({c.source for c in links} | {c.target for c in links}))
-        key = (maps, tuple(_content(units[m]) for m in maps), members, config)
+        key = (maps, tuple(content_digest(units[m]) for m in maps), members, config)
         return cast(
             tuple[float, float],
-            _cached(_SEEN, key, lambda: seen_through_near(links, units, views_of, config)),
+            cached(_SEEN, key, lambda: seen_through_near(links, units, views_of, config)),
         )
 
     return {
@@ -476,7 +342,7 @@ def _intra_edges(unit: MapUnit, offset: int, config: MergeConfig) -> list[Edge]:
     key = (unit.key, content, config)
     pairs, relative, information = cast(
         tuple[IntArray, FloatArray, FloatArray],
-        _cached(_INTRA, key, lambda: _intra_arrays(unit, config)),
+        cached(_INTRA, key, lambda: _intra_arrays(unit, config)),
     )
     return [
         Edge(offset + int(a), offset + int(b), (x, y, t), info, robust=False)
