@@ -48,8 +48,8 @@ from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTA
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import (
     MapViews,
+    free_space_conflict,
     seen_through_allowance,
-    seen_through_length,
 )
 from multi_robot_mapper.core.merging.place_links import LinkCandidate, segments_near
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
@@ -185,8 +185,8 @@ def consistent_set(
 ) -> PairVerdict:
     """The pair's heaviest consistent set of links and whether to accept it (module doc);
     with ``seen_through`` (:func:`seen_through_near` over the robots' views), an accepted set
-    must also leave its maps' walls near its places out of the free space the other robot
-    saw."""
+    (and a rival that would make it ambiguous) must also keep its maps' walls out of the free
+    space the other robot saw (:func:`_free_space_shortfall`)."""
     usable = [c for c in candidates if c.fit >= config.link_fit and c.value >= config.link_min_wall]
     if not usable:
         return PairVerdict(pair, [], 0.0, 0.0, 0, False, "no link fits")
@@ -267,18 +267,18 @@ def seen_through_near(
     sides = [oriented(c, best.first) for c in links]
     near_first = _poses(first, [lk.k_first for lk in sides])[:, :2]
     near_second = _poses(second, [lk.k_second for lk in sides])[:, :2]
-    near = whole = 0.0
     views_first, views_second = views_of(best.first), views_of(best.second)
-    for views, walls, centres, T in (
-        (views_first, second.segments, near_second, T_first_second),
-        (views_second, first.segments, near_first, se2.invert(T_first_second)),
-    ):
-        if views is None:
-            continue
-        moved = se2.transform_segments(T, walls)
-        whole = max(whole, seen_through_length(views, moved, config))
-        close = se2.transform_segments(T, segments_near(walls, centres, reach))
-        near = max(near, seen_through_length(views, close, config))
+    near = free_space_conflict(
+        segments_near(first.segments, near_first, reach),
+        views_first,
+        segments_near(second.segments, near_second, reach),
+        views_second,
+        T_first_second,
+        config,
+    )
+    whole = free_space_conflict(
+        first.segments, views_first, second.segments, views_second, T_first_second, config
+    )
     return near, whole
 
 
