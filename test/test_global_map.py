@@ -67,7 +67,19 @@ def test_an_update_reuses_the_fusion_of_unchanged_maps_and_fuses_the_rest_again(
     assert global_map._LAST_FUSION[2][2] is not cached[2][2]
     for got, want in zip(update, _fresh(names, units, order, moved), strict=True):
         np.testing.assert_allclose(got, want)
+    # A keyframe turned by 3 mrad barely moves, but its walls 1.1 m away move by 3.4 mm:
+    # within a quarter of fusion_tolerance (12.5 mm), reused. Turned by 20 mrad they move
+    # 22 mm: that map is fused again.
+    for turn, reused in ((0.003, True), (0.02, False)):
+        fuse_keyframes(names, units, order, moved, CONFIG)
+        kept = global_map._LAST_FUSION
+        turned = dict(moved)
+        turned[order[-1]] = moved[order[-1]] + np.array([0.0, 0.0, turn])
+        fuse_keyframes(names, units, order, turned, CONFIG)
+        assert (global_map._LAST_FUSION[2][2] is kept[2][2]) is reused  # type: ignore[index]
     # Another config, or another set of robots: nothing is reused.
-    other = fuse_keyframes(names, units, order, moved, MergeConfig(fusion_tolerance=0.05))
-    assert global_map._LAST_FUSION[2][0] is not cached[2][0]
+    fuse_keyframes(names, units, order, moved, CONFIG)
+    kept = global_map._LAST_FUSION
+    other = fuse_keyframes(names, units, order, moved, MergeConfig(fusion_tolerance=0.04))
+    assert global_map._LAST_FUSION[2][0] is not kept[2][0]  # type: ignore[index]
     assert len(other[0]) > 0

@@ -15,6 +15,7 @@ import functools
 from collections.abc import Sequence
 
 import numpy as np
+import pytest
 from test_merging import LASER, random_frames, stranger_walls
 
 from multi_robot_mapper.core import se2
@@ -194,6 +195,47 @@ def test_a_corridor_is_merged_through_a_consistent_set_of_links() -> None:
     assert again.stats["matches_computed"] == 0
     for name in world:
         np.testing.assert_allclose(again.placements[name], result.placements[name], atol=1e-6)  # type: ignore[arg-type]
+
+
+def test_what_an_update_keeps_from_the_last_never_changes_its_result() -> None:
+    # The merger keeps the last update's pair verdicts, graph solution and fusion and reuses
+    # them where their inputs are the same. Merging other maps in between, then the first
+    # maps again (with and without the previous result), gives what a merge from nothing gave;
+    # a map that changed gets a new verdict and graph.
+    _, corridors = drives("corridors", 2)
+    world = {"a": corridors[0], "b": corridors[1]}
+    frames = dict(zip(world, random_frames(2, seed=6), strict=True))
+    keyframes = {n: moved(world[n], frames[n]) for n in world}
+    first = merge_joint(keyframes, CONFIG, budget=0.0)
+    assert first.unmerged == []
+    shorter = {"a": keyframes["a"], "b": keyframes["b"][:-3]}
+    other = merge_joint(shorter, CONFIG, budget=0.0)
+    for previous in (None, first, other):
+        again = merge_joint(keyframes, CONFIG, previous=previous, budget=0.0)
+        for name in world:
+            np.testing.assert_allclose(again.keyframe_poses[name], first.keyframe_poses[name])
+        np.testing.assert_allclose(again.segments, first.segments)
+    assert len(other.keyframe_poses["b"]) == len(keyframes["b"]) - 3
+
+
+def test_an_update_takes_about_its_budget_in_all() -> None:
+    from multi_robot_mapper.core.merging.joint import _matching_budget
+
+    last = MergeResult(
+        robots=["a"],
+        placements={"a": (0.0, 0.0, 0.0)},
+        reference="a",
+        links=[],
+        pairs={},
+        segments=np.zeros((0, 4)),
+        segment_robot=np.zeros(0, dtype=np.int64),
+        timings={"matching_s": 0.4, "total_s": 0.7},  # 0.3 s of consistency, graph, fusion
+        stats={},
+    )
+    assert _matching_budget(1.0, last) == pytest.approx(0.7)
+    assert _matching_budget(1.0, None) == 1.0  # the first update: nothing known of the rest
+    assert 0.0 < _matching_budget(0.2, last) < 1e-3  # one match (match_places makes one)
+    assert _matching_budget(0.0, last) == 0.0 and _matching_budget(None, last) is None
 
 
 def test_robots_whose_overlap_ends_one_map_and_starts_the_next_are_merged() -> None:

@@ -213,16 +213,67 @@ def fuse(
     fresh = (chain2 < 0) & ~_covered(segments2, segments1, limit)
     parts = [segments1[chain1 < 0], segments2[fresh]]
     owners = [owner1[chain1 < 0], owner2[fresh]]
+    if count == 0:
+        return np.vstack(parts).reshape(-1, 4), np.concatenate(owners).astype(np.int64)
+    in1, in2 = np.flatnonzero(chain1 >= 0), np.flatnonzero(chain2 >= 0)
+    members = np.vstack((segments1[in1], segments2[in2]))
+    label = np.concatenate((chain1[in1], chain2[in2]))
+    owner = np.full(count, np.iinfo(np.int64).max, dtype=np.int64)
+    np.minimum.at(owner, chain1[in1], owner1[in1])
+    lines, straight = _chain_lines(members, label, count, tolerance)
     for chain in range(count):
-        in1, in2 = chain1 == chain, chain2 == chain
-        members = np.vstack((segments1[in1], segments2[in2]))
-        if not _roughly_straight(members):
+        if straight[chain]:
+            parts.append(lines[chain : chain + 1])
+            owners.append(owner[chain : chain + 1])
+            continue
+        first = segments1[chain1 == chain]
+        second = segments2[chain2 == chain]
+        chain_members = np.vstack((first, second))
+        if not _roughly_straight(chain_members):
             # A long curved wall chains into a shape the projection in chain_polyline cannot
             # order; leave its pieces as they are rather than draw chords through the room.
-            parts.extend((segments1[in1], segments2[in2]))
-            owners.extend((owner1[in1], owner2[in2]))
+            parts.extend((first, second))
+            owners.extend((owner1[chain1 == chain], owner2[chain2 == chain]))
             continue
-        polyline = chain_polyline(members, tolerance)
+        polyline = chain_polyline(chain_members, tolerance)
         parts.append(polyline)
-        owners.append(np.full(len(polyline), int(owner1[in1].min()), dtype=np.int64))
+        owners.append(np.full(len(polyline), owner[chain], dtype=np.int64))
     return np.vstack(parts).reshape(-1, 4), np.concatenate(owners).astype(np.int64)
+
+
+def _chain_lines(
+    members: FloatArray, label: IntArray, count: int, tolerance: float
+) -> tuple[FloatArray, BoolArray]:
+    """The common case of :func:`chain_polyline` for every chain at once: the chain's
+    total-least-squares line over its members' extent, and whether the chain is that case
+    (every end point within ``tolerance`` of the line, every member within 30 degrees of it:
+    :func:`_roughly_straight` along that line). Most chains are one wall seen twice; the
+    rest go through the greedy polyline one by one."""
+    ends = members.reshape(-1, 2)
+    of_end = np.repeat(label, 2)
+    size = np.bincount(of_end, minlength=count).astype(np.float64)
+    centre = np.stack(
+        [np.bincount(of_end, ends[:, k], minlength=count) / size for k in range(2)], axis=1
+    )
+    offset = ends - centre[of_end]
+    sxx = np.bincount(of_end, offset[:, 0] ** 2, minlength=count)
+    syy = np.bincount(of_end, offset[:, 1] ** 2, minlength=count)
+    sxy = np.bincount(of_end, offset[:, 0] * offset[:, 1], minlength=count)
+    heading = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)  # the scatter's principal axis
+    direction = np.stack((np.cos(heading), np.sin(heading)), axis=1)
+    normal = np.stack((-direction[:, 1], direction[:, 0]), axis=1)
+    across = np.abs(np.einsum("ij,ij->i", offset, normal[of_end]))
+    worst = np.zeros(count)
+    np.maximum.at(worst, of_end, across)
+    along = np.einsum("ij,ij->i", offset, direction[of_end])
+    low, high = np.full(count, np.inf), np.full(count, -np.inf)
+    np.minimum.at(low, of_end, along)
+    np.maximum.at(high, of_end, along)
+    d = members[:, 2:] - members[:, :2]
+    length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)
+    aligned = np.abs(np.einsum("ij,ij->i", d, direction[label])) / length >= np.cos(
+        np.radians(30.0)
+    )
+    every_aligned = np.bincount(label, ~aligned, minlength=count) == 0
+    lines = np.hstack((centre + low[:, None] * direction, centre + high[:, None] * direction))
+    return lines, (worst <= tolerance) & every_aligned

@@ -440,10 +440,11 @@ class MergeConfig:
         maximum=100.0,
     )
     update_budget: float = param(
-        0.5,
+        1.0,
         unit="s",
-        doc="seconds of place matching per merge update (the node's; a replay matches "
-        "everything): the rest waits for the next update, new places first; 0: no limit",
+        doc="seconds a merge update may take in the node (a replay matches everything): "
+        "place matching gets what the rest of the last update left, the places not matched "
+        "wait for the next update, new places first; 0: no limit",
         minimum=0.0,
         maximum=3600.0,
     )

@@ -3,10 +3,13 @@ optimised pose, fused map by map in placing order (Amigoni Alg. 5, :func:`fuse_m
 
 Fusing is most of an update's cost once the places are matched (0.25 s of about 1 s for 8
 robots of 110 keyframes), and most updates move few keyframes: one robot's new keyframe
-changes that robot's map, and the graph moves the other maps' keyframes by far less than a
-millimetre. The fusion of the maps before the first one in the placing order that changed
-(its content, or a keyframe moved by more than 1 mm / 1 mrad) is therefore the previous
-update's, kept here for the last merge made in this process.
+changes that robot's map, and the graph moves the other maps' keyframes by a few millimetres
+at most (intel cut into 8 robots: 0.0-2.3 mm, up to 1 mrad). The fusion of the maps before
+the first one in the placing order that changed (its content, or a keyframe whose walls moved
+by more than a quarter of ``fusion_tolerance``) is therefore the previous update's, kept here
+for the last merge made in this process. Fusion joins walls within ``fusion_tolerance`` of
+each other, so walls that moved a quarter of that would fuse the same, and the map shown
+never lies further than that from the keyframes' optimised poses.
 """
 
 from __future__ import annotations
@@ -42,10 +45,9 @@ class _Fused:
 # The last global map's fusion, map by map: (robots, config, prefix states). An update fuses
 # again only from the first map in the placing order that changed or moved (module doc).
 _LAST_FUSION: tuple[tuple[str, ...], MergeConfig, tuple[_Fused, ...]] | None = None
-# A keyframe that moved less than this since the last fusion is not fused again: below what
-# a laser resolves, and the markers carry each keyframe's exact optimised pose anyway.
-_REFUSE_SHIFT = 1e-3  # m
-_REFUSE_TURN = 1e-3  # rad
+# A keyframe whose walls moved less than this share of fusion_tolerance since the last
+# fusion is not fused again (module doc).
+_STILL_SHARE = 0.25
 
 
 def fuse_keyframes(
@@ -57,8 +59,8 @@ def fuse_keyframes(
 ) -> tuple[FloatArray, IntArray, IntArray]:
     """Every merged keyframe's segments at its optimised pose, fused map by map in placing
     order; each fused segment's robot (index into ``robots``) and owning keyframe. The
-    fusion of the maps before the first one that changed (content, or a keyframe moved by
-    more than 1 mm / 1 mrad) is the previous update's."""
+    fusion of the maps before the first one that changed (content, or a keyframe whose walls
+    moved by more than a quarter of ``fusion_tolerance``) is the previous update's."""
     global _LAST_FUSION
     last = _LAST_FUSION
     previous = last[2] if last is not None and last[:2] == (tuple(robots), config) else ()
@@ -76,7 +78,12 @@ def fuse_keyframes(
         ids = len(base) + unit.owner
         base += [(robots.index(key[0]), int(k)) for k in unit.index]
         old = previous[position] if reusing and position < len(previous) else None
-        if old is not None and old.key == key and old.content == content and _still(old, placed):
+        if (
+            old is not None
+            and old.key == key
+            and old.content == content
+            and _still(old, placed, unit, _STILL_SHARE * config.fusion_tolerance)
+        ):
             segments, owner = old.segments, old.owner
             states.append(old)
             continue
@@ -93,10 +100,15 @@ def fuse_keyframes(
     return segments, table[owner, 0], table[owner, 1]
 
 
-def _still(fused: _Fused, poses: FloatArray) -> bool:
-    """Have a map's keyframes stayed where they were fused (within 1 mm / 1 mrad)?"""
+def _still(fused: _Fused, poses: FloatArray, unit: MapUnit, allowed: float) -> bool:
+    """Have a map's keyframes stayed where they were fused: has no wall moved by more than
+    ``allowed`` (its keyframe's shift plus its turn times the wall's farthest end point)?"""
     if fused.poses.shape != poses.shape:
         return False
     shift = np.hypot(*(fused.poses[:, :2] - poses[:, :2]).T)
     turn = np.abs(se2.wrap_angle(fused.poses[:, 2] - poses[:, 2]))
-    return bool(np.all(shift <= _REFUSE_SHIFT) and np.all(turn <= _REFUSE_TURN))
+    reach = np.zeros(len(poses))
+    if len(unit.segments):
+        ends = np.vstack(unit.local).reshape(-1, 2)
+        np.maximum.at(reach, np.repeat(unit.owner, 2), np.hypot(ends[:, 0], ends[:, 1]))
+    return bool(np.all(shift + turn * reach <= allowed))

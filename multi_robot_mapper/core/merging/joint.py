@@ -10,8 +10,9 @@ segments in its own frame). Each piece of each robot is a map of its own (a
    of every pair searched for on the other map
    (:func:`~multi_robot_mapper.core.merging.place_links.match_place`), results kept from one
    update to the next: a place is matched again only when its keyframes or segments changed,
-   or the other map grew by ``reuse_*``; at most ``update_budget`` seconds per update, places
-   never matched first (the rest waits, and the node merges again);
+   or the other map grew by ``reuse_*``; an update takes about ``update_budget`` seconds in
+   all: matching gets what the rest of the last update left, places never matched first (the
+   rest waits, and the node merges again);
 3. **consistency** (:mod:`~multi_robot_mapper.core.merging.consistency`): per pair of maps the
    heaviest set of mutually consistent links (PCM), accepted when confident or supported by
    enough places, unique, and leaving the walls near its places out of the free space the
@@ -86,6 +87,13 @@ class JointState:
 # Each map's edges, and seen_through_near of a pair's set, kept per content (place_matching.cached).
 _INTRA: OrderedDict[tuple[UnitKey, str, MergeConfig], Any] = OrderedDict()
 _SEEN: OrderedDict[Any, tuple[float, float]] = OrderedDict()
+# The last update's verdict of every pair, keyed by what it was made from: most updates change
+# one robot's map, and the pairs without it (21 of 28 with 8 robots) keep their verdicts.
+_LAST_VERDICTS: dict[Any, PairVerdict] = {}
+# The last update's graph solution and what it was solved from: an update that brought no
+# change to the maps joined or their links (a place matched again to the same result, the
+# node's retries) solves the same graph and gets the same poses.
+_LAST_SOLUTION: tuple[Any, _Solution] | None = None
 
 
 def merge_joint(
@@ -95,8 +103,9 @@ def merge_joint(
     reference: str | None = None,
     budget: float | None = None,
 ) -> MergeResult:
-    """Merge the robots' keyframe maps (module doc). ``budget``: seconds of place matching
-    (default ``config.update_budget``; 0 or None with a config of 0: every place is matched).
+    """Merge the robots' keyframe maps (module doc). ``budget``: seconds the update may take
+    (default ``config.update_budget``; 0 or None with a config of 0: every place is matched);
+    place matching gets what the rest of the last update left (:func:`_matching_budget`).
     ``reference`` (or ``config.reference``) names the robot whose map frame is ``map``; by
     default the previous update's is kept while it is in the largest group."""
     config = config if config is not None else MergeConfig()
@@ -113,7 +122,7 @@ def merge_joint(
         units,
         config,
         state.matches if state is not None else {},
-        config.update_budget if budget is None else budget,
+        _matching_budget(config.update_budget if budget is None else budget, previous),
     )
     matched = time.perf_counter()
     verdicts = _verdicts(units, matches, config)
@@ -121,7 +130,7 @@ def merge_joint(
     checked = time.perf_counter()
     previous_reference = None if previous is None else previous.reference
     group, ref_unit = _reference(accepted, units, chosen, previous_reference)
-    solved = _solve(units, group, ref_unit, accepted, config)
+    solved = _solved(units, group, ref_unit, accepted, config)
     optimised = time.perf_counter()
     result = _result(robots, units, accepted, verdicts, solved, ref_unit, config)
     finished = time.perf_counter()
@@ -135,6 +144,17 @@ def merge_joint(
     }
     result.stats.update(counts)
     return result
+
+
+def _matching_budget(budget: float | None, previous: MergeResult | None) -> float | None:
+    """Seconds of place matching in an update of ``budget`` seconds (0 or None: no limit):
+    what the rest of the last update took (consistency, graph, fusion) is kept for the rest of
+    this one, so that an update takes about ``budget`` in all (at least one match is made)."""
+    if not budget:
+        return budget
+    timings = {} if previous is None else previous.timings
+    rest = timings.get("total_s", 0.0) - timings.get("matching_s", 0.0)
+    return max(budget - rest, 1e-6)
 
 
 # --- links ----------------------------------------------------------------------------------
@@ -174,10 +194,34 @@ def _verdicts(
             cached(_SEEN, key, lambda: seen_through_near(links, units, views_of, config)),
         )
 
-    return {
-        pair: consistent_set(pair, found, units, config, seen_through)
-        for pair, found in by_pair.items()
-    }
+    global _LAST_VERDICTS
+    digests = {key: content_digest(unit) for key, unit in units.items()}
+    verdicts: dict[tuple[UnitKey, UnitKey], PairVerdict] = {}
+    kept: dict[Any, PairVerdict] = {}
+    for pair, found in by_pair.items():
+        key = (pair, digests[pair[0]], digests[pair[1]], tuple(map(_identity, found)), config)
+        verdict = _LAST_VERDICTS.get(key)
+        if verdict is None:
+            verdict = consistent_set(pair, found, units, config, seen_through)
+        verdicts[pair] = kept[key] = verdict
+    _LAST_VERDICTS = kept
+    return verdicts
+
+
+def _identity(candidate: LinkCandidate) -> tuple[Any, ...]:
+    """What a link candidate says (its information matrix follows from the same match)."""
+    c = candidate
+    return (
+        c.source,
+        c.centre,
+        c.target,
+        c.keyframe,
+        c.T_keyframe_centre,
+        c.confidence,
+        c.fit,
+        c.value,
+        c.rank,
+    )
 
 
 def _has(unit: MapUnit, keyframe: int) -> bool:
@@ -233,6 +277,29 @@ class _Solution:
     nodes: int = 0
     edges: int = 0
     iterations: int = 0
+
+
+def _solved(
+    units: Mapping[UnitKey, MapUnit],
+    group: list[UnitKey],
+    ref_unit: UnitKey | None,
+    accepted: Accepted,
+    config: MergeConfig,
+) -> _Solution:
+    """:func:`_solve`, or the last update's solution where the graph is the same."""
+    global _LAST_SOLUTION
+    key = (
+        tuple((k, content_digest(units[k])) for k in sorted(group)),
+        ref_unit,
+        tuple(tuple(map(_identity, verdict.links)) for verdict in accepted.pairs),
+        tuple((k, tuple((o, v.pair) for o, v in accepted.tree[k])) for k in sorted(accepted.tree)),
+        config,
+    )
+    if _LAST_SOLUTION is not None and _LAST_SOLUTION[0] == key:
+        return _LAST_SOLUTION[1]
+    solution = _solve(units, group, ref_unit, accepted, config)
+    _LAST_SOLUTION = (key, solution)
+    return solution
 
 
 def _solve(

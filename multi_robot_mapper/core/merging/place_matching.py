@@ -127,8 +127,11 @@ def match_places(
     computed = 0
     drawings: dict[str, Drawing] = {}
     for *_, key, place in work:
-        if budget and computed and time.perf_counter() - started >= budget:
-            break  # out of time (after one match at least: every update makes progress)
+        elapsed = time.perf_counter() - started
+        if budget and computed and elapsed * (computed + 1) / computed > budget:
+            # The next match would end past the budget (at this update's mean time per
+            # match); one match at least, so that every update makes progress.
+            break
         drawing = drawings.get(place.digest)
         if drawing is None:
             drawing = drawings[place.digest] = place_drawing(place, config)
