@@ -22,6 +22,10 @@ no particular order and prints robots merged, the worst placement error, the num
 links that are wrong (> 0.3 m from the reference) and the merge time. The maps are reference
 maps, not local-mapping output: this measures merging alone.
 
+    .venv/bin/python bench/merge_speed.py --split 8 --logs intel --joint --live 10
+
+runs the joint merger as the node does while the maps grow (``live_joint``).
+
 Both modes pass the scans' poses as the robots' viewpoints, as the node passes keyframe
 poses, so links are also judged on free space; ``--no-views`` merges on segments alone.
 """
@@ -259,6 +263,64 @@ def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> No
     )
 
 
+def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every: float) -> None:
+    """The node's regime on a reference-built cut: the robots drive at once (each run's time
+    counted from its own first scan), and every ``every`` seconds the keyframes made so far
+    are merged with the previous update within ``update_budget``; then updates with nothing
+    new until no match is pending. One line: updates, their time (median, 90th percentile,
+    largest), the largest part not spent matching, the updates until every robot was placed
+    (and stayed so), robots placed at the end, keyframes; then each stage's median time."""
+    from multi_robot_mapper.core.merging.joint import merge_joint
+
+    path = DATA / f"{name}.log.gz"
+    if not path.is_file():
+        print(f"{name}: skipped, {path} not found")
+        return
+    _, keyframes = joint_cut(list(read_carmen(path)), robots, overlap)
+    start = {robot: frames[0].stamp for robot, frames in keyframes.items()}
+    stop = max(frames[-1].stamp - start[robot] for robot, frames in keyframes.items())
+    times: list[float] = []
+    stages: list[list[float]] = []
+    rest = 0.0
+    placed_since = None
+    result = None
+    clock = 0.0
+    while True:
+        clock = min(clock + every, stop)
+        shown = {
+            robot: [kf for kf in frames if kf.stamp - start[robot] <= clock]
+            for robot, frames in keyframes.items()
+        }
+        began = time.perf_counter()
+        result = merge_joint({r: f for r, f in shown.items() if f}, config, previous=result)
+        times.append(time.perf_counter() - began)
+        stages.append([result.timings[f"{stage}_s"] for stage in STAGES])
+        rest = max(rest, result.timings["total_s"] - result.timings["matching_s"])
+        placed = sum(pose is not None for pose in result.placements.values())
+        if placed < robots:
+            placed_since = None
+        elif placed_since is None:
+            placed_since = len(times)
+        if clock >= stop and result.stats["matches_pending"] == 0:
+            break
+    spread = np.percentile(times, [50, 90, 100])
+    count = sum(len(k) for k in keyframes.values())
+    print(
+        f"| {name} | {robots} | {len(times)} | {spread[0]:.2f} | {spread[1]:.2f} | "
+        f"{spread[2]:.2f} | {rest:.2f} | {placed_since or '-'} | {placed}/{robots} | {count} |",
+        flush=True,
+    )
+    median = np.median(np.array(stages), axis=0)
+    print(
+        "  median per stage (s): "
+        + ", ".join(f"{stage} {m:.3f}" for stage, m in zip(STAGES, median, strict=True)),
+        flush=True,
+    )
+
+
+STAGES = ("matching", "consistency", "graph", "fusion")
+
+
 def overlapping(frames: dict[str, np.ndarray], maps: dict[str, np.ndarray], shared: float) -> int:
     """The largest group of robots joined by pairs whose maps, placed at the truth, share at
     least ``shared`` metres of wall (within 10 cm): the most any merger could link."""
@@ -299,6 +361,15 @@ def main() -> None:
         "(of which not matching) | "
         "keyframes |",
     )
+    parser.add_argument(
+        "--live",
+        type=float,
+        metavar="SECONDS",
+        help="--split --joint in the node's regime: the robots at once, an update every "
+        "SECONDS of their runs within update_budget; prints | log | robots | updates | "
+        "median | p90 | max (s) | largest part not matching (s) | updates until all placed | "
+        "placed | keyframes |",
+    )
     parser.add_argument("--logs", nargs="*", default=["intel", "aces", "fhw", "csail"])
     parser.add_argument(
         "--no-views",
@@ -311,7 +382,9 @@ def main() -> None:
     if args.split:
         for name in args.logs:
             for robots in args.split:
-                if args.joint:
+                if args.joint and args.live:
+                    live_joint(name, robots, args.overlap, base, args.live)
+                elif args.joint:
                     split_joint(name, robots, args.overlap, base)
                 else:
                     split_runs(name, robots, args.overlap, not args.no_views, base)

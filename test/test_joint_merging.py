@@ -219,23 +219,26 @@ def test_what_an_update_keeps_from_the_last_never_changes_its_result() -> None:
 
 
 def test_an_update_takes_about_its_budget_in_all() -> None:
-    from multi_robot_mapper.core.merging.joint import _matching_budget
+    from multi_robot_mapper.core.merging.joint import JointState, _matching_budget
 
-    last = MergeResult(
-        robots=["a"],
-        placements={"a": (0.0, 0.0, 0.0)},
-        reference="a",
-        links=[],
-        pairs={},
-        segments=np.zeros((0, 4)),
-        segment_robot=np.zeros(0, dtype=np.int64),
-        timings={"matching_s": 0.4, "total_s": 0.7},  # 0.3 s of consistency, graph, fusion
-        stats={},
-    )
+    # The rest of the last update that changed a map took 0.3 s: matching gets the remainder.
+    last = JointState(rest_s=0.3)
     assert _matching_budget(1.0, last) == pytest.approx(0.7)
     assert _matching_budget(1.0, None) == 1.0  # the first update: nothing known of the rest
     assert 0.0 < _matching_budget(0.2, last) < 1e-3  # one match (match_places makes one)
     assert _matching_budget(0.0, last) == 0.0 and _matching_budget(None, last) is None
+    # An update with nothing new keeps the estimate of the last one that changed a map.
+    _, corridors = drives("corridors", 2)
+    world = {"a": corridors[0], "b": corridors[1]}
+    frames = dict(zip(world, random_frames(2, seed=6), strict=True))
+    keyframes = {n: moved(world[n], frames[n]) for n in world}
+    first = merge_joint(keyframes, CONFIG, budget=0.0)
+    assert isinstance(first.state, JointState)
+    assert first.state.rest_s == pytest.approx(
+        first.timings["total_s"] - first.timings["matching_s"], abs=1e-3
+    )
+    again = merge_joint(keyframes, CONFIG, previous=first, budget=0.0)
+    assert isinstance(again.state, JointState) and again.state.rest_s == first.state.rest_s
 
 
 def test_robots_whose_overlap_ends_one_map_and_starts_the_next_are_merged() -> None:

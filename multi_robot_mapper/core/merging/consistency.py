@@ -140,11 +140,10 @@ def consistency_matrix(
     agree = (shift <= RIGHT_DISTANCE + config.link_pair_slack * path) & (
         turn <= RIGHT_ANGLE + config.link_pair_angle_slack * path
     )
-    place = [(lk.candidate.source, lk.candidate.centre) for lk in links]
-    for i in range(n):
-        for j in range(i + 1, n):
-            if place[i] == place[j]:
-                agree[i, j] = agree[j, i] = False
+    places = [(lk.candidate.source, lk.candidate.centre) for lk in links]
+    ids = {p: k for k, p in enumerate(dict.fromkeys(places))}
+    place = np.array([ids[p] for p in places])
+    agree &= place[:, None] != place[None, :]
     np.fill_diagonal(agree, True)
     return np.asarray(agree & agree.T)
 

@@ -82,6 +82,10 @@ class JointState:
 
     matches: dict[MatchKey, MatchRecord] = dataclasses.field(default_factory=dict)
     links: list[LinkCandidate] = dataclasses.field(default_factory=list)  # in the graph
+    # Seconds the rest of an update (consistency, graph, fusion) took the last time a map
+    # changed, and every map's content then: what the next update's matching leaves room for.
+    rest_s: float = 0.0
+    contents: dict[UnitKey, str] = dataclasses.field(default_factory=dict)
 
 
 # Each map's edges, and seen_through_near of a pair's set, kept per content (place_matching.cached).
@@ -122,7 +126,7 @@ def merge_joint(
         units,
         config,
         state.matches if state is not None else {},
-        _matching_budget(config.update_budget if budget is None else budget, previous),
+        _matching_budget(config.update_budget if budget is None else budget, state),
     )
     matched = time.perf_counter()
     verdicts = _verdicts(units, matches, config)
@@ -134,7 +138,11 @@ def merge_joint(
     optimised = time.perf_counter()
     result = _result(robots, units, accepted, verdicts, solved, ref_unit, config)
     finished = time.perf_counter()
-    result.state = JointState(matches, solved.accepted)
+    contents = {key: content_digest(unit) for key, unit in units.items()}
+    rest = finished - matched
+    if state is not None and state.contents == contents:
+        rest = state.rest_s  # nothing changed: this update says nothing of a changing one
+    result.state = JointState(matches, solved.accepted, rest, contents)
     result.timings = {
         "matching_s": matched - started,
         "consistency_s": checked - matched,
@@ -146,14 +154,14 @@ def merge_joint(
     return result
 
 
-def _matching_budget(budget: float | None, previous: MergeResult | None) -> float | None:
+def _matching_budget(budget: float | None, state: JointState | None) -> float | None:
     """Seconds of place matching in an update of ``budget`` seconds (0 or None: no limit):
-    what the rest of the last update took (consistency, graph, fusion) is kept for the rest of
-    this one, so that an update takes about ``budget`` in all (at least one match is made)."""
+    room is left for the rest of the update (consistency, graph, fusion) as long as it took
+    the last time a map changed (``JointState.rest_s``), so that an update takes about
+    ``budget`` in all; at least one match is made."""
     if not budget:
         return budget
-    timings = {} if previous is None else previous.timings
-    rest = timings.get("total_s", 0.0) - timings.get("matching_s", 0.0)
+    rest = 0.0 if state is None else state.rest_s
     return max(budget - rest, 1e-6)
 
 
