@@ -13,6 +13,8 @@ from multi_robot_mapper.core.local_mapping import (
     LocalMapper,
     LocalMapperConfig,
     LocalUpdate,
+    attempts,
+    keyframe_map,
     loop_closer,
     mapper,
 )
@@ -199,7 +201,7 @@ def test_a_heading_bias_is_straightened_by_loop_closures(monkeypatch) -> None:  
         T[0] += np.radians(1.0) * float(np.hypot(T[1], T[2]))
         return dataclasses.replace(result, T_1_2=T)
 
-    monkeypatch.setattr(mapper, "integrate", biased)
+    monkeypatch.setattr(attempts, "integrate", biased)
     local = LocalMapper()
     for t, s in zip(stamps, scans, strict=True):
         _feed(local, float(t), s)
@@ -267,6 +269,116 @@ def test_a_lost_robot_maps_on_in_a_piece_that_joins_the_map_again(monkeypatch) -
         float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
     }
     assert _ate(times, poses, truth_at) < 0.02
+
+
+@pytest.mark.parametrize("turn_limit", [loop_closer._TURN_BETWEEN_SCANS, 2.0 * np.pi])
+def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -> None:  # type: ignore[no-untyped-def]
+    # The robot is lost once; every match between the two pieces is then made the half-turned
+    # look-alike of the right one (the piece turned round about its first scan, consistently,
+    # confidence 0.99): what a symmetric corridor offers. The robot turned far less than a
+    # quarter turn between its last placed scan and the piece's first, so the joins are refused
+    # and the piece stays apart; without the limit (2 pi) the look-alike joins the map.
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
+    original_match, original_windows = (
+        mapper.LocalMapper._match,
+        loop_closer.LoopCloser._match_windows,
+    )
+    count = {"scan": 0}
+
+    def failing(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        chosen, integrated = original_match(self, *args, **kwargs)
+        return chosen, integrated and count["scan"] != 25
+
+    def turned_round(self, first, second, predicted, search=True):  # type: ignore[no-untyped-def]
+        result = original_windows(self, first, second, predicted, search)
+        keyframes = self.keyframes
+        if keyframes.piece(first) == keyframes.piece(second):
+            return result
+        theta, x, y = result.T_1_2
+        T_other_second = se2.compose(keyframes.pose(first), (x, y, theta))
+        T_other_piece = se2.compose(T_other_second, se2.between(keyframes.pose(second), (0, 0, 0)))
+        wrong = se2.compose(se2.compose(T_other_piece, (0.0, 0.0, np.pi)), keyframes.pose(second))
+        dx, dy, dtheta = se2.between(keyframes.pose(first), wrong)
+        return dataclasses.replace(result, T_1_2=np.array([dtheta, dx, dy]), confidence=0.99)
+
+    monkeypatch.setattr(mapper.LocalMapper, "_match", failing)
+    monkeypatch.setattr(loop_closer.LoopCloser, "_match_windows", turned_round)
+    monkeypatch.setattr(loop_closer, "_TURN_BETWEEN_SCANS", turn_limit)
+    local = LocalMapper()
+    for k, (t, s) in enumerate(zip(stamps, scans, strict=True)):
+        count["scan"] = k
+        _feed(local, float(t), s)
+    assert local.pieces_started == 1
+    joins = [c for c in local.closures if c.kind == "join"]
+    if turn_limit < np.pi:
+        assert joins == []
+        assert local.closer.refused["turned round from the robot's last pose (join)"] > 0
+        assert len(set(local.map.pieces.tolist())) == 2
+    else:
+        # The look-alike joined: the map is decimetres off (the right join: under 2 cm, the
+        # test above).
+        assert len(joins) == 1
+        assert set(local.map.pieces.tolist()) == {0}
+        times, poses = local.trajectory()
+        truth_at = {
+            float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
+        }
+        assert _ate(times, poses, truth_at) > 0.1
+
+
+@pytest.mark.parametrize(
+    ("search_finds", "integrated"),
+    [
+        ((0.52, 0.01, np.pi / 2 + 0.02), True),  # the search confirms the tracked placement
+        ((0.50, 0.00, 0.0), False),  # a likely rival a quarter turn away: neither alone
+    ],
+)
+def test_a_tracked_placement_far_from_the_prediction_needs_the_search_to_agree(
+    monkeypatch,  # type: ignore[no-untyped-def]
+    search_finds: tuple[float, float, float],
+    integrated: bool,
+) -> None:
+    # The prediction (0.5 m ahead) refined alone is not confident; refined with its rivals it
+    # lands a quarter turn away at confidence 0.95 (a room that fits four ways). The search
+    # with no guess against the last scan (placed where the keyframe is) either confirms it
+    # or finds a likely rival; then neither settles alone and, with no other reference to
+    # corroborate one, the scan is not integrated.
+    tracked = (0.5, 0.0, np.pi / 2)
+    searched: list[bool] = []
+
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
+        searched.append(bool(heuristics))
+        if heuristics:
+            pose, confidence = search_finds, 0.9
+        elif len(extra_hypotheses) == 1:
+            pose, confidence = (0.5, 0.0, 0.0), 0.3  # the prediction alone
+        else:
+            pose, confidence = tracked, 0.95
+        x, y, theta = pose
+        return MatchResult(np.array([theta, x, y]), 5.0, 0.9, True, 1, 1, confidence)
+
+    monkeypatch.setattr(attempts, "integrate", fake)
+    scan = _stranger()
+    segments, _ = extract_scan(scan, EXTRACTION)
+    keyframe = keyframe_map.KeyframeScan(0, 0.0, segments.segments, scan)
+    references = attempts.References(
+        here=(0.0, 0.0, 0.0),
+        last=attempts.Reference(segments.segments, scan, attempts.Anchor(0, (0.0, 0.0, 0.0))),
+        keyframe=0,
+        older=[],
+        poses={0: (0.0, 0.0, 0.0)},
+        pieces={0: 0},
+        scans={0: keyframe},
+    )
+    motions = [(0.5, 0.0, 0.0), (0.0, 0.0, 0.0)]
+    chosen, placed, _ = attempts.match_scan(
+        LocalMapperConfig(), references, segments.segments, scan, motions, True, lambda *_: None
+    )
+    assert placed == integrated
+    assert searched == [False, False, True]  # the prediction, with its rivals, the search
+    if integrated:
+        assert chosen.stage == "track"
+        np.testing.assert_allclose(chosen.pose, tracked)
 
 
 def test_a_cluttered_office_is_tracked_within_centimetres() -> None:

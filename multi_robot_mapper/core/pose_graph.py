@@ -200,6 +200,19 @@ class PoseGraph:
         """Marginal covariance (3x3, Pose2 tangent order) of an optimised keyframe."""
         return np.asarray(self._isam.marginalCovariance(key), dtype=np.float64)
 
+    def relative_covariance(self, first: int, second: int) -> FloatArray:
+        """Covariance (3x3, tangent of T_first_second) of keyframe ``second``'s pose in
+        keyframe ``first``'s frame, from the two keyframes' joint marginal: what the graph
+        knows of their relative pose, which two poses far from the anchor know much better
+        than either alone."""
+        joint = np.asarray(self._isam.jointMarginalCovariance([first, second]).fullMatrix())
+        T_first_second = gtsam.Pose2(*self._estimate[first]).between(
+            gtsam.Pose2(*self._estimate[second])
+        )
+        # d(between)/d(first) = -Ad(T_second_first), d(between)/d(second) = I (body tangents).
+        jacobian = np.hstack((-T_first_second.inverse().AdjointMap(), np.eye(3)))
+        return np.asarray(jacobian @ joint @ jacobian.T, dtype=np.float64)
+
     def edge_error(self, edge_id: int) -> float:
         """Squared Mahalanobis distance of an edge's measurement at the current estimate."""
         edge = self.edges[edge_id]

@@ -1,16 +1,28 @@
 """The front end's match attempts: where a scan is anchored, one match of a new scan against
-one reference scan, and when two attempts corroborate each other."""
+one reference scan, when two attempts corroborate each other, and the order in which a new
+scan is matched (:func:`match_scan`)."""
 
 from __future__ import annotations
 
 import dataclasses
+import time
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.matching import MatchResult
-from multi_robot_mapper.core.matching.confidence import LIKELY, RIGHT_ANGLE, RIGHT_DISTANCE
+from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeScan
+from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
+from multi_robot_mapper.core.matching.confidence import (
+    LIKELY,
+    LOOK_ALIKE_TURNS,
+    RIGHT_ANGLE,
+    RIGHT_DISTANCE,
+    TRACK_TURNS,
+)
+from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = NDArray[np.float64]
 Pose = tuple[float, float, float]
@@ -72,3 +84,135 @@ def hypotheses_of(poses: list[Pose]) -> FloatArray:
     """(x, y, theta) poses as INTEGRATE hypotheses (theta, tx, ty)."""
     stacked = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     return np.column_stack((stacked[:, 2], stacked[:, 0], stacked[:, 1]))
+
+
+@dataclasses.dataclass(frozen=True)
+class Reference:
+    """A scan a new scan can be matched against, and where it is."""
+
+    segments: FloatArray
+    view: LaserScanData
+    anchor: Anchor
+
+
+@dataclasses.dataclass(frozen=True)
+class References:
+    """What the front end matches a new scan against, copied under the mapper's lock."""
+
+    here: Pose  # the last placed scan's pose in its piece
+    last: Reference  # the last placed scan
+    keyframe: int  # its keyframe
+    older: list[int]  # recent keyframes of its piece, then the newest of the other pieces
+    poses: dict[int, Pose]  # of ``keyframe`` and ``older``, each in its piece
+    pieces: dict[int, int]
+    scans: dict[int, KeyframeScan]
+
+
+def match_scan(
+    config: LocalMapperConfig,
+    references: References,
+    new: FloatArray,
+    view: LaserScanData,
+    motions: list[Pose],
+    tracking: bool,
+    count: Callable[[str, float], None],
+) -> tuple[Attempt, bool, bool]:
+    """The placement of the new scan, whether to integrate it, and whether it was tracked:
+    against the last keyframe from the predictions ``motions`` (the constant-velocity one
+    first, when ``tracking``: a velocity is known), else searched against the last scan, until
+    one match reaches ``integrate_confidence``; else against the ``older`` keyframes, until two
+    matches against different scans corroborate each other (:func:`corroborated`). When none
+    does, the most confident attempt is returned (the guess a new piece starts from).
+    ``count(stage, seconds)`` is told where the time went."""
+    threshold = config.integrate_confidence
+    here, poses, pieces = references.here, references.poses, references.pieces
+    attempts: list[Attempt] = []
+
+    def attempt(
+        stage: str, reference: Reference, search: bool, guesses_from_last: list[Pose]
+    ) -> Attempt:
+        started = time.perf_counter()
+        anchor = reference.anchor
+        # The predictions, from the reference's frame.
+        T_ref_last = se2.between(se2.compose(poses[anchor.keyframe], anchor.T_keyframe_scan), here)
+        guesses = [se2.compose(T_ref_last, m) for m in guesses_from_last]
+        result = integrate(
+            reference.segments,
+            new,
+            config.integrate,
+            heuristics=HEURISTICS if search else (),
+            extra_hypotheses=hypotheses_of(guesses),
+            views=(reference.view, view),
+        )
+        T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
+        done = Attempt(
+            result,
+            anchor,
+            reference.segments,
+            se2.compose(poses[anchor.keyframe], T_keyframe_new),
+            pieces[anchor.keyframe],
+            stage,
+        )
+        attempts.append(done)
+        checked = result.seconds.get("confidence", 0.0)
+        count(stage, time.perf_counter() - started - checked)
+        count("confidence", checked)
+        return done
+
+    rivals_disagree = False
+
+    def settled() -> Attempt | None:
+        # A match against the last keyframe or the last scan settles it alone; one against an
+        # older keyframe (tried because those failed: the best of several tries), or any
+        # match once two likely ones disagree, only with another match that corroborates it.
+        if rivals_disagree:
+            return corroborated(attempts)
+        recent = [a for a in attempts if a.stage != "recent"]
+        best = max(recent, key=lambda a: a.result.confidence, default=None)
+        if best is not None and best.result.confidence >= threshold:
+            return best
+        return corroborated(attempts)
+
+    def keyframe_reference(keyframe: int) -> Reference:
+        scan = references.scans[keyframe]
+        return Reference(scan.segments, scan.view, Anchor(keyframe, (0.0, 0.0, 0.0)))
+
+    if tracking:
+        # Tracking needs a prediction: after a new piece starts nothing is known of the
+        # motion, and "did not move" refined in a corridor stays where it started.
+        start = keyframe_reference(references.keyframe)
+        # A fast laser's prediction is good: refined alone, it lands next to it. When it lands
+        # farther, or is not confident, it is refined again with rivals a wrong minimum cannot
+        # hide from: turned either way (a turn that starts between two scans is the usual
+        # miss), and a quarter and a half turn (a room of right angles fits those ways too:
+        # the look-alike's rival, or the right answer when the prediction found the look-alike).
+        quick = attempt("track", start, False, motions[:1])
+        if quick.result.confidence >= threshold and close_to(
+            se2.between(here, quick.pose), motions[0], NEAR, NEAR_ANGLE
+        ):
+            return quick, True, True
+        attempts.remove(quick)
+        x, y, theta = motions[0]
+        rivals = [(x, y, theta + d) for d in (*TRACK_TURNS, *LOOK_ALIKE_TURNS) if d]
+        track = attempt("track", start, False, motions + rivals)
+        if track.result.confidence >= threshold:
+            # Far from the prediction (or it would have settled above), the placement may be
+            # a look-alike the prediction led to: the search with no guess confirms it, or
+            # finds a likely rival, and then neither settles alone.
+            search = attempt("search", references.last, True, motions)
+            rivals_disagree = search.result.confidence >= LIKELY and not close_to(
+                search.pose, track.pose, RIGHT_DISTANCE, RIGHT_ANGLE
+            )
+            if not rivals_disagree:
+                return track, True, True
+        elif (done := settled()) is not None:
+            return done, True, True
+    if not any(a.stage == "search" for a in attempts):
+        attempt("search", references.last, True, motions)
+    if (done := settled()) is not None:
+        return done, True, False
+    for k in references.older:
+        attempt("recent", keyframe_reference(k), True, motions)
+        if (done := settled()) is not None:
+            return done, True, False
+    return max(attempts, key=lambda a: a.result.confidence), False, False

@@ -37,7 +37,7 @@ import dataclasses
 import time
 import traceback
 from collections.abc import Callable
-from typing import TypeVar
+from typing import NamedTuple, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,9 +59,19 @@ from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
 FloatArray = NDArray[np.float64]
 Pose = tuple[float, float, float]
 T = TypeVar("T")
-# A piece's origin as the front end guessed it when the robot was lost: the keyframe it was
-# lost near, and T_keyframe_piece by its best match.
-LostFrom = tuple[int, Pose]
+
+
+class LostFrom(NamedTuple):
+    """Where a piece started: the front end's guess of its origin (the keyframe the best match
+    was against, and T_keyframe_piece by that match, right or not), and where the robot's last
+    placed scan was (its keyframe and T_keyframe_scan): the piece's first scan is the next
+    scan, so the robot was there one scan interval before."""
+
+    keyframe: int
+    T_keyframe_piece: Pose
+    last_keyframe: int
+    T_last_keyframe_scan: Pose
+
 
 # Pieces followed back along the chain of losses when joining (a piece lost from a piece
 # lost from a third ...).
@@ -73,6 +83,12 @@ _WINDOW = 3
 # covariances inflated this many times (drift the graph does not model: biased matches).
 _CHI2_3DOF_999 = 16.27
 _GATE_INFLATION = 4.0
+# A robot turns less than a quarter turn between two consecutive scans (at most 79 deg on the
+# shared logs, whose scans are up to 1.5 m apart): a join that turns a piece's first scan more
+# than this from the robot's last placed scan is the half-turned look-alike of a symmetric
+# corridor, not the robot's motion.
+_TURN_BETWEEN_SCANS = np.pi / 2
+_ORIGIN: Pose = (0.0, 0.0, 0.0)
 # Two closures are neighbours (checked against each other) when both ends are within this many
 # keyframes; their cycle must close within the correctness tolerance, plus this share of the
 # path the cycle runs along.
@@ -378,20 +394,15 @@ class LoopCloser:
         return [c.closure for c in (*partners, candidate)]
 
     def _agrees_with_graph(self, first: int, second: int, T_first_second: Pose) -> bool:
-        """The Mahalanobis gate of a loop closure: where the closure puts keyframe ``second``
-        (keyframe ``first``'s pose composed with it) against where the graph has it, with the
-        two keyframes' marginal covariances (``first``'s carried over by the lever arm, their
-        correlation ignored: a wider gate), inflated ``_GATE_INFLATION`` times against drift the
-        graph does not model, plus the correctness tolerance; chi-square 3 dof, 99.9 %."""
-        a = np.asarray(self.keyframes.pose(first))
-        b = np.asarray(self.keyframes.pose(second))
-        found = np.asarray(se2.compose(tuple(a), T_first_second))
-        delta = found - b
-        delta[2] = float(se2.wrap_angle(delta[2]))
-        lever = np.array([[1.0, 0.0, -(found[1] - a[1])], [0.0, 1.0, found[0] - a[0]], [0, 0, 1]])
-        sigma_a = _world_covariance(self.graph.covariance(first), float(a[2]))
-        sigma_b = _world_covariance(self.graph.covariance(second), float(b[2]))
-        sigma = _GATE_INFLATION * (lever @ sigma_a @ lever.T + sigma_b)
+        """The Mahalanobis gate of a loop closure: the closure's relative pose of the two
+        keyframes against the graph's, with the covariance of the graph's relative pose (from
+        the two keyframes' joint marginal: what the path between them leaves uncertain, not
+        what both inherit from far back), inflated ``_GATE_INFLATION`` times against drift
+        the graph does not model, plus the correctness tolerance; chi-square 3 dof, 99.9 %."""
+        predicted = se2.between(self.keyframes.pose(first), self.keyframes.pose(second))
+        dx, dy, dtheta = se2.between(predicted, T_first_second)
+        delta = np.array([dx, dy, dtheta])
+        sigma = _GATE_INFLATION * self.graph.relative_covariance(first, second)
         sigma += np.diag([RIGHT_DISTANCE**2, RIGHT_DISTANCE**2, RIGHT_ANGLE**2])
         return float(delta @ np.linalg.solve(sigma, delta)) <= _CHI2_3DOF_999
 
@@ -430,12 +441,14 @@ class LoopCloser:
         keyframe's window is matched with the other piece's keyframes near where the guess
         puts it. Matches are searched with no guess (the guess one more hypothesis), so a
         guess that fits a symmetric corridor turned round as well as the right way has a
-        rival. A confident match that **agrees with the guess** joins (two matches of
-        different scans found the same placement); one that does not waits, within a region
-        around the guess (the robot does not jump: its last placed scan was near), for a
-        second one from another keyframe that puts the piece at the same place (any heading:
-        a guess that was not confident may be turned round). The younger piece then moves
-        into the older one's frame."""
+        rival. A match is confident at ``loop_confidence``, as a loop closure, and must not
+        turn the robot round between its last placed scan and the piece's first (a
+        symmetric corridor's half-turned look-alike). One that **agrees with the guess**
+        joins (two matches of different scans found the same placement); one that does not
+        waits, within a region around the guess (the robot does not jump: its last placed
+        scan was near), for a second one from another keyframe that puts the piece at the
+        same place (any heading: a guess that was not confident may be turned round). The
+        younger piece then moves into the older one's frame."""
         piece = self.keyframes.piece(index)
         # The pieces the robot was lost from, one after the other (a piece of one scan, lost
         # again at once, never grows to join by itself): each with the guess of this piece's
@@ -444,7 +457,7 @@ class LoopCloser:
         T_piece_here: Pose = (0.0, 0.0, 0.0)
         current = piece
         while current in self._lost_from and len(chain) < _CHAIN:
-            keyframe, T_keyframe_current = self._lost_from[current]
+            keyframe, T_keyframe_current, _, _ = self._lost_from[current]
             other = self.keyframes.piece(keyframe)
             if other == piece:
                 break  # joined already (through another keyframe)
@@ -486,15 +499,19 @@ class LoopCloser:
             )
             result = self._match_windows(first, mine, predicted)
             found = _pose(result.T_1_2)
-            if (
-                _close(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE)
-                and result.confidence >= config.integrate_confidence
-            ):
-                return [self._join(first, mine, found, result.confidence)]
             if result.confidence < config.loop_confidence:
                 self._refuse("confidence (join)")
                 continue
-            if not _close(found, predicted, radius, np.pi):
+            if depth == 0 and not self._robot_did_not_turn_round(piece, first, mine, found):
+                self._refuse("turned round from the robot's last pose (join)")
+                continue
+            if mine != piece and _close(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE):
+                # The guess came from the piece's first scan: only another keyframe's match
+                # is a second opinion.
+                return [self._join(first, mine, found, result.confidence)]
+            # Any heading where the robot's last placed scan rules out a half turn (above);
+            # through a chain of pieces nothing does, and the chained guess must.
+            if not _close(found, predicted, radius, np.pi if depth == 0 else _TURN_BETWEEN_SCANS):
                 self._refuse("far from the guess (join)")
                 continue
             T_found = se2.compose(
@@ -509,6 +526,23 @@ class LoopCloser:
                 continue
             return [self._join(first, mine, found, result.confidence)]
         return []
+
+    def _robot_did_not_turn_round(
+        self, piece: int, first: int, mine: int, T_first_mine: Pose
+    ) -> bool:
+        """Would joining ``piece`` by this match (keyframe ``mine`` of the piece placed in
+        keyframe ``first``'s frame) keep the robot's motion between its last placed scan and
+        the piece's first scan within ``_TURN_BETWEEN_SCANS``? True when the last placed scan
+        is not in ``first``'s piece (nothing to compare)."""
+        lost = self._lost_from.get(piece)
+        if lost is None or self.keyframes.piece(lost.last_keyframe) != self.keyframes.piece(first):
+            return True
+        last_scan = se2.compose(self.keyframes.pose(lost.last_keyframe), lost.T_last_keyframe_scan)
+        T_other_mine = se2.compose(self.keyframes.pose(first), T_first_mine)
+        # The piece's first scan is the origin of its frame.
+        T_other_piece = se2.compose(T_other_mine, se2.between(self.keyframes.pose(mine), _ORIGIN))
+        first_scan = se2.compose(T_other_piece, self.keyframes.pose(piece))
+        return abs(se2.between(last_scan, first_scan)[2]) <= _TURN_BETWEEN_SCANS
 
     def _join(
         self, first: int, second: int, T_first_second: Pose, confidence: float
@@ -533,13 +567,6 @@ class LoopCloser:
         self._lost_from.pop(moved, None)
         self._path_since_closure[kept] = 0.0
         return (moved, kept, T_kept_moved)
-
-
-def _world_covariance(covariance: FloatArray, theta: float) -> FloatArray:
-    """A Pose2 marginal covariance (body-frame tangent x, y, theta) in world axes."""
-    c, s = np.cos(theta), np.sin(theta)
-    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return np.asarray(R @ covariance @ R.T)
 
 
 def _pose(T_1_2: FloatArray) -> Pose:

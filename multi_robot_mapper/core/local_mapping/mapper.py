@@ -39,13 +39,11 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import SegmentScan
 from multi_robot_mapper.core.geometry import lines_of
 from multi_robot_mapper.core.local_mapping.attempts import (
-    NEAR,
-    NEAR_ANGLE,
     Anchor,
     Attempt,
-    close_to,
-    corroborated,
-    hypotheses_of,
+    Reference,
+    References,
+    match_scan,
     pose_of_match,
 )
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
@@ -56,10 +54,7 @@ from multi_robot_mapper.core.local_mapping.loop_closer import (
     LoopCloser,
     LostFrom,
 )
-from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
-from multi_robot_mapper.core.matching.confidence import (
-    TRACK_TURNS,
-)
+from multi_robot_mapper.core.matching import MatchResult
 from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.scan import LaserScanData
@@ -194,7 +189,9 @@ class LocalMapper:
         if not integrated:
             # The best match, right or not, is the guess of where the new piece lies: the back
             # end joins the pieces when later keyframes confirm it (or find better).
-            lost_from = (anchor.keyframe, T_keyframe_new)
+            lost_from = LostFrom(
+                anchor.keyframe, T_keyframe_new, last.anchor.keyframe, last.anchor.T_keyframe_scan
+            )
             return self._start_piece(stamp, new, view, "lost: no confident match", lost_from)
         pose = chosen.pose
         motion = se2.between(self._placed_pose_unlocked(last.anchor), pose)
@@ -224,26 +221,16 @@ class LocalMapper:
     def _match(
         self, last: _Last, new: FloatArray, view: LaserScanData, dt: float
     ) -> tuple[Attempt, bool]:
-        """The placement of the new scan, and whether to integrate it: against the last
-        keyframe from the predictions, else searched against the last scan, until one match
-        reaches ``integrate_confidence``; else against up to ``recent_keyframes`` older
-        keyframes, until two matches against different scans corroborate each other
-        (:func:`corroborated`). When none does, the most confident attempt is returned (the
-        guess a new piece starts from)."""
+        """The placement of the new scan and whether to integrate it (:func:`match_scan`),
+        against the references as they are now."""
         config = self.config
-        threshold = config.integrate_confidence
         keyframe = last.anchor.keyframe
         # The constant-velocity prediction and "did not move", from the last scan.
         motions: list[Pose] = [(0.0, 0.0, 0.0)]
         if self._velocity is not None:
             vx, vy, vtheta = (float(v) for v in self._velocity * dt)
             motions.insert(0, (vx, vy, vtheta))
-        # Refining one prediction finds the nearest minimum, right or not, and no rival to
-        # doubt it: the prediction turned either way is refined too (a turn that starts
-        # between two scans is the usual miss), so a wrong minimum has rivals.
-        turned = [(m[0], m[1], m[2] + d) for m in motions[:1] for d in TRACK_TURNS if d]
         with self._lock:
-            here = self._placed_pose_unlocked(last.anchor)
             piece = self._pieces[keyframe]
             newest_first = sorted(self._poses, reverse=True)
             older = [k for k in newest_first if k != keyframe and self._pieces[k] == piece]
@@ -252,86 +239,20 @@ class LocalMapper:
             # person in front of the laser) sees its old surroundings again.
             others = [k for k in newest_first if self._pieces[k] != piece]
             older += others[: config.recent_keyframes]
-            poses = {k: self._poses[k] for k in (keyframe, *older)}
-            pieces = {k: self._pieces[k] for k in (keyframe, *older)}
-        attempts: list[Attempt] = []
-
-        def attempt(
-            stage: str,
-            reference: FloatArray,
-            ref_view: LaserScanData,
-            anchor: Anchor,
-            search: bool,
-            guesses_from_last: list[Pose],
-        ) -> Attempt:
-            started = time.perf_counter()
-            # The predictions, from the reference's frame.
-            T_ref_last = se2.between(
-                se2.compose(poses[anchor.keyframe], anchor.T_keyframe_scan), here
+            references = References(
+                here=self._placed_pose_unlocked(last.anchor),
+                last=Reference(last.segments, last.view, last.anchor),
+                keyframe=keyframe,
+                older=older,
+                poses={k: self._poses[k] for k in (keyframe, *older)},
+                pieces={k: self._pieces[k] for k in (keyframe, *older)},
+                scans={k: self._scans[k] for k in (keyframe, *older)},
             )
-            guesses = [se2.compose(T_ref_last, m) for m in guesses_from_last]
-            result = integrate(
-                reference,
-                new,
-                config.integrate,
-                heuristics=HEURISTICS if search else (),
-                extra_hypotheses=hypotheses_of(guesses),
-                views=(ref_view, view),
-            )
-            T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
-            done = Attempt(
-                result,
-                anchor,
-                reference,
-                se2.compose(poses[anchor.keyframe], T_keyframe_new),
-                pieces[anchor.keyframe],
-                stage,
-            )
-            attempts.append(done)
-            checked = result.seconds.get("confidence", 0.0)
-            self._count(stage, time.perf_counter() - started - checked)
-            self._count("confidence", checked)
-            return done
-
-        def settled() -> Attempt | None:
-            # A match against the last keyframe or the last scan settles it alone; one against
-            # an older keyframe (tried because those failed: the best of several tries) only
-            # with another match that corroborates it.
-            recent = [a for a in attempts if a.stage != "recent"]
-            best = max(recent, key=lambda a: a.result.confidence, default=None)
-            if best is not None and best.result.confidence >= threshold:
-                return best
-            return corroborated(attempts)
-
-        if self._velocity is not None:
-            # Tracking needs a prediction: after a new piece starts nothing is known of the
-            # motion, and "did not move" refined in a corridor stays where it started.
-            start = self._scans[keyframe]
-            anchor = Anchor(keyframe, (0.0, 0.0, 0.0))
-            # A fast laser's prediction is good: refined alone, it lands next to it. When it
-            # lands farther, or is not confident, it is refined again with its turned copies
-            # (rivals that a wrong minimum cannot hide from).
-            quick = attempt("track", start.segments, start.view, anchor, False, motions[:1])
-            if quick.result.confidence >= threshold and close_to(
-                se2.between(here, quick.pose), motions[0], NEAR, NEAR_ANGLE
-            ):
-                self.scans_tracked += 1
-                return quick, True
-            attempts.remove(quick)
-            attempt("track", start.segments, start.view, anchor, False, motions + turned)
-            if (done := settled()) is not None:
-                self.scans_tracked += 1
-                return done, True
-        attempt("search", last.segments, last.view, last.anchor, True, motions)
-        if (done := settled()) is not None:
-            return done, True
-        for k in older:
-            candidate = self._scans[k]
-            anchor = Anchor(k, (0.0, 0.0, 0.0))
-            attempt("recent", candidate.segments, candidate.view, anchor, True, motions)
-            if (done := settled()) is not None:
-                return done, True
-        return max(attempts, key=lambda a: a.result.confidence), False
+        chosen, integrated, tracked = match_scan(
+            config, references, new, view, motions, self._velocity is not None, self._count
+        )
+        self.scans_tracked += tracked
+        return chosen, integrated
 
     def _known_view(self, pose: Pose, piece: int) -> Anchor | None:
         """The anchor on the nearest keyframe of ``piece`` within ``keyframe_distance`` and

@@ -53,6 +53,10 @@ LIKELY = 0.5
 # prediction is refined turned by these (rad) too, so that a wrong minimum has rivals (a turn
 # that starts between two scans is the usual miss of a constant-velocity prediction).
 TRACK_TURNS = (-0.4, -0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3, 0.4)
+# Buildings are made of right angles: a room or a crossing fits a quarter or a half turn away
+# as well as the right way. A prediction refined turned by these (rad) as well finds that
+# look-alike's rival, or the right placement when a wrong prediction found the look-alike.
+LOOK_ALIKE_TURNS = (np.pi / 2, -np.pi / 2, np.pi)
 
 
 @dataclasses.dataclass(frozen=True)
