@@ -18,7 +18,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError
-from multi_robot_mapper.core.local_mapping import mapper as mapper_module
+from multi_robot_mapper.core.local_mapping import attempts as front_end_attempts
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import (
     LaserModel,
@@ -370,7 +370,7 @@ def test_an_error_inside_the_local_mapper_is_logged_and_the_map_kept(
     def broken(*args: object, **kwargs: object) -> None:
         raise RuntimeError("simulated bug")  # in the middle of matching a scan
 
-    monkeypatch.setattr(mapper_module, "integrate", broken)
+    monkeypatch.setattr(front_end_attempts, "integrate", broken)
     run = drive()
     far = len(run.scans) - 1  # the drive's last scan, not sent before
     scan = scan_to_msg(run.scans[far], "robot1/laser", stamp_from_seconds(run.stamps[-1] + 1.0))
