@@ -160,6 +160,7 @@ def match_scan(
         return done
 
     rivals_disagree = False
+    search: Attempt | None = None  # the search against the last scan, once made
 
     def settled() -> Attempt | None:
         # A match against the last keyframe or the last scan settles it alone; one against an
@@ -207,7 +208,7 @@ def match_scan(
                 return track, True, True
         elif (done := settled()) is not None:
             return done, True, True
-    if not any(a.stage == "search" for a in attempts):
+    if search is None:
         attempt("search", references.last, True, motions)
     if (done := settled()) is not None:
         return done, True, False

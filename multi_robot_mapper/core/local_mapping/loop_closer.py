@@ -516,7 +516,7 @@ class LoopCloser:
                 continue
             T_found = se2.compose(
                 se2.compose(self.keyframes.pose(first), found),
-                se2.between(self.keyframes.pose(mine), (0.0, 0.0, 0.0)),
+                se2.between(self.keyframes.pose(mine), _ORIGIN),
             )
             earlier = self._join_candidates.setdefault(piece, [])
             if not any(
