@@ -33,6 +33,7 @@ from multi_robot_mapper.core.merging.consistency import (
 )
 from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.joint import merge_joint
+from multi_robot_mapper.core.merging.motion import motion_excess, robot_reaches
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.places import MapUnit, units_of
 from multi_robot_mapper.core.pipeline import TimedLaserScan, run_offline
@@ -482,3 +483,97 @@ def test_a_link_that_breaks_a_cycle_is_refused() -> None:
     right = verdict("c", "a", 1.8, 0.0)
     closed = accept_pairs([ab, bc, right], units, CONFIG)
     assert len(closed.pairs) == 3 and closed.refused == []
+
+
+# --- Motion between a robot's pieces ---------------------------------------------------------
+
+
+def lost_once() -> tuple[dict[tuple[str, int], MapUnit], dict[tuple[str, int], np.ndarray]]:
+    """Robot ``a`` drove the corridor of :func:`line_units` at 1 m/s and was lost once: its
+    keyframes 0-9 are its map, 10-19 a second piece (its own frame at a random pose), the
+    first of them one second after the last of the map. ``b`` drove the whole corridor. The
+    units and each unit's frame in the world."""
+    wall = np.array([[-0.5, 1.0, 0.5, 1.0], [-0.5, -1.0, 0.5, -1.0]])
+    frames = {
+        ("a", 0): se2.matrix_from_pose(0.0, 0.0, 0.0),
+        ("a", 10): se2.matrix_from_pose(7.0, 4.0, 2.5),
+        ("b", 0): se2.matrix_from_pose(3.0, 0.5, 0.2),
+    }
+    keyframes: dict[str, list[Keyframe]] = {"a": [], "b": []}
+    for k in range(20):
+        T_world_keyframe = se2.matrix_from_pose(float(k), 0.0, 0.0)
+        for key in [("a", 0 if k < 10 else 10), ("b", 0)]:
+            pose = se2.pose_from_matrix(se2.invert(frames[key]) @ T_world_keyframe)
+            keyframes[key[0]].append(Keyframe(k, float(k), np.array(pose), wall, key[1]))
+    return units_of(keyframes), frames
+
+
+def piece_link(
+    units: dict[tuple[str, int], MapUnit],
+    frames: dict[tuple[str, int], np.ndarray],
+    source: tuple[str, int],
+    centre: int,
+    target: tuple[str, int],
+    keyframe: int,
+    shift: float = 0.0,
+) -> LinkCandidate:
+    """:func:`link` between any two units, confident, moved ``shift`` m along the corridor."""
+    pose_of = {key: dict(zip(u.index.tolist(), u.poses, strict=True)) for key, u in units.items()}
+    T_world_centre = frames[source] @ se2.matrix_from_pose(*pose_of[source][centre])
+    T_target_keyframe = se2.matrix_from_pose(*pose_of[target][keyframe])
+    T_world_keyframe = frames[target] @ T_target_keyframe
+    T = se2.matrix_from_pose(shift, 0.0, 0.0) @ se2.invert(T_world_keyframe) @ T_world_centre
+    return LinkCandidate(
+        source=source,
+        centre=centre,
+        target=target,
+        keyframe=keyframe,
+        T_keyframe_centre=se2.pose_from_matrix(T),
+        T_target_centre=se2.pose_from_matrix(T_target_keyframe @ T),
+        confidence=0.95,
+        fit=0.95,
+        value=20.0,
+        rank=0,
+        information=np.diag([400.0, 400.0, 1e4]),
+    )
+
+
+def test_motion_bounds_how_far_apart_a_robots_pieces_can_be_placed() -> None:
+    units, frames = lost_once()
+    reaches = robot_reaches(units, max_speed=2.0)
+    # Between keyframes of one piece the reach is the piece's own distance; across the loss
+    # it is the speed bound: 9 m, then 2 m in the one second, then 9 m.
+    np.testing.assert_allclose(reaches["a"].reach[[0, 9, 10, 19]], [0.0, 9.0, 11.0, 20.0])
+    truth = {key: frames[key] for key in [("a", 0), ("a", 10)]}
+    assert motion_excess(truth, units, reaches, slack=0.0) == 0.0
+    # The second piece placed 8 m further along: keyframe 10 lies 9 m from keyframe 9,
+    # 7 m beyond the 2 m the robot can have driven (and the 0.3 m tolerance).
+    along = {**truth, ("a", 10): se2.matrix_from_pose(8.0, 0.0, 0.0) @ frames[("a", 10)]}
+    assert motion_excess(along, units, reaches, slack=0.0) == pytest.approx(9.0 - 2.0 - 0.3)
+    # Only keyframes of different pieces are judged, and a robot with one piece placed is free.
+    assert motion_excess({("a", 10): np.eye(3)}, units, reaches, slack=0.0) == 0.0
+
+
+def test_a_piece_placed_where_its_robot_cannot_have_driven_is_refused() -> None:
+    # b's places link a's map at the truth, and a's second piece 8 m along the corridor: a
+    # look-alike set, consistent in itself and confident (three places; four for the map).
+    # Placed so, a would have driven 9 m in the second between its pieces: refused. Without
+    # motion (no reaches) both are taken; the right set for the second piece is taken.
+    units, frames = lost_once()
+    a0, a10, b = ("a", 0), ("a", 10), ("b", 0)
+
+    def verdict(piece: tuple[str, int], keyframes: tuple[int, ...], shift: float) -> PairVerdict:
+        links = [piece_link(units, frames, b, k, piece, k, shift) for k in keyframes]
+        return consistent_set((piece, b), links, units, CONFIG)
+
+    right = verdict(a0, (2, 4, 6, 8), 0.0)
+    look_alike = verdict(a10, (11, 14, 17), 8.0)
+    assert right.accepted and look_alike.accepted  # each pair alone believes its set
+    reaches = robot_reaches(units, CONFIG.max_speed)
+    accepted = accept_pairs([right, look_alike], units, CONFIG, reaches)
+    assert [v.pair for v in accepted.pairs] == [right.pair]
+    assert [v.pair for v in accepted.refused] == [look_alike.pair]
+    assert "max_speed" in accepted.refused[0].reason
+    assert len(accept_pairs([right, look_alike], units, CONFIG).pairs) == 2
+    both = accept_pairs([right, verdict(a10, (11, 14, 17), 0.0)], units, CONFIG, reaches)
+    assert len(both.pairs) == 2 and both.refused == [] and both.groups == [[a0, a10, b]]

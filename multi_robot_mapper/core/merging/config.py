@@ -377,6 +377,15 @@ class MergeConfig:
         minimum=0.0,
         maximum=1.0,
     )
+    max_speed: float = param(
+        2.0,
+        unit="m/s",
+        doc="the fastest any robot drives: a merge that puts two keyframes of one robot, in "
+        "two of its pieces, farther apart than it can have driven between their stamps is "
+        "refused (a piece placed at a look-alike of the place it followed)",
+        minimum=0.01,
+        maximum=100.0,
+    )
     link_sigma: float = param(
         0.05,
         unit="m",

@@ -32,7 +32,9 @@ A pair joining two groups of maps joins them; a pair whose maps are already join
 cycle, and is accepted only when the cycle through its best link and the best links of the
 chain joining its maps closes within the same tolerance (per metre of the maps the cycle runs
 through): a link that breaks a cycle is refused. Three robots that see each other check each
-other.
+other. A pair joining two groups is refused when the joined group would need one robot to
+drive faster than ``max_speed`` between two of its pieces
+(:mod:`~multi_robot_mapper.core.merging.motion`): the cycle a robot's own motion closes.
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ from multi_robot_mapper.core.merging.free_space import (
     free_space_conflict,
     seen_through_allowance,
 )
+from multi_robot_mapper.core.merging.motion import RobotReach, motion_excess
 from multi_robot_mapper.core.merging.place_links import LinkCandidate, segments_near
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
 
@@ -260,8 +263,7 @@ def seen_through_near(
     elsewhere (4.4 m allowed)."""
     best = oriented(max(links, key=lambda c: c.fit), links[0].source)
     first, second = units[best.first], units[best.second]
-    a, b = _poses(first, [best.k_first]), _poses(second, [best.k_second])
-    T_first_second = se2.matrix_from_pose(*a[0]) @ best.T @ se2.invert(se2.matrix_from_pose(*b[0]))
+    T_first_second = _link_placement(best, units)
     reach = 2.0 * config.place_radius
     sides = [oriented(c, best.first) for c in links]
     near_first = _poses(first, [lk.k_first for lk in sides])[:, :2]
@@ -356,18 +358,29 @@ class Accepted:
     """The pairs accepted and the groups of maps they join."""
 
     pairs: list[PairVerdict]  # accepted, in the order taken
-    refused: list[PairVerdict]  # consistent within the pair but breaking a cycle
+    refused: list[PairVerdict]  # consistent within the pair, refused over the groups
     groups: list[list[UnitKey]]  # connected maps, largest first
     tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]]  # spanning tree adjacency
 
 
 def accept_pairs(
-    verdicts: Sequence[PairVerdict], units: Mapping[UnitKey, MapUnit], config: MergeConfig
+    verdicts: Sequence[PairVerdict],
+    units: Mapping[UnitKey, MapUnit],
+    config: MergeConfig,
+    reaches: Mapping[str, RobotReach] | None = None,
 ) -> Accepted:
-    """Pairs by weight, best first: a pair joining two groups joins them; one inside a group
-    must close the cycle through the group's tree (module doc)."""
+    """Pairs by weight, best first: a pair joining two groups joins them, one inside a group
+    must close the cycle through the group's tree (module doc). With ``reaches``
+    (:mod:`~multi_robot_mapper.core.merging.motion`) a join is refused when the joined group
+    would need a robot to drive faster than ``max_speed`` between two of its pieces."""
     order = sorted((v for v in verdicts if v.accepted), key=lambda v: (-v.weight, v.pair))
     parent: dict[UnitKey, UnitKey] = {key: key for key in units}
+    # Each group's maps placed rigidly in its root's frame along the tree's best links.
+    placed: dict[UnitKey, dict[UnitKey, FloatArray]] = {key: {key: np.eye(3)} for key in units}
+    tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]] = {key: [] for key in units}
+    taken: list[PairVerdict] = []
+    refused: list[PairVerdict] = []
+    slack = config.link_pair_slack
 
     def root(key: UnitKey) -> UnitKey:
         while parent[key] != key:
@@ -375,23 +388,31 @@ def accept_pairs(
             key = parent[key]
         return key
 
-    tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]] = {key: [] for key in units}
-    taken: list[PairVerdict] = []
-    refused: list[PairVerdict] = []
+    def refuse(verdict: PairVerdict, reason: str) -> None:
+        refused.append(dataclasses.replace(verdict, accepted=False, reason=reason))
+
     for verdict in order:
         a, b = verdict.pair
-        if root(a) != root(b):
-            parent[root(b)] = root(a)
-            tree[a].append((b, verdict))
-            tree[b].append((a, verdict))
-            taken.append(verdict)
+        if root(a) == root(b):
+            chain = _tree_path(tree, b, a)  # b ... a through the tree, then the new link a -> b
+            if closes([_best(v, x) for x, v in chain] + [_best(verdict, a)], units, config):
+                taken.append(verdict)
+            else:
+                refuse(verdict, "breaks a cycle")
             continue
-        chain = _tree_path(tree, b, a)  # b ... a through the tree, then the new link a -> b
-        links = [_best(v, x) for x, v in chain] + [_best(verdict, a)]
-        if closes(links, units, config):
-            taken.append(verdict)
-        else:
-            refused.append(dataclasses.replace(verdict, accepted=False, reason="breaks a cycle"))
+        group_a, group_b = placed[root(a)], placed[root(b)]
+        T_ra_rb = group_a[a] @ placement(verdict, a, units) @ se2.invert(group_b[b])
+        joined = {**group_a, **{key: T_ra_rb @ T for key, T in group_b.items()}}
+        excess = 0.0 if reaches is None else motion_excess(joined, units, reaches, slack)
+        if excess > 0.0:
+            refuse(verdict, f"a robot would drive {excess:.1f} m beyond max_speed")
+            continue
+        del placed[root(b)]
+        placed[root(a)] = joined
+        parent[root(b)] = root(a)
+        tree[a].append((b, verdict))
+        tree[b].append((a, verdict))
+        taken.append(verdict)
     groups: dict[UnitKey, list[UnitKey]] = {}
     for key in units:
         groups.setdefault(root(key), []).append(key)
@@ -405,6 +426,19 @@ def accept_pairs(
 def _best(verdict: PairVerdict, first: UnitKey) -> OrientedLink:
     """The set's best-fitting link, read from map ``first``."""
     return oriented(max(verdict.links, key=lambda c: c.fit), first)
+
+
+def placement(verdict: PairVerdict, first: UnitKey, units: Mapping[UnitKey, MapUnit]) -> FloatArray:
+    """T_first_second: the pair's other map placed in map ``first`` as a rigid body, by the
+    set's best-fitting link."""
+    return _link_placement(_best(verdict, first), units)
+
+
+def _link_placement(link: OrientedLink, units: Mapping[UnitKey, MapUnit]) -> FloatArray:
+    """T_first_second by one link: its keyframes' poses in their maps, and the link."""
+    a = _poses(units[link.first], [link.k_first])[0]
+    b = _poses(units[link.second], [link.k_second])[0]
+    return se2.matrix_from_pose(*a) @ link.T @ se2.invert(se2.matrix_from_pose(*b))
 
 
 def _tree_path(

@@ -17,7 +17,8 @@ segments in its own frame). Each piece of each robot is a map of its own (a
    heaviest set of mutually consistent links (PCM), accepted when confident or supported by
    enough places, unique, and leaving the walls near its places out of the free space the
    other robot saw; pairs taken best first, a pair closing a cycle only when the cycle
-   closes;
+   closes, a pair joining two groups only when no robot would have to drive faster than
+   ``max_speed`` between two of its pieces (:mod:`~multi_robot_mapper.core.merging.motion`);
 4. **one graph** (:class:`~multi_robot_mapper.core.pose_graph.PoseGraph`, gtsam) of every
    keyframe of the maps joined to the reference: edges between a map's keyframes from their
    published poses (consecutive keyframes, and keyframes within ``graph_radius``: the wire
@@ -52,12 +53,13 @@ from multi_robot_mapper.core.merging.consistency import (
     PairVerdict,
     accept_pairs,
     consistent_set,
-    oriented,
+    placement,
     seen_through_near,
 )
 from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.global_map import fuse_keyframes
 from multi_robot_mapper.core.merging.link_graph import MergeResult
+from multi_robot_mapper.core.merging.motion import robot_reaches
 from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.place_matching import (
@@ -130,7 +132,9 @@ def merge_joint(
     )
     matched = time.perf_counter()
     verdicts = _verdicts(units, matches, config)
-    accepted = accept_pairs(list(verdicts.values()), units, config)
+    accepted = accept_pairs(
+        list(verdicts.values()), units, config, robot_reaches(units, config.max_speed)
+    )
     checked = time.perf_counter()
     previous_reference = None if previous is None else previous.reference
     group, ref_unit = _reference(accepted, units, chosen, previous_reference)
@@ -386,11 +390,7 @@ def _rigid_placements(
         for other, verdict in sorted(accepted.tree[key], key=lambda item: item[0]):
             if other in placed:
                 continue
-            link = oriented(max(verdict.links, key=lambda c: c.fit), key)
-            first, second = units[link.first], units[link.second]
-            T_first_k = se2.matrix_from_pose(*first.poses[first.row(link.k_first)])
-            T_second_k = se2.matrix_from_pose(*second.poses[second.row(link.k_second)])
-            placed[other] = placed[key] @ T_first_k @ link.T @ se2.invert(T_second_k)
+            placed[other] = placed[key] @ placement(verdict, key, units)
             queue.append(other)
     return placed
 
