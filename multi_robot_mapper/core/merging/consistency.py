@@ -35,6 +35,8 @@ through): a link that breaks a cycle is refused. Three robots that see each othe
 other. A pair joining two groups is refused when the joined group would need one robot to
 drive faster than ``max_speed`` between two of its pieces
 (:mod:`~multi_robot_mapper.core.merging.motion`): the cycle a robot's own motion closes.
+Such a refusal proves a look-alike at least as heavy as the refused set; the pairs are then
+taken again with only the sets that outweigh it ``link_set_uniqueness`` times.
 """
 
 from __future__ import annotations
@@ -363,6 +365,9 @@ class Accepted:
     tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]]  # spanning tree adjacency
 
 
+_TOO_FAST = "a robot would drive"
+
+
 def accept_pairs(
     verdicts: Sequence[PairVerdict],
     units: Mapping[UnitKey, MapUnit],
@@ -372,7 +377,32 @@ def accept_pairs(
     """Pairs by weight, best first: a pair joining two groups joins them, one inside a group
     must close the cycle through the group's tree (module doc). With ``reaches``
     (:mod:`~multi_robot_mapper.core.merging.motion`) a join is refused when the joined group
-    would need a robot to drive faster than ``max_speed`` between two of its pieces."""
+    would need a robot to drive faster than ``max_speed`` between two of its pieces.
+
+    Such a refusal proves that a wrong set at least as heavy as the refused one is among the
+    pairs (the refused set, or one of the heavier sets that placed its maps): a look-alike
+    here reaches that weight. Every set is then a rival of it, and as a pair's set must
+    outweigh its rival ``link_set_uniqueness`` times, the pairs are taken again with only the
+    sets that outweigh the heaviest set so refused as much (until no heavier one is)."""
+    accepted = _take_pairs(verdicts, units, config, reaches, 0.0)
+    proven = 0.0
+    while True:
+        refused = [v.weight for v in accepted.refused if v.reason.startswith(_TOO_FAST)]
+        if max(refused, default=0.0) <= proven:
+            return accepted
+        proven = max(refused)
+        floor = config.link_set_uniqueness * proven
+        accepted = _take_pairs(verdicts, units, config, reaches, floor)
+
+
+def _take_pairs(
+    verdicts: Sequence[PairVerdict],
+    units: Mapping[UnitKey, MapUnit],
+    config: MergeConfig,
+    reaches: Mapping[str, RobotReach] | None,
+    floor: float,
+) -> Accepted:
+    """One pass of :func:`accept_pairs`: sets lighter than ``floor`` are refused."""
     order = sorted((v for v in verdicts if v.accepted), key=lambda v: (-v.weight, v.pair))
     parent: dict[UnitKey, UnitKey] = {key: key for key in units}
     # Each group's maps placed rigidly in its root's frame along the tree's best links.
@@ -393,6 +423,9 @@ def accept_pairs(
 
     for verdict in order:
         a, b = verdict.pair
+        if verdict.weight < floor:
+            refuse(verdict, f"no heavier than a look-alike here ({floor:.2f} needed)")
+            continue
         if root(a) == root(b):
             chain = _tree_path(tree, b, a)  # b ... a through the tree, then the new link a -> b
             if closes([_best(v, x) for x, v in chain] + [_best(verdict, a)], units, config):
@@ -405,7 +438,7 @@ def accept_pairs(
         joined = {**group_a, **{key: T_ra_rb @ T for key, T in group_b.items()}}
         excess = 0.0 if reaches is None else motion_excess(joined, units, reaches, slack)
         if excess > 0.0:
-            refuse(verdict, f"a robot would drive {excess:.1f} m beyond max_speed")
+            refuse(verdict, f"{_TOO_FAST} {excess:.1f} m beyond max_speed")
             continue
         del placed[root(b)]
         placed[root(a)] = joined

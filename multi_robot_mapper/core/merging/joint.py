@@ -18,7 +18,8 @@ segments in its own frame). Each piece of each robot is a map of its own (a
    enough places, unique, and leaving the walls near its places out of the free space the
    other robot saw; pairs taken best first, a pair closing a cycle only when the cycle
    closes, a pair joining two groups only when no robot would have to drive faster than
-   ``max_speed`` between two of its pieces (:mod:`~multi_robot_mapper.core.merging.motion`);
+   ``max_speed`` between two of its pieces (:mod:`~multi_robot_mapper.core.merging.motion`),
+   and, once a set is refused so, only sets that outweigh it ``link_set_uniqueness`` times;
 4. **one graph** (:class:`~multi_robot_mapper.core.pose_graph.PoseGraph`, gtsam) of every
    keyframe of the maps joined to the reference: edges between a map's keyframes from their
    published poses (consecutive keyframes, and keyframes within ``graph_radius``: the wire
