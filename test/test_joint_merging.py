@@ -552,6 +552,14 @@ def test_motion_bounds_how_far_apart_a_robots_pieces_can_be_placed() -> None:
     assert motion_excess(along, units, reaches, slack=0.0) == pytest.approx(9.0 - 2.0 - 0.3)
     # Only keyframes of different pieces are judged, and a robot with one piece placed is free.
     assert motion_excess({("a", 10): np.eye(3)}, units, reaches, slack=0.0) == 0.0
+    # A robot whose stamps do not increase (no clock) is bound by nothing between its pieces.
+    for stamps in (np.zeros(20), np.r_[np.arange(10.0), np.nan, np.arange(11.0, 20.0)]):
+        unclocked = {
+            key: dataclasses.replace(u, stamps=stamps[u.index]) for key, u in units.items()
+        }
+        free = robot_reaches(unclocked, max_speed=2.0)
+        assert np.isinf(free["a"].reach[-1])
+        assert motion_excess(along, unclocked, free, slack=0.0) == 0.0
 
 
 def test_a_piece_placed_where_its_robot_cannot_have_driven_is_refused() -> None:

@@ -47,7 +47,9 @@ class RobotReach:
 def robot_reaches(units: Mapping[UnitKey, MapUnit], max_speed: float) -> dict[str, RobotReach]:
     """Each robot's :class:`RobotReach`: a step between two keyframes of one map is the
     distance the map puts between them; a step between maps is ``max_speed`` (m/s) times the
-    time between their stamps."""
+    time between their stamps. Keyframes are taken in index order (the order the robot made
+    them); a robot whose stamps do not increase with it (no clock, a replay gone wrong) gets
+    no bound between its maps: its time says nothing."""
     by_robot: dict[str, list[UnitKey]] = {}
     for key in sorted(units):
         by_robot.setdefault(key[0], []).append(key)
@@ -55,14 +57,17 @@ def robot_reaches(units: Mapping[UnitKey, MapUnit], max_speed: float) -> dict[st
     for robot, keys in by_robot.items():
         map_of = np.concatenate([np.full(len(units[k].index), i) for i, k in enumerate(keys)])
         rows = np.concatenate([np.arange(len(units[k].index)) for k in keys])
+        index = np.concatenate([units[k].index for k in keys])
         stamps = np.concatenate([units[k].stamps for k in keys])
         xy = np.vstack([units[k].poses[:, :2] for k in keys])
-        order = np.lexsort((rows, map_of, stamps))
+        order = np.argsort(index, kind="stable")
         map_of, rows, stamps, xy = map_of[order], rows[order], stamps[order], xy[order]
+        elapsed = np.diff(stamps)
+        clock = bool(np.isfinite(stamps).all() and (elapsed > 0.0).all())
         step = np.where(
             map_of[1:] == map_of[:-1],
             np.hypot(*np.diff(xy, axis=0).T),
-            max_speed * np.maximum(np.diff(stamps), 0.0),
+            max_speed * elapsed if clock else np.inf,
         )
         reaches[robot] = RobotReach(
             keys,
@@ -89,7 +94,9 @@ def _steps(
         T = placed[reach.maps[i]]
         xy[mine] = units[reach.maps[i]].poses[rows[mine], :2] @ T[:2, :2].T + T[:2, 2]
     maps = [reach.maps[i] for i in map_of]
-    return maps, np.hypot(*np.diff(xy, axis=0).T), np.diff(reach.reach[keep])
+    with np.errstate(invalid="ignore"):  # inf - inf: no bound after a robot without a clock
+        bound = np.nan_to_num(np.diff(reach.reach[keep]), nan=np.inf)
+    return maps, np.hypot(*np.diff(xy, axis=0).T), bound
 
 
 def motion_excess(
