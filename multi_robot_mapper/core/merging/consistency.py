@@ -365,7 +365,9 @@ class Accepted:
     tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]]  # spanning tree adjacency
 
 
-_TOO_FAST = "a robot would drive"
+# Why a pair was refused over the groups (the start of PairVerdict.reason).
+TOO_FAST = "a robot would drive"
+LOOK_ALIKE = "no heavier than a look-alike here"
 
 
 def accept_pairs(
@@ -387,7 +389,7 @@ def accept_pairs(
     accepted = _take_pairs(verdicts, units, config, reaches, 0.0)
     proven = 0.0
     while True:
-        refused = [v.weight for v in accepted.refused if v.reason.startswith(_TOO_FAST)]
+        refused = [v.weight for v in accepted.refused if v.reason.startswith(TOO_FAST)]
         if max(refused, default=0.0) <= proven:
             return accepted
         proven = max(refused)
@@ -424,7 +426,7 @@ def _take_pairs(
     for verdict in order:
         a, b = verdict.pair
         if verdict.weight < floor:
-            refuse(verdict, f"no heavier than a look-alike here ({floor:.2f} needed)")
+            refuse(verdict, f"{LOOK_ALIKE} ({floor:.2f} needed)")
             continue
         if root(a) == root(b):
             chain = _tree_path(tree, b, a)  # b ... a through the tree, then the new link a -> b
@@ -438,7 +440,7 @@ def _take_pairs(
         joined = {**group_a, **{key: T_ra_rb @ T for key, T in group_b.items()}}
         excess = 0.0 if reaches is None else motion_excess(joined, units, reaches, slack)
         if excess > 0.0:
-            refuse(verdict, f"{_TOO_FAST} {excess:.1f} m beyond max_speed")
+            refuse(verdict, f"{TOO_FAST} {excess:.1f} m beyond max_speed")
             continue
         del placed[root(b)]
         placed[root(a)] = joined

@@ -50,6 +50,8 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.consistency import (
+    LOOK_ALIKE,
+    TOO_FAST,
     Accepted,
     PairVerdict,
     accept_pairs,
@@ -485,7 +487,13 @@ def _result(
             "maps_merged": len(solved.order),
             "pairs_linked": len(accepted.pairs),
             "pairs_consistent": sum(v.accepted for v in verdicts.values()),
-            "pairs_breaking_cycles": len(accepted.refused),
+            "pairs_breaking_cycles": sum(v.reason == "breaks a cycle" for v in accepted.refused),
+            # joins that would make a robot drive faster than max_speed, and sets refused as
+            # no heavier than such a proven look-alike (consistency.accept_pairs)
+            "pairs_too_fast": sum(v.reason.startswith(TOO_FAST) for v in accepted.refused),
+            "pairs_like_a_look_alike": sum(
+                v.reason.startswith(LOOK_ALIKE) for v in accepted.refused
+            ),
             "links_accepted": len(solved.accepted),
             "link_candidates": sum(len(v.links) for v in verdicts.values()),
             "graph_nodes": solved.nodes,
