@@ -16,6 +16,8 @@ from collections.abc import Sequence
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_merging import LASER, random_frames, stranger_walls
 
 from multi_robot_mapper.core import se2
@@ -560,6 +562,31 @@ def test_motion_bounds_how_far_apart_a_robots_pieces_can_be_placed() -> None:
         free = robot_reaches(unclocked, max_speed=2.0)
         assert np.isinf(free["a"].reach[-1])
         assert motion_excess(along, unclocked, free, slack=0.0) == 0.0
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    x=st.floats(-100.0, 100.0),
+    y=st.floats(-100.0, 100.0),
+    theta=st.floats(-np.pi, np.pi),
+    shift=st.floats(0.0, 20.0),
+)
+def test_motion_judges_placements_not_where_the_group_lies(
+    x: float, y: float, theta: float, shift: float
+) -> None:
+    # The same placement of a's two pieces, the whole group moved rigidly anywhere: the same
+    # excess (the bound is between the robot's keyframes, not in any frame).
+    units, frames = lost_once()
+    reaches = robot_reaches(units, max_speed=2.0)
+    placed = {
+        ("a", 0): frames[("a", 0)],
+        ("a", 10): se2.matrix_from_pose(shift, 0.0, 0.0) @ frames[("a", 10)],
+    }
+    T = se2.matrix_from_pose(x, y, theta)
+    moved = {key: T @ T_group_unit for key, T_group_unit in placed.items()}
+    expected = max(0.0, abs(1.0 + shift) - 2.0 - 0.3)
+    assert motion_excess(placed, units, reaches, 0.0) == pytest.approx(expected, abs=1e-9)
+    assert motion_excess(moved, units, reaches, 0.0) == pytest.approx(expected, abs=1e-6)
 
 
 def test_a_piece_placed_where_its_robot_cannot_have_driven_is_refused() -> None:
