@@ -20,7 +20,6 @@ neighbours.
 from __future__ import annotations
 
 import dataclasses
-import itertools
 from collections.abc import Mapping
 
 import numpy as np
@@ -80,9 +79,10 @@ def robot_reaches(units: Mapping[UnitKey, MapUnit], max_speed: float) -> dict[st
 
 def _steps(
     placed: Mapping[UnitKey, FloatArray], units: Mapping[UnitKey, MapUnit], reach: RobotReach
-) -> tuple[list[UnitKey], FloatArray, FloatArray] | None:
-    """The robot's keyframes in ``placed`` in time order: the map of each, and between each
-    and the next the distance ``placed`` puts and the bound; None with fewer than two maps."""
+) -> tuple[IntArray, FloatArray, FloatArray] | None:
+    """The robot's keyframes in ``placed`` in time order: the map of each (index into
+    ``reach.maps``), and between each and the next the distance ``placed`` puts and the
+    bound; None with fewer than two maps."""
     in_group = [i for i, key in enumerate(reach.maps) if key in placed]
     if len(in_group) < 2:
         return None
@@ -93,10 +93,9 @@ def _steps(
         mine = map_of == i
         T = placed[reach.maps[i]]
         xy[mine] = units[reach.maps[i]].poses[rows[mine], :2] @ T[:2, :2].T + T[:2, 2]
-    maps = [reach.maps[i] for i in map_of]
     with np.errstate(invalid="ignore"):  # inf - inf: no bound after a robot without a clock
         bound = np.nan_to_num(np.diff(reach.reach[keep]), nan=np.inf)
-    return maps, np.hypot(*np.diff(xy, axis=0).T), bound
+    return map_of, np.hypot(*np.diff(xy, axis=0).T), bound
 
 
 def motion_excess(
@@ -114,8 +113,8 @@ def motion_excess(
         steps = None if robot not in reaches else _steps(placed, units, reaches[robot])
         if steps is None:
             continue
-        maps, apart, bound = steps
-        between_maps = np.array([a != b for a, b in itertools.pairwise(maps)], dtype=bool)
+        map_of, apart, bound = steps
+        between_maps = map_of[1:] != map_of[:-1]
         if between_maps.any():
             excess = apart - bound * (1.0 + slack) - RIGHT_DISTANCE
             worst = max(worst, float(excess[between_maps].max()))
