@@ -25,6 +25,7 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import NDArray
 
+from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.matching.confidence import RIGHT_DISTANCE
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
 
@@ -91,8 +92,8 @@ def _steps(
     xy = np.empty((len(rows), 2))
     for i in in_group:
         mine = map_of == i
-        T = placed[reach.maps[i]]
-        xy[mine] = units[reach.maps[i]].poses[rows[mine], :2] @ T[:2, :2].T + T[:2, 2]
+        key = reach.maps[i]
+        xy[mine] = se2.transform_points(placed[key], units[key].poses[rows[mine], :2])
     with np.errstate(invalid="ignore"):  # inf - inf: no bound after a robot without a clock
         bound = np.nan_to_num(np.diff(reach.reach[keep]), nan=np.inf)
     return map_of, np.hypot(*np.diff(xy, axis=0).T), bound
