@@ -77,3 +77,15 @@ def test_yaw_of_a_quaternion_does_not_depend_on_its_scale(yaw: float, scale: flo
         warnings.simplefilter("error")
         found = float(yaw_from_quaternion(x * scale, y * scale, z * scale, w * scale))
     assert abs(se2.wrap_angle(found - yaw)) < 1e-9
+
+
+@given(
+    x=st.floats(-10.0, 10.0),
+    y=st.floats(-10.0, 10.0),
+    theta=st.floats(-np.pi, np.pi),
+)
+def test_fit_points_recovers_the_motion_of_a_point_set(x: float, y: float, theta: float) -> None:
+    points = np.array([[0.0, 0.0], [2.0, 0.5], [-1.0, 3.0], [4.0, -2.0]])
+    T_to_from = se2.matrix_from_pose(x, y, theta)
+    moved = se2.transform_points(T_to_from, points)
+    np.testing.assert_allclose(se2.fit_points(points, moved), T_to_from, atol=1e-9)

@@ -113,8 +113,16 @@ def rigid_fit(poses_from: FloatArray, poses_to: FloatArray) -> FloatArray:
     b = np.asarray(poses_to, dtype=np.float64).reshape(-1, 3)
     if len(a) == 1 or np.ptp(a[:, :2], axis=0).max() < 1e-9:
         return np.asarray(matrix_from_pose(*b[0]) @ invert(matrix_from_pose(*a[0])))
-    ca, cb = a[:, :2].mean(axis=0), b[:, :2].mean(axis=0)
-    da, db = a[:, :2] - ca, b[:, :2] - cb
+    return fit_points(a[:, :2], b[:, :2])
+
+
+def fit_points(points_from: FloatArray, points_to: FloatArray) -> FloatArray:
+    """``T_to_from`` (3x3): the rigid motion that best carries ``(K, 2)`` points onto their
+    partners (least squares, 2-D Kabsch; K >= 2 distinct points)."""
+    a = np.asarray(points_from, dtype=np.float64).reshape(-1, 2)
+    b = np.asarray(points_to, dtype=np.float64).reshape(-1, 2)
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    da, db = a - ca, b - cb
     theta = float(np.arctan2(np.sum(da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]), np.sum(da * db)))
     c, s = np.cos(theta), np.sin(theta)
     t = cb - np.array([[c, -s], [s, c]]) @ ca

@@ -373,7 +373,7 @@ def align(
             break
         targets = np.column_stack((near_x[body, nearest[body]], near_y[body, nearest[body]]))
         rms = float(np.sqrt(np.mean(distance[body, nearest[body]] ** 2)))
-        fitted = _rigid_fit(samples[body], targets)
+        fitted = se2.fit_points(samples[body], targets)
         change = se2.pose_from_matrix(se2.invert(T) @ fitted)
         T = fitted
         if np.hypot(change[0], change[1]) < 1e-4 and abs(change[2]) < 1e-5:
@@ -401,20 +401,6 @@ def _samples(segments: FloatArray, spacing: float) -> tuple[FloatArray, IntArray
     t = (np.arange(owner.size) - start) / count[owner]
     points = segments[owner, :2] + t[:, None] * (segments[owner, 2:] - segments[owner, :2])
     return points, owner
-
-
-def _rigid_fit(source: FloatArray, target: FloatArray) -> FloatArray:
-    """The SE(2) matrix that best maps ``source`` points onto ``target`` (least squares)."""
-    cs, ct = source.mean(axis=0), target.mean(axis=0)
-    s, t = source - cs, target - ct
-    theta = np.arctan2(
-        float((s[:, 0] * t[:, 1] - s[:, 1] * t[:, 0]).sum()),
-        float((s[:, 0] * t[:, 0] + s[:, 1] * t[:, 1]).sum()),
-    )
-    c, si = np.cos(theta), np.sin(theta)
-    x = ct[0] - (c * cs[0] - si * cs[1])
-    y = ct[1] - (si * cs[0] + c * cs[1])
-    return se2.matrix_from_pose(float(x), float(y), float(theta))
 
 
 def match_shapes(reference: Shape, perceived: Shape, config: ShapeConfig) -> ShapeMatch:
