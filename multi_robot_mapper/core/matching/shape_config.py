@@ -69,9 +69,9 @@ class ShapeConfig:
     reliable_candidates: int = param(
         3,
         unit="correspondences",
-        doc="the most reliable correspondences of the first pass (Wolter Eq. 5) each tried as "
-        "the estimate of the second pass; the one whose matching costs least is kept (1: "
-        "the paper's single most reliable one)",
+        doc="the most reliable pairs of polylines on shape alone (Wolter Eq. 5) each tried as "
+        "the estimate of the matching with alignment term; the one whose matching costs "
+        "least is kept (1: the paper's single most reliable one)",
         minimum=1,
         maximum=50,
     )
