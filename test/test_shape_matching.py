@@ -98,17 +98,20 @@ def test_similarity_ignores_where_a_polyline_is_and_how_it_is_turned() -> None:
     moved = se2.transform_points(se2.matrix_from_pose(3.0, -1.0, 2.0), l_shape)
     straight = np.array([[0.0, 0.0], [2.0, 0.0]])
     longer = np.array([[0.0, 0.0], [3.0, 0.0]])
-    groups_a = shape_matching._groups(_shape(l_shape), dataclasses.replace(CONFIG, max_group=1))
-    groups_b = shape_matching._groups(
-        _shape(moved, straight, longer), dataclasses.replace(CONFIG, max_group=1)
-    )
+    big_l = np.array([[0.0, 0.0], [1.5, 0.0], [1.5, 1.5]])
+    singles = dataclasses.replace(CONFIG, max_group=1)
+    groups_a = shape_matching._groups(_shape(l_shape), singles)
+    groups_b = shape_matching._groups(_shape(moved, straight, longer, big_l), singles)
     s = similarity(groups_a, groups_b)[0]
     assert s[0] == pytest.approx(0.0, abs=1e-12)
     assert s[1] == pytest.approx((np.pi / 4) ** 2)  # T steps 0 -> pi/2 halfway: variance
-    # Two straight lines are alike whatever their direction; lengths 2 and 3: factor 1 + 1.
-    straight_groups = shape_matching._groups(_shape(straight), CONFIG)
-    assert similarity(straight_groups, groups_b)[0, 2] == pytest.approx(0.0, abs=1e-12)
-    assert (1.0 + (2.0 - 3.0) ** 2) == 2.0
+    # Straight lines are alike in tangent space whatever their direction (lengths 2 and 3
+    # differ, but the variance is 0); a straight wall (2 m) against a larger L (3 m): the
+    # L's variance times 1 + (2 - 3)^2.
+    straight_groups = shape_matching._groups(_shape(straight), singles)
+    s = similarity(straight_groups, groups_b)[0]
+    assert s[2] == pytest.approx(0.0, abs=1e-12)
+    assert s[3] == pytest.approx(2.0 * (np.pi / 4) ** 2)
 
 
 def test_correspondence_keeps_the_order_and_groups_a_split_polyline() -> None:
