@@ -411,13 +411,17 @@ class LoopCloser:
 
     def _pairwise(self, closure: Closure, other: Closure) -> bool | None:
         """Are two closures consistent (None: not neighbours, both ends more than
-        ``loop_window`` keyframes apart)? The cycle (this closure, the path from its second
-        end to the other's, the other closure backwards, the path back) must close within the
-        correctness tolerance plus a share of the path it runs along."""
+        ``loop_window`` keyframes apart; or not independent, from the same new keyframe)?
+        The cycle (this closure, the path from its second end to the other's, the other
+        closure backwards, the path back) must close within the correctness tolerance plus a
+        share of the path it runs along."""
         window = self.config.loop_window
         if abs(other.first - closure.first) > window or abs(other.second - closure.second) > window:
             return None
-        if other.first == closure.first and other.second == closure.second:
+        if other.second == closure.second:
+            # The same new keyframe's window matched to neighbouring old ones: one scan's
+            # evidence twice, which a look-alike place fools as consistently (intel: three
+            # such closures 7.2 m off, at 0.98-0.99). Only a later keyframe is a partner.
             return None
         first, second = closure.first, closure.second
         # T_first_second should equal T_first_a . T_a_b . T_b_second (a, b: the other's ends).
