@@ -467,3 +467,14 @@ def test_degenerate_scans_let_through_are_never_placed_in_the_map() -> None:
         float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
     }
     assert _ate(times, poses, truth_at) < 0.02
+
+
+def test_closures_of_one_new_keyframe_are_not_each_others_partner() -> None:
+    # Pairwise consistency needs independent matches: the new keyframe's window matched to
+    # two neighbouring old keyframes is one scan's evidence twice (a look-alike place fools
+    # both alike), so neither is the other's partner, however well they agree.
+    local = LocalMapper()
+    closure = loop_closer.Closure(10, 50, (1.0, 0.0, 0.0), 0.99, "loop", True, "")
+    neighbour = dataclasses.replace(closure, first=11, T_first_second=(0.5, 0.0, 0.0))
+    assert local.closer._pairwise(closure, neighbour) is None
+    assert local.closer._pairwise(neighbour, closure) is None
