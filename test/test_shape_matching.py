@@ -130,7 +130,7 @@ def test_correspondence_keeps_the_order_and_groups_a_split_polyline() -> None:
     deviation = shape_matching._deviation(theta, translation, groups_2, (0.0, 0.0, 0.0), CONFIG)
     skips = groups_1.penalty[:, None] + groups_2.penalty[None, :]
     cost = similarity(groups_1, groups_2) + skips * np.minimum(deviation, 1.0)
-    _, pairs = correspond(cost, groups_1, groups_2, CONFIG.max_group)
+    _, pairs = correspond(cost, groups_1, groups_2)
     matched = [
         (
             (int(groups_1.first[a]), int(groups_1.count[a])),

@@ -169,7 +169,9 @@ class _Groups:
     complexity: FloatArray  # (R,) Wolter's C: inner vertices' relevance summed, or half the
     # end-to-end distance of a chain without inner vertex
     penalty: FloatArray  # (R,) skip penalty of its polylines (Eq. 4, P)
-    index: dict[tuple[int, int], int]  # (first, count) -> row
+    centre: FloatArray  # (R, 2) mean of its samples
+    row: IntArray  # (max_group + 1, n): row[c, f] is the group of c polylines from f (-1: none)
+    ending: IntArray  # (max_group + 1, n): the group of c polylines whose last is j (-1: none)
 
 
 def _groups(shape: Shape, config: ShapeConfig) -> _Groups:
@@ -203,8 +205,12 @@ def _groups(shape: Shape, config: ShapeConfig) -> _Groups:
     own = cumulative[shape.stop] - cumulative[shape.start]  # each polyline's length alone
     own_sum = np.concatenate(([0.0], np.cumsum(own)))
     penalty = config.skip_penalty * (own_sum[first + count] - own_sum[first])
-    index = {(int(f), int(c)): row for row, (f, c) in enumerate(zip(first, count, strict=True))}
-    return _Groups(first, count, length, angles, points, complexity, penalty, index)
+    row = np.full((config.max_group + 1, n), -1, dtype=np.int64)
+    row[count, first] = np.arange(len(first))
+    ending = np.full((config.max_group + 1, n), -1, dtype=np.int64)
+    ending[count, first + count - 1] = np.arange(len(first))
+    centre = points.mean(axis=1)
+    return _Groups(first, count, length, angles, points, complexity, penalty, centre, row, ending)
 
 
 def similarity(reference: _Groups, perceived: _Groups) -> FloatArray:
@@ -246,7 +252,7 @@ def _deviation(
     """How far each pair's induced alignment is from the estimate, in units of
     (``alignment_distance``, ``alignment_angle``), squared: measured at the perceived group's
     centre, so that it does not depend on where the frame's origin is."""
-    centre = perceived.points.mean(axis=1)  # (R2, 2)
+    centre = perceived.centre
     c, s = np.cos(theta), np.sin(theta)
     moved_x = c * centre[None, :, 0] - s * centre[None, :, 1] + translation[..., 0]
     moved_y = s * centre[None, :, 0] + c * centre[None, :, 1] + translation[..., 1]
@@ -259,15 +265,15 @@ def _deviation(
 
 
 def correspond(
-    cost: FloatArray, reference: _Groups, perceived: _Groups, max_group: int
+    cost: FloatArray, reference: _Groups, perceived: _Groups
 ) -> tuple[float, list[tuple[int, int]]]:
     """Wolter Eq. 4 by dynamic programming: the order-preserving correspondence of the two
-    shapes' polylines (1-to-1, 1-to-many, many-to-1 up to ``max_group``) with the least total
+    shapes' polylines (1-to-1, 1-to-many, many-to-1 up to ``max_group``, as the groups were
+    made) with the least total
     of ``cost`` (R1, R2: each matched pair of groups) plus the skip penalty of each polyline
     left out. Returns the total and the matched (reference row, perceived row) pairs."""
-    n1, n2 = int((reference.count == 1).sum()), int((perceived.count == 1).sum())
-    single1 = np.array([reference.index[(i, 1)] for i in range(n1)], dtype=np.int64)
-    single2 = np.array([perceived.index[(j, 1)] for j in range(n2)], dtype=np.int64)
+    n1, n2 = reference.row.shape[1], perceived.row.shape[1]
+    single1, single2 = reference.row[1], perceived.row[1]
     skip1, skip2 = reference.penalty[single1], perceived.penalty[single2]
     prefix2 = np.concatenate(([0.0], np.cumsum(skip2)))
     total = np.empty((n1 + 1, n2 + 1))
@@ -279,22 +285,19 @@ def correspond(
     choice = np.zeros((n1 + 1, n2 + 1), dtype=np.int64)
     choice[0, 1:] = _SKIP_PERCEIVED
     j_all = np.arange(1, n2 + 1)
-    ending_at = {  # perceived group of k polylines ending at j-1, per j (-1: none)
-        k: np.array([perceived.index.get((j - k, k), -1) for j in range(1, n2 + 1)])
-        for k in range(1, max_group + 1)
-    }
+    max_group = min(reference.row.shape[0], perceived.row.shape[0]) - 1
     for i in range(1, n1 + 1):
         best = total[i - 1, 1:] + skip1[i - 1]
         best_choice = np.zeros(n2, dtype=np.int64)
-        for k, rows in ending_at.items():  # reference i-1 with perceived j-k..j-1
+        for k in range(1, max_group + 1):  # reference i-1 with perceived j-k..j-1
+            rows = perceived.ending[k]  # per j, the group ending at j-1
             ok = rows >= 0
             candidate = np.full(n2, np.inf)
             candidate[ok] = total[i - 1, j_all[ok] - k] + cost[single1[i - 1], rows[ok]]
             better = candidate < best
             best, best_choice = np.where(better, candidate, best), np.where(better, k, best_choice)
         for k in range(2, min(max_group, i) + 1):  # reference i-k..i-1 with perceived j-1
-            row = reference.index[(i - k, k)]
-            candidate = total[i - k, j_all - 1] + cost[row, single2]
+            candidate = total[i - k, j_all - 1] + cost[reference.row[k, i - k], single2]
             better = candidate < best
             best, best_choice = np.where(better, candidate, best), np.where(better, -k, best_choice)
         # total[i, j] = min(best[j], total[i, j-1] + skip2[j-1]): a running minimum of
@@ -312,10 +315,10 @@ def correspond(
         elif c == 0 or j == 0:
             i -= 1
         elif c > 0:
-            pairs.append((reference.index[(i - 1, 1)], perceived.index[(j - c, c)]))
+            pairs.append((int(reference.row[1, i - 1]), int(perceived.row[c, j - c])))
             i, j = i - 1, j - c
         else:
-            pairs.append((reference.index[(i + c, -c)], perceived.index[(j - 1, 1)]))
+            pairs.append((int(reference.row[-c, i + c]), int(perceived.row[1, j - 1])))
             i, j = i + c, j - 1
     return float(total[n1, n2]), pairs[::-1]
 
@@ -431,7 +434,7 @@ def match_shapes(reference: Shape, perceived: Shape, config: ShapeConfig) -> Sha
     def second_pass(estimate: Pose) -> tuple[float, list[tuple[int, int]]]:
         deviation = _deviation(theta, translation, groups_2, estimate, config)
         cost = dissimilarity + skips * np.minimum(deviation, 1.0)
-        return correspond(cost, groups_1, groups_2, config.max_group)
+        return correspond(cost, groups_1, groups_2)
 
     def as_polylines(pairs: list[tuple[int, int]]) -> list[tuple[tuple[int, int], tuple[int, int]]]:
         return [
