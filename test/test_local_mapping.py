@@ -478,3 +478,55 @@ def test_closures_of_one_new_keyframe_are_not_each_others_partner() -> None:
     neighbour = dataclasses.replace(closure, first=11, T_first_second=(0.5, 0.0, 0.0))
     assert local.closer._pairwise(closure, neighbour) is None
     assert local.closer._pairwise(neighbour, closure) is None
+
+
+@pytest.mark.parametrize(("placed_at", "integrated"), [(1.5, True), (6.0, False)])
+def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
+    monkeypatch,  # type: ignore[no-untyped-def]
+    placed_at: float,
+    integrated: bool,
+) -> None:
+    # The robot got lost 7 s ago in piece 0, at its origin; it never drove faster than
+    # 0.3 m/s, so it is within 0.3 * 7 + 0.30 = 2.4 m of there. Two likely matches against
+    # two keyframes of piece 0 agree on one placement: 1.5 m away they put it back; 6 m away
+    # they are a look-alike place (agreeing as well as two right ones) and the robot stays
+    # lost in its own piece, its guess the best placement it can have driven to.
+    scan = _stranger()
+    segments, _ = extract_scan(scan, EXTRACTION)
+    own, first, second = (segments.segments.copy() for _ in range(3))
+
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
+        if reference is first:
+            pose, confidence = (placed_at, 0.0, 0.0), 0.7  # keyframe 0 at the origin
+        elif reference is second:
+            pose, confidence = (placed_at - 1.0, 0.0, 0.0), 0.6  # keyframe 2, 1 m along x
+        else:
+            pose, confidence = (0.0, 0.0, 0.0), 0.2  # the last scan: no idea
+        x, y, theta = pose
+        return MatchResult(np.array([theta, x, y]), 5.0, 0.9, True, 1, 1, confidence)
+
+    monkeypatch.setattr(attempts, "integrate", fake)
+    references = attempts.References(
+        here=(0.0, 0.0, 0.0),
+        last=attempts.Reference(own, scan, attempts.Anchor(1, (0.0, 0.0, 0.0))),
+        keyframe=1,
+        older=[2, 0],
+        poses={0: (0.0, 0.0, 0.0), 1: (0.0, 0.0, 0.0), 2: (1.0, 0.0, 0.0)},
+        pieces={0: 0, 1: 1, 2: 0},
+        scans={
+            k: keyframe_map.KeyframeScan(k, 0.0, s, scan)
+            for k, s in ((0, first), (1, own), (2, second))
+        },
+        left={0: ((0.0, 0.0, 0.0), 7.0)},
+        top_speed=0.3,
+    )
+    chosen, placed, _ = attempts.match_scan(
+        LocalMapperConfig(), references, own, scan, [(0.0, 0.0, 0.0)], False, lambda *_: None
+    )
+    assert placed == integrated
+    if integrated:
+        assert chosen.piece == 0
+        np.testing.assert_allclose(chosen.pose, (placed_at, 0.0, 0.0))
+    else:
+        # Nor is the look-alike the guess the new piece is joined from.
+        assert chosen.piece == 1

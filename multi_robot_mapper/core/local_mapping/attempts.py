@@ -22,6 +22,8 @@ from multi_robot_mapper.core.matching.confidence import (
     RIGHT_DISTANCE,
     TRACK_TURNS,
 )
+from multi_robot_mapper.core.matching.shape import Shape, match_shapes, shape_of_scan
+from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = NDArray[np.float64]
@@ -59,12 +61,15 @@ class Attempt:
     stage: str  # "track", "search" or "recent"
 
 
-def corroborated(attempts: list[Attempt]) -> Attempt | None:
+def corroborated(
+    attempts: list[Attempt], reachable: Callable[[Attempt], bool] = lambda _: True
+) -> Attempt | None:
     """The more confident of two attempts against different reference scans, each more likely
     right than wrong, that place the scan within the correctness tolerance of each other:
     wrong matches rarely agree on one placement from two scans (when they do, it is the
-    same structure misleading both, and their confidence is low)."""
-    likely = [a for a in attempts if a.result.confidence >= LIKELY]
+    same structure misleading both, and their confidence is low). ``reachable`` says whether
+    the robot can have driven to an attempt's placement (:func:`match_scan`)."""
+    likely = [a for a in attempts if a.result.confidence >= LIKELY and reachable(a)]
     for i, a in enumerate(likely):
         for b in likely[i + 1 :]:
             if a.anchor == b.anchor or a.piece != b.piece:
@@ -106,6 +111,30 @@ class References:
     poses: dict[int, Pose]  # of ``keyframe`` and ``older``, each in its piece
     pieces: dict[int, int]
     scans: dict[int, KeyframeScan]
+    # piece -> (pose of the robot's last placed scan in it, seconds since), for the pieces
+    # of ``older`` other than the current one
+    left: dict[int, tuple[Pose, float]] = dataclasses.field(default_factory=dict)
+    top_speed: float | None = None  # the fastest the robot was seen to drive (m/s)
+
+
+class Shapes:
+    """Wolter's shapes of the scans the front end matches, each made once: a bounded cache,
+    keyed by the scan object (kept alive while cached, so its id is not reused)."""
+
+    def __init__(self, config: ShapeConfig, size: int = 64) -> None:
+        self.config = config
+        self._size = size
+        self._cache: dict[int, tuple[LaserScanData, Shape]] = {}
+
+    def __call__(self, view: LaserScanData) -> Shape:
+        entry = self._cache.get(id(view))
+        if entry is not None and entry[0] is view:
+            return entry[1]
+        shape = shape_of_scan(view, self.config)
+        if len(self._cache) >= self._size:
+            del self._cache[next(iter(self._cache))]  # the oldest
+        self._cache[id(view)] = (view, shape)
+        return shape
 
 
 def match_scan(
@@ -116,13 +145,17 @@ def match_scan(
     motions: list[Pose],
     tracking: bool,
     count: Callable[[str, float], None],
+    shapes: Shapes | None = None,
 ) -> tuple[Attempt, bool, bool]:
     """The placement of the new scan, whether to integrate it, and whether it was tracked:
     against the last keyframe from the predictions ``motions`` (the constant-velocity one
     first, when ``tracking``: a velocity is known), else searched against the last scan, until
     one match reaches ``integrate_confidence``; else against the ``older`` keyframes, until two
-    matches against different scans corroborate each other (:func:`corroborated`). When none
-    does, the most confident attempt is returned (the guess a new piece starts from).
+    matches against different scans corroborate each other (:func:`corroborated`; in another
+    piece than the robot's, only where it can have driven since it was last placed there).
+    When none does, the most confident attempt the robot can have driven to is returned (the
+    guess a new piece starts from). A search that is not confident is searched again with the
+    shape matching's placements as more hypotheses (``shapes``, Wolter; None: never).
     ``count(stage, seconds)`` is told where the time went."""
     threshold = config.integrate_confidence
     here, poses, pieces = references.here, references.poses, references.pieces
@@ -144,6 +177,26 @@ def match_scan(
             extra_hypotheses=hypotheses_of(guesses),
             views=(reference.view, view),
         )
+        checked = result.seconds.get("confidence", 0.0)
+        shaping = 0.0
+        if search and shapes is not None and result.confidence < threshold:
+            # A search that is not confident is searched again with Wolter's shape matching
+            # as a second source of hypotheses: its polylines keep clusters too small for
+            # segments. Only then: a confident search keeps the hypotheses its confidence
+            # was calibrated on.
+            shaped = time.perf_counter()
+            found = match_shapes(shapes(reference.view), shapes(view), shapes.config)
+            shaped_result = integrate(
+                reference.segments,
+                new,
+                config.integrate,
+                heuristics=HEURISTICS,
+                extra_hypotheses=hypotheses_of(guesses + list(found.alternatives)),
+                views=(reference.view, view),
+            )
+            if shaped_result.confidence > result.confidence:
+                result = shaped_result
+            shaping = time.perf_counter() - shaped
         T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
         done = Attempt(
             result,
@@ -154,10 +207,25 @@ def match_scan(
             stage,
         )
         attempts.append(done)
-        checked = result.seconds.get("confidence", 0.0)
-        count(stage, time.perf_counter() - started - checked)
+        count(stage, time.perf_counter() - started - checked - shaping)
         count("confidence", checked)
+        if shaping:
+            count("shape", shaping)
         return done
+
+    current = pieces[references.keyframe]
+
+    def reachable(a: Attempt) -> bool:
+        # A placement in another piece puts the robot back where it was when it got lost
+        # there: no farther from its last scan in that piece than it drives (at the fastest
+        # it was seen to) in the time since, plus the correctness tolerance. Two attempts
+        # against neighbouring keyframes of one look-alike place agree as well as two
+        # right ones (intel: 7.2 m off at 0.64 and 0.76).
+        if a.piece == current or references.top_speed is None or a.piece not in references.left:
+            return True
+        pose, elapsed = references.left[a.piece]
+        reach = references.top_speed * elapsed + RIGHT_DISTANCE
+        return bool(np.hypot(a.pose[0] - pose[0], a.pose[1] - pose[1]) <= reach)
 
     rivals_disagree = False
     search: Attempt | None = None  # the search against the last scan, once made
@@ -167,12 +235,12 @@ def match_scan(
         # older keyframe (tried because those failed: the best of several tries), or any
         # match once two likely ones disagree, only with another match that corroborates it.
         if rivals_disagree:
-            return corroborated(attempts)
+            return corroborated(attempts, reachable)
         recent = [a for a in attempts if a.stage != "recent"]
         best = max(recent, key=lambda a: a.result.confidence, default=None)
         if best is not None and best.result.confidence >= threshold:
             return best
-        return corroborated(attempts)
+        return corroborated(attempts, reachable)
 
     def keyframe_reference(keyframe: int) -> Reference:
         scan = references.scans[keyframe]
@@ -216,4 +284,7 @@ def match_scan(
         attempt("recent", keyframe_reference(k), True, motions)
         if (done := settled()) is not None:
             return done, True, False
-    return max(attempts, key=lambda a: a.result.confidence), False, False
+    # The guess a new piece starts from: the most confident placement the robot can have
+    # driven to (a look-alike far off misleads the join's search).
+    guesses = [a for a in attempts if reachable(a)] or attempts
+    return max(guesses, key=lambda a: a.result.confidence), False, False

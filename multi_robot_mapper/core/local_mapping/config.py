@@ -6,6 +6,7 @@ import dataclasses
 
 from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.matching import IntegrateConfig
+from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -141,6 +142,9 @@ class LocalMapperConfig:
         maximum=1000.0,
     )
     integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
+    # Wolter's shape matching: a second source of hypotheses for a search that is not
+    # confident (README, "Local mapping").
+    shape: ShapeConfig = dataclasses.field(default_factory=ShapeConfig)
 
     def __post_init__(self) -> None:
         validate(self)

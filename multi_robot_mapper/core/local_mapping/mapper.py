@@ -8,7 +8,9 @@ add_scan`):
 1. **match**: the scan is matched against the last keyframe from the constant-velocity
    prediction alone (every scan of a fast laser is placed this way, in milliseconds); if that
    is not confident, INTEGRATE searches with no guess against the last scan, then against up
-   to ``recent_keyframes`` keyframes before it (the predictions stay hypotheses);
+   to ``recent_keyframes`` keyframes before it (the predictions stay hypotheses); a search
+   that is not confident is searched again with Wolter's shape matching as a second source of
+   hypotheses (:mod:`core.matching.shape`);
 2. **confidence**: the best match's probability of being right
    (:mod:`core.matching.confidence`);
 3. **integrate** when it reaches ``integrate_confidence``: the scan is placed; a scan that
@@ -43,6 +45,7 @@ from multi_robot_mapper.core.local_mapping.attempts import (
     Attempt,
     Reference,
     References,
+    Shapes,
     match_scan,
     pose_of_match,
 )
@@ -66,6 +69,8 @@ Pose = tuple[float, float, float]
 
 # Back-end times kept (per keyframe): enough for any replay, bounded for a node running for hours.
 _TIMES_KEPT = 100_000
+# Placed motions whose speeds say how fast the robot drives (the latest: a robot's pace changes).
+_SPEEDS_KEPT = 1_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,6 +116,7 @@ class LocalMapper:
             self.config.integrate, self.config.fusion_tolerance, self.config.fusion_radius
         )
         self.closer = LoopCloser(self.config, self.map)
+        self._shapes = Shapes(self.config.shape)  # of the scans the front end searches
         self.inline_backend = backend  # run the back end inside add_scan
         self.version = 0  # bumped whenever the partial map changes
         self.scans_accepted = 0
@@ -126,6 +132,10 @@ class LocalMapper:
         self.optimise_seconds: deque[float] = deque(maxlen=_TIMES_KEPT)  # per keyframe
         self._last: _Last | None = None
         self._velocity: FloatArray | None = None  # (x, y, theta) per second, last scan frame
+        # the speeds (m/s) of the latest placed motions, for how far a lost robot can drive
+        self._speeds: deque[float] = deque(maxlen=_SPEEDS_KEPT)
+        # piece when placed -> (stamp, anchor) of the robot's last scan placed in it
+        self._last_in_piece: dict[int, tuple[float, Anchor]] = {}
         self._piece_of_last = 0
         # The scans placed so far: (stamp, anchor), for the trajectory.
         self._placed: list[tuple[float, Anchor]] | None = [] if trajectory else None
@@ -197,6 +207,7 @@ class LocalMapper:
         motion = se2.between(self._placed_pose_unlocked(last.anchor), pose)
         if dt > 0.0:
             self._velocity = np.asarray(motion) / dt
+            self._speeds.append(float(np.hypot(motion[0], motion[1])) / dt)
         placed = Anchor(anchor.keyframe, T_keyframe_new)
         keyframe_added = False
         T_keyframe_new_arr = np.asarray(T_keyframe_new)
@@ -247,9 +258,18 @@ class LocalMapper:
                 poses={k: self._poses[k] for k in (keyframe, *older)},
                 pieces={k: self._pieces[k] for k in (keyframe, *older)},
                 scans={k: self._scans[k] for k in (keyframe, *older)},
+                left=self._left(last.stamp + dt, {self._pieces[k] for k in older} - {piece}),
+                top_speed=self._top_speed(),
             )
         chosen, integrated, tracked = match_scan(
-            config, references, new, view, motions, self._velocity is not None, self._count
+            config,
+            references,
+            new,
+            view,
+            motions,
+            self._velocity is not None,
+            self._count,
+            self._shapes,
         )
         self.scans_tracked += tracked
         return chosen, integrated
@@ -358,6 +378,8 @@ class LocalMapper:
         self.closer.config = config
         self.map.config = config.integrate
         self.map.tolerance, self.map.radius = config.fusion_tolerance, config.fusion_radius
+        if config.shape != self._shapes.config:
+            self._shapes = Shapes(config.shape)
 
     def start_worker(self) -> None:
         """Run the back end on a thread of its own from now on: :meth:`add_scan` only hands
@@ -460,9 +482,30 @@ class LocalMapper:
         ]
         return np.vstack(pieces) if pieces else np.zeros((0, 4))
 
+    def _top_speed(self) -> float | None:
+        """How fast the robot drives at most, by its placed motions: their 95th percentile,
+        which one wrong placement (or a motion over a short, jittery interval) cannot move.
+        None before there are any."""
+        if not self._speeds:
+            return None
+        return float(np.percentile(np.asarray(self._speeds), 95.0))
+
+    def _left(self, stamp: float, pieces: set[int]) -> dict[int, tuple[Pose, float]]:
+        """For each of ``pieces``: the pose of the robot's last scan placed in it (in its
+        frame, which joins may have changed) and the seconds from then to ``stamp``."""
+        left: dict[int, tuple[Pose, float]] = {}
+        newest: dict[int, float] = {}
+        for placed_stamp, anchor in self._last_in_piece.values():
+            piece = self._pieces[anchor.keyframe]
+            if piece in pieces and placed_stamp > newest.get(piece, -np.inf):
+                newest[piece] = placed_stamp
+                left[piece] = (self._placed_pose_unlocked(anchor), max(stamp - placed_stamp, 0.0))
+        return left
+
     def _record(self, stamp: float, anchor: Anchor) -> None:
         """A scan placed on ``anchor``: counted on its keyframe, and remembered for the
         trajectory when asked."""
+        self._last_in_piece[self._pieces[anchor.keyframe]] = (stamp, anchor)
         self._scans_at[anchor.keyframe] = self._scans_at.get(anchor.keyframe, 0) + 1
         if self._placed is not None:
             self._placed.append((stamp, anchor))
