@@ -114,7 +114,8 @@ class References:
     # piece -> (pose of the robot's last placed scan in it, seconds since), for the pieces
     # of ``older`` other than the current one
     left: dict[int, tuple[Pose, float]] = dataclasses.field(default_factory=dict)
-    top_speed: float | None = None  # the fastest the robot was seen to drive (m/s)
+    # how fast the robot drives at most (m/s; the 95th percentile of its placed motions)
+    top_speed: float | None = None
 
 
 class Shapes:
@@ -217,8 +218,8 @@ def match_scan(
 
     def reachable(a: Attempt) -> bool:
         # A placement in another piece puts the robot back where it was when it got lost
-        # there: no farther from its last scan in that piece than it drives (at the fastest
-        # it was seen to) in the time since, plus the correctness tolerance. Two attempts
+        # there: no farther from its last scan in that piece than it drives (``top_speed``)
+        # in the time since, plus the correctness tolerance. Two attempts
         # against neighbouring keyframes of one look-alike place agree as well as two
         # right ones (intel: 7.2 m off at 0.64 and 0.76).
         if a.piece == current or references.top_speed is None or a.piece not in references.left:
