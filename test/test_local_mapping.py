@@ -530,3 +530,54 @@ def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
     else:
         # Nor is the look-alike the guess the new piece is joined from.
         assert chosen.piece == 1
+
+
+@pytest.mark.parametrize(("second_confidence", "kept"), [(0.9, "second"), (0.1, "first")])
+def test_a_search_that_is_not_confident_is_searched_again_with_the_shapes(
+    monkeypatch,  # type: ignore[no-untyped-def]
+    second_confidence: float,
+    kept: str,
+) -> None:
+    # The search with no guess is not confident (0.3): it is searched again with the shape
+    # matching's placements as more hypotheses, and that second result is kept only when it
+    # is more confident.
+    scan = _stranger()
+    segments, _ = extract_scan(scan, EXTRACTION)
+    calls: list[int] = []
+
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
+        calls.append(len(extra_hypotheses))
+        if len(calls) == 1:
+            pose, confidence = (0.2, 0.0, 0.0), 0.3
+        else:
+            pose, confidence = (0.5, 0.1, 0.0), second_confidence
+        x, y, theta = pose
+        return MatchResult(np.array([theta, x, y]), 5.0, 0.9, True, 1, 1, confidence)
+
+    monkeypatch.setattr(attempts, "integrate", fake)
+    keyframe = keyframe_map.KeyframeScan(0, 0.0, segments.segments, scan)
+    references = attempts.References(
+        here=(0.0, 0.0, 0.0),
+        last=attempts.Reference(segments.segments, scan, attempts.Anchor(0, (0.0, 0.0, 0.0))),
+        keyframe=0,
+        older=[],
+        poses={0: (0.0, 0.0, 0.0)},
+        pieces={0: 0},
+        scans={0: keyframe},
+    )
+    stages: list[str] = []
+    chosen, placed, _ = attempts.match_scan(
+        LocalMapperConfig(),
+        references,
+        segments.segments,
+        scan,
+        [(0.0, 0.0, 0.0)],
+        False,
+        lambda stage, _: stages.append(stage),
+        attempts.Shapes(LocalMapperConfig().shape),
+    )
+    assert len(calls) == 2 and calls[1] > calls[0]  # the shape placements came in
+    assert "shape" in stages
+    assert placed == (kept == "second")
+    expected = (0.5, 0.1, 0.0) if kept == "second" else (0.2, 0.0, 0.0)
+    np.testing.assert_allclose(chosen.pose, expected)
