@@ -68,6 +68,26 @@ def _stranger(seed: int = 5) -> LaserScanData:
     )
 
 
+def _match(pose: tuple[float, float, float], confidence: float) -> MatchResult:
+    """A match that places the new scan at ``pose`` with ``confidence`` (for a fake
+    INTEGRATE)."""
+    x, y, theta = pose
+    return MatchResult(np.array([theta, x, y]), 5.0, 0.9, True, 1, 1, confidence)
+
+
+def _only_the_last_scan(segments: np.ndarray, scan: LaserScanData) -> attempts.References:
+    """References of a robot whose only scan (keyframe 0) is the last one, at the origin."""
+    return attempts.References(
+        here=(0.0, 0.0, 0.0),
+        last=attempts.Reference(segments, scan, attempts.Anchor(0, (0.0, 0.0, 0.0))),
+        keyframe=0,
+        older=[],
+        poses={0: (0.0, 0.0, 0.0)},
+        pieces={0: 0},
+        scans={0: keyframe_map.KeyframeScan(0, 0.0, segments, scan)},
+    )
+
+
 def _ate(stamps: np.ndarray, poses: np.ndarray, truth: dict[float, np.ndarray]) -> float:
     """RMSE of the positions after the best rigid alignment (Umeyama without scale)."""
     est = poses[:, :2]
@@ -354,22 +374,12 @@ def test_a_tracked_placement_far_from_the_prediction_needs_the_search_to_agree(
             pose, confidence = (0.5, 0.0, 0.0), 0.3  # the prediction alone
         else:
             pose, confidence = tracked, 0.95
-        x, y, theta = pose
-        return MatchResult(np.array([theta, x, y]), 5.0, 0.9, True, 1, 1, confidence)
+        return _match(pose, confidence)
 
     monkeypatch.setattr(attempts, "integrate", fake)
     scan = _stranger()
     segments, _ = extract_scan(scan, EXTRACTION)
-    keyframe = keyframe_map.KeyframeScan(0, 0.0, segments.segments, scan)
-    references = attempts.References(
-        here=(0.0, 0.0, 0.0),
-        last=attempts.Reference(segments.segments, scan, attempts.Anchor(0, (0.0, 0.0, 0.0))),
-        keyframe=0,
-        older=[],
-        poses={0: (0.0, 0.0, 0.0)},
-        pieces={0: 0},
-        scans={0: keyframe},
-    )
+    references = _only_the_last_scan(segments.segments, scan)
     motions = [(0.5, 0.0, 0.0), (0.0, 0.0, 0.0)]
     chosen, placed, _ = attempts.match_scan(
         LocalMapperConfig(), references, segments.segments, scan, motions, True, lambda *_: None
@@ -502,8 +512,7 @@ def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
             pose, confidence = (placed_at - 1.0, 0.0, 0.0), 0.6  # keyframe 2, 1 m along x
         else:
             pose, confidence = (0.0, 0.0, 0.0), 0.2  # the last scan: no idea
-        x, y, theta = pose
-        return MatchResult(np.array([theta, x, y]), 5.0, 0.9, True, 1, 1, confidence)
+        return _match(pose, confidence)
 
     monkeypatch.setattr(attempts, "integrate", fake)
     references = attempts.References(
@@ -551,20 +560,10 @@ def test_a_search_that_is_not_confident_is_searched_again_with_the_shapes(
             pose, confidence = (0.2, 0.0, 0.0), 0.3
         else:
             pose, confidence = (0.5, 0.1, 0.0), second_confidence
-        x, y, theta = pose
-        return MatchResult(np.array([theta, x, y]), 5.0, 0.9, True, 1, 1, confidence)
+        return _match(pose, confidence)
 
     monkeypatch.setattr(attempts, "integrate", fake)
-    keyframe = keyframe_map.KeyframeScan(0, 0.0, segments.segments, scan)
-    references = attempts.References(
-        here=(0.0, 0.0, 0.0),
-        last=attempts.Reference(segments.segments, scan, attempts.Anchor(0, (0.0, 0.0, 0.0))),
-        keyframe=0,
-        older=[],
-        poses={0: (0.0, 0.0, 0.0)},
-        pieces={0: 0},
-        scans={0: keyframe},
-    )
+    references = _only_the_last_scan(segments.segments, scan)
     stages: list[str] = []
     chosen, placed, _ = attempts.match_scan(
         LocalMapperConfig(),
