@@ -250,6 +250,7 @@ class LocalMapper:
             # person in front of the laser) sees its old surroundings again.
             others = [k for k in newest_first if self._pieces[k] != piece]
             older += others[: config.recent_keyframes]
+            left = self._left(last.stamp + dt, {self._pieces[k] for k in older} - {piece})
             references = References(
                 here=self._placed_pose_unlocked(last.anchor),
                 last=Reference(last.segments, last.view, last.anchor),
@@ -258,8 +259,9 @@ class LocalMapper:
                 poses={k: self._poses[k] for k in (keyframe, *older)},
                 pieces={k: self._pieces[k] for k in (keyframe, *older)},
                 scans={k: self._scans[k] for k in (keyframe, *older)},
-                left=self._left(last.stamp + dt, {self._pieces[k] for k in older} - {piece}),
-                top_speed=self._top_speed(),
+                left=left,
+                # Only a placement in another piece is bounded by it: not computed otherwise.
+                top_speed=self._top_speed() if left else None,
             )
         chosen, integrated, tracked = match_scan(
             config,
