@@ -1,13 +1,15 @@
-"""Where local mapping goes wrong: every accepted scan whose motion from the previous placed
+"""Where local mapping goes wrong: every placed scan whose motion from the previous placed
 scan is wrong, and how it was placed.
 
 Each CARMEN log is cut into ``--robots`` consecutive runs (as ``mrm import-carmen`` cuts it);
-one LocalMapper maps each run. For every accepted scan the motion since the previous placed
-scan is compared with the reference poses; a pair is wrong beyond 0.30 m or 5 degrees (the
-evaluation's pair threshold). Each wrong pair is printed with how the scan was placed
-(``track``: the prediction alone; ``search``: INTEGRATE against the last scan; ``submap``:
-against the partial map; ``after gap``: right after scans set aside), its gap in scans, the
-match's overlap (m) and net fraction, the error and the turn the mapper took.
+one LocalMapper maps each run. For every scan placed in the same piece as the scan before, the
+motion since that scan is compared with the reference poses; a pair is wrong beyond 0.30 m or
+5 degrees (the evaluation's pair threshold). Each wrong pair is printed with the context of the
+match that placed it (``LocalUpdate.placed_by``: ``track``, the last keyframe from the
+prediction; ``search``, the last scan with no guess; ``recent``, an older keyframe; ``other``,
+another piece's keyframe; ``after gap``: right after scans set aside), its gap in scans, its
+confidence in context, the error and the turn the mapper took. New pieces (the robot was
+lost) are counted. ``bench/fit_placement.py`` judges every match tried, not only the chosen.
 
     .venv/bin/python bench/local_errors.py [--logs intel aces fhw csail] [--robots 4]
         [--set NAME=VALUE ...]
@@ -26,6 +28,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
@@ -34,7 +37,11 @@ from multi_robot_mapper.evaluation.metrics import (  # noqa: E402
     PAIR_ROTATION_RAD,
     PAIR_TRANSLATION_M,
 )
-from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
+from multi_robot_mapper.io.carmen import (  # noqa: E402
+    carmen_scan_data,
+    monotonic_stamps,
+    read_carmen,
+)
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
 
@@ -50,33 +57,26 @@ def run_log(name: str, robots: int, config: LocalMapperConfig) -> None:
     if not path.is_file():
         print(f"{name}: skipped, {path} not found")
         return
-    scans = list(read_carmen(path))
-    size = len(scans) // robots
+    scans = read_carmen(path)
+    stamps, _ = monotonic_stamps(np.array([s.timestamp for s in scans]), path.name)
     extraction = ExtractionConfig()
-    placed, wrong = Counter(), []
-    for robot in range(robots):
+    placed, wrong, lost = Counter(), [], 0
+    for robot, (start, stop) in enumerate(split_runs(len(scans), robots, 0)):
         mapper = LocalMapper(config)
         previous = None  # (pose, reference pose, index) of the previous placed scan
-        for index, scan in enumerate(scans[robot * size : (robot + 1) * size]):
-            data = carmen_scan_data(scan)
+        for index in range(start, stop):
+            data = carmen_scan_data(scans[index])
             segments, _ = extract_scan(data, extraction)
-            tracked, on_map = mapper.scans_tracked, mapper.scans_on_submap
-            update = mapper.add_scan(float(scan.timestamp), segments, data)
+            update = mapper.add_scan(float(stamps[index]), segments, data)
             if update.pose is None:
                 continue
-            if update.restarted:
-                previous = None
-            route = (
-                "track"
-                if mapper.scans_tracked > tracked
-                else "submap"
-                if mapper.scans_on_submap > on_map
-                else "search"
-            )
-            reference = np.asarray(scan.reference_pose)
+            if update.new_piece:
+                lost += 1
+                previous = None  # the new piece's frame is its first scan's
+            reference = np.asarray(scans[index].reference_pose)
             if previous is not None:
                 gap = index - previous[2]
-                route = route if gap == 1 else f"{route} after gap"
+                route = update.placed_by if gap == 1 else f"{update.placed_by} after gap"
                 placed[route] += 1
                 truth = relative(previous[1], reference)
                 moved = relative(previous[0], np.asarray(update.pose))
@@ -84,15 +84,17 @@ def run_log(name: str, robots: int, config: LocalMapperConfig) -> None:
                 shift, turn = float(np.hypot(error[0], error[1])), abs(float(error[2]))
                 if shift > PAIR_TRANSLATION_M or turn > PAIR_ROTATION_RAD:
                     wrong.append(
-                        f"  robot{robot + 1} scan {index}: {route}, gap {gap}, overlap "
-                        f"{update.value:.1f} m, fraction {update.fraction:.2f}, error "
-                        f"{shift:.2f} m {np.degrees(turn):.1f} deg, turned "
-                        f"{np.degrees(abs(moved[2])):.0f} deg"
+                        f"  robot{robot + 1} scan {index - start}: {route}, gap {gap}, "
+                        f"confidence {update.confidence:.2f}, error {shift:.2f} m "
+                        f"{np.degrees(turn):.1f} deg, turned {np.degrees(abs(moved[2])):.0f} deg"
                     )
             previous = (np.asarray(update.pose), reference, index)
     total = sum(placed.values())
     counts = ", ".join(f"{route} {count}" for route, count in sorted(placed.items()))
-    print(f"{name}, {robots} robots: {len(wrong)} wrong of {total} placed pairs ({counts})")
+    print(
+        f"{name}, {robots} robots: {len(wrong)} wrong of {total} placed pairs ({counts}); "
+        f"{lost} new pieces"
+    )
     print("\n".join(wrong))
 
 

@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
@@ -14,6 +16,7 @@ from multi_robot_mapper.core.local_mapping import (
     LocalMapperConfig,
     LocalUpdate,
     attempts,
+    context_model,
     keyframe_map,
     loop_closer,
     mapper,
@@ -68,6 +71,13 @@ def _stranger(seed: int = 5) -> LaserScanData:
     )
 
 
+@pytest.fixture
+def as_matched(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Every context keeps the match confidence as it is: a fake INTEGRATE's confidences are
+    then the ones the front end decides on."""
+    monkeypatch.setattr(context_model, "CALIBRATION", {c: (1.0, 0.0) for c in attempts.CONTEXTS})
+
+
 def _match(pose: tuple[float, float, float], confidence: float) -> MatchResult:
     """A match that places the new scan at ``pose`` with ``confidence`` (for a fake
     INTEGRATE)."""
@@ -79,7 +89,7 @@ def _only_the_last_scan(segments: np.ndarray, scan: LaserScanData) -> attempts.R
     """References of a robot whose only scan (keyframe 0) is the last one, at the origin."""
     return attempts.References(
         here=(0.0, 0.0, 0.0),
-        last=attempts.Reference(segments, scan, attempts.Anchor(0, (0.0, 0.0, 0.0))),
+        last=attempts.Reference(segments, scan, attempts.Anchor(0, (0.0, 0.0, 0.0)), 0.0),
         keyframe=0,
         older=[],
         poses={0: (0.0, 0.0, 0.0)},
@@ -346,6 +356,7 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
         assert _ate(times, poses, truth_at) > 0.1
 
 
+@pytest.mark.usefixtures("as_matched")
 @pytest.mark.parametrize(
     ("search_finds", "integrated"),
     [
@@ -490,6 +501,7 @@ def test_closures_of_one_new_keyframe_are_not_each_others_partner() -> None:
     assert local.closer._pairwise(neighbour, closure) is None
 
 
+@pytest.mark.usefixtures("as_matched")
 @pytest.mark.parametrize(("placed_at", "integrated"), [(1.5, True), (6.0, False)])
 def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
     monkeypatch,  # type: ignore[no-untyped-def]
@@ -517,7 +529,7 @@ def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
     monkeypatch.setattr(attempts, "integrate", fake)
     references = attempts.References(
         here=(0.0, 0.0, 0.0),
-        last=attempts.Reference(own, scan, attempts.Anchor(1, (0.0, 0.0, 0.0))),
+        last=attempts.Reference(own, scan, attempts.Anchor(1, (0.0, 0.0, 0.0)), 0.0),
         keyframe=1,
         older=[2, 0],
         poses={0: (0.0, 0.0, 0.0), 1: (0.0, 0.0, 0.0), 2: (1.0, 0.0, 0.0)},
@@ -541,6 +553,7 @@ def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
         assert chosen.piece == 1
 
 
+@pytest.mark.usefixtures("as_matched")
 @pytest.mark.parametrize(("second_confidence", "kept"), [(0.9, "second"), (0.1, "first")])
 def test_a_search_that_is_not_confident_is_searched_again_with_the_shapes(
     monkeypatch,  # type: ignore[no-untyped-def]
@@ -580,3 +593,123 @@ def test_a_search_that_is_not_confident_is_searched_again_with_the_shapes(
     assert placed == (kept == "second")
     expected = (0.5, 0.1, 0.0) if kept == "second" else (0.2, 0.0, 0.0)
     np.testing.assert_allclose(chosen.pose, expected)
+
+
+@pytest.mark.parametrize("context", attempts.CONTEXTS)
+def test_a_context_shifts_the_odds_by_its_prior(monkeypatch, context: str) -> None:  # type: ignore[no-untyped-def]
+    # Bayes' rule: a context whose matches are right four times as often at the same evidence
+    # multiplies the odds by 4 (intercept log 4, slope 1); no shift keeps the confidence.
+    monkeypatch.setattr(context_model, "CALIBRATION", {context: (1.0, float(np.log(4.0)))})
+    assert attempts.in_context(0.5, context) == pytest.approx(0.8)
+    assert attempts.in_context(0.2, context) == pytest.approx(0.5)  # odds 1/4 -> 1
+    monkeypatch.setattr(context_model, "CALIBRATION", {context: (1.0, 0.0)})
+    for p in (0.01, 0.3, 0.77, 0.999):
+        assert attempts.in_context(p, context) == pytest.approx(p)
+
+
+@given(
+    st.sampled_from(attempts.CONTEXTS),
+    st.floats(0.0, 1.0),
+    st.floats(0.0, 1.0),
+)
+def test_more_evidence_never_means_less_confidence_in_any_context(
+    context: str, p: float, q: float
+) -> None:
+    # The fitted calibration is monotone (a positive slope in every context), and a
+    # probability stays one.
+    low, high = sorted((p, q))
+    assert context_model.CALIBRATION[context][0] > 0.0
+    assert 0.0 <= attempts.in_context(low, context) <= attempts.in_context(high, context) <= 1.0
+
+
+@pytest.mark.parametrize(("search_prior", "integrated"), [(4.0, True), (1.0, False)])
+def test_the_front_end_decides_on_the_confidence_in_context(
+    monkeypatch,  # type: ignore[no-untyped-def]
+    search_prior: float,
+    integrated: bool,
+) -> None:
+    # A search against the last scan finds a placement at match confidence 0.6. Where such
+    # matches are right four times as often (odds x 4: 0.857 >= integrate_confidence 0.8) the
+    # scan is integrated; with the confidence as matched it is not, and the robot is lost.
+    shift = {"search": float(np.log(search_prior))}
+    calibration = {c: (1.0, shift.get(c, 0.0)) for c in attempts.CONTEXTS}
+    monkeypatch.setattr(context_model, "CALIBRATION", calibration)
+    monkeypatch.setattr(attempts, "integrate", lambda *a, **k: _match((0.4, 0.0, 0.0), 0.6))
+    scan = _stranger()
+    segments, _ = extract_scan(scan, EXTRACTION)
+    record: list[attempts.Attempt] = []
+    chosen, placed, _ = attempts.match_scan(
+        LocalMapperConfig(),
+        _only_the_last_scan(segments.segments, scan),
+        segments.segments,
+        scan,
+        [(0.0, 0.0, 0.0)],
+        False,
+        lambda *_: None,
+        record=record,
+    )
+    assert placed == integrated
+    assert chosen.context == "search" and chosen.result.confidence == 0.6
+    assert chosen.confidence == pytest.approx(0.6 * search_prior / (0.4 + 0.6 * search_prior))
+    assert chosen in record
+
+
+@pytest.mark.parametrize(
+    ("refined_to", "value", "expected"),
+    [
+        ((0.52, 0.11, 0.31), 4.0, (0.52, 0.11, 0.31)),  # the scans refine it: kept
+        ((0.0, 0.0, 0.0), 0.0, (0.5, 0.1, 0.3)),  # the scans keep nothing (INTEGRATE's zero)
+        ((-0.4, 0.2, 3.1), 4.0, (0.5, 0.1, 0.3)),  # another minimum, a half turn away
+    ],
+)
+def test_a_closure_edge_keeps_the_windows_placement_when_the_scans_cannot_refine_it(
+    office_drive,  # type: ignore[no-untyped-def]
+    monkeypatch,  # type: ignore[no-untyped-def]
+    refined_to: tuple[float, float, float],
+    value: float,
+    expected: tuple[float, float, float],
+) -> None:
+    # Two keyframes' windows agree on a placement; the closure's edge refines it with the two
+    # keyframes' own scans. When those keep no placement, or refine to another minimum, the
+    # edge must say what the windows found, never INTEGRATE's empty identity.
+    stamps, scans, _ = office_drive
+    local = LocalMapper()
+    for t, s in zip(stamps, scans, strict=True):
+        _feed(local, float(t), s)
+    assert len(local.keyframes()) >= 2
+    x, y, theta = refined_to
+    failed = MatchResult(np.array([theta, x, y]), value, 0.5, value > 0, 1, 1, 0.9)
+    monkeypatch.setattr(local.closer, "_match", lambda *a, **k: failed)
+    edge = local.closer._scan_edge(0, 1, (0.5, 0.1, 0.3))
+    np.testing.assert_allclose(edge.T_first_second, expected)
+    assert edge.robust
+
+
+@pytest.mark.parametrize(
+    ("matched", "in_context", "corroborated"),
+    [
+        (0.6, 0.6, True),  # each more likely right than wrong by its own evidence
+        (0.3, 0.7, False),  # only by the context's prior: shared, so it counts once
+    ],
+)
+def test_two_matches_corroborate_each_other_by_their_own_evidence(
+    matched: float, in_context: float, corroborated: bool
+) -> None:
+    # Two matches of one scan against two reference scans agree on its placement. They
+    # corroborate each other when each is likely right by its own evidence; their context's
+    # prior (the same for both: one scan, one situation) must not be counted in each.
+    def attempt(keyframe: int, pose: tuple[float, float, float]) -> attempts.Attempt:
+        return attempts.Attempt(
+            _match(pose, matched),
+            attempts.Anchor(keyframe, (0.0, 0.0, 0.0)),
+            np.zeros((0, 4)),
+            pose,
+            0,
+            "recent",
+            "recent",
+            in_context,
+            0.0,
+        )
+
+    pair = [attempt(0, (1.0, 0.0, 0.0)), attempt(2, (1.05, 0.02, 0.01))]
+    assert (attempts.corroborated(pair) is not None) == corroborated

@@ -233,6 +233,7 @@ def _run_local(
             "scans_accepted": mapper.scans_accepted,
             "scans_set_aside": mapper.scans_set_aside,
             "scans_tracked": mapper.scans_tracked,
+            "scans_placed_by": dict(mapper.scans_placed_by),
             "scans_in_main_piece": len(trajectories[robot][0]),
             "set_aside_reasons": dict(mapper.set_aside_reasons),
             "pieces_started": mapper.pieces_started,

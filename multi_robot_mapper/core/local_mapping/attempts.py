@@ -1,5 +1,6 @@
 """The front end's match attempts: where a scan is anchored, one match of a new scan against
-one reference scan, when two attempts corroborate each other, and the order in which a new
+one reference scan, what its confidence means in the context it was made in
+(:func:`in_context`), when two attempts corroborate each other, and the order in which a new
 scan is matched (:func:`match_scan`)."""
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.local_mapping import context_model
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeScan
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
@@ -49,6 +51,30 @@ def close_to(a: Pose, b: Pose, distance: float, angle: float) -> bool:
     return bool(np.hypot(dx, dy) <= distance and abs(dtheta) <= angle)
 
 
+# What a front-end match was asked, each with its own base rate of right answers: the last
+# keyframe from the prediction, the last scan with no guess, an older keyframe of the robot's
+# piece, a keyframe of another piece (where the robot was before it got lost).
+CONTEXTS = ("track", "search", "recent", "other")
+
+
+def in_context(confidence: float, context: str) -> float:
+    """P(right) of a front-end match with this :mod:`~core.matching.confidence`, given its
+    context (:data:`CONTEXTS`).
+
+    The confidence model is fitted on a mixture of scan pairs (consecutive, revisits,
+    unrelated places: ``bench/fit_confidence.py``), so its base rate is the mixture's. The
+    front end asks narrower questions: at a match confidence of 0.5-0.8, a search against the
+    last scan, one scan interval before, was right 93 % of the time on the shared logs, a
+    match against another piece's keyframe 23 % (``bench/fit_placement.py``, README
+    "Confidence in context"). Bayes' rule moves the log-odds by each context's prior; a
+    slope lets the evidence count more or less there too (Platt scaling, fitted per context
+    on the front end's own matches with the reference, written into :mod:`context_model`)."""
+    slope, intercept = context_model.CALIBRATION[context]
+    p = min(max(confidence, 1e-9), 1.0 - 1e-9)
+    z = slope * float(np.log(p / (1.0 - p))) + intercept
+    return float(1.0 / (1.0 + np.exp(-np.clip(z, -50.0, 50.0))))
+
+
 @dataclasses.dataclass(frozen=True)
 class Attempt:
     """One match of the new scan against one reference scan."""
@@ -59,16 +85,23 @@ class Attempt:
     pose: Pose  # the new scan's pose in the piece, by this match
     piece: int  # the reference's piece
     stage: str  # "track", "search" or "recent"
+    context: str  # one of CONTEXTS
+    confidence: float  # P(right) in its context (:func:`in_context` of the match's)
+    reference_stamp: float  # when the reference scan was taken (s)
 
 
 def corroborated(
     attempts: list[Attempt], reachable: Callable[[Attempt], bool] = lambda _: True
 ) -> Attempt | None:
     """The more confident of two attempts against different reference scans, each more likely
-    right than wrong, that place the scan within the correctness tolerance of each other:
-    wrong matches rarely agree on one placement from two scans (when they do, it is the
-    same structure misleading both, and their confidence is low). ``reachable`` says whether
-    the robot can have driven to an attempt's placement (:func:`match_scan`)."""
+    right than wrong by its own evidence, that place the scan within the correctness
+    tolerance of each other: wrong matches rarely agree on one placement from two scans
+    (when they do, it is the same structure misleading both, and their confidence is low).
+    "By its own evidence" is the match confidence, not the one in context: the two matches
+    are of one scan in one situation, so their context's prior is shared, and counting it in
+    each would count it twice (on fhw a search at 0.20, 0.57 in context, corroborated a
+    look-alike 5 m and 98 deg off). ``reachable`` says whether the robot can have driven to
+    an attempt's placement (:func:`match_scan`)."""
     likely = [a for a in attempts if a.result.confidence >= LIKELY and reachable(a)]
     for i, a in enumerate(likely):
         for b in likely[i + 1 :]:
@@ -76,7 +109,7 @@ def corroborated(
                 continue  # the same reference scan (not independent), or unrelated frames
             dx, dy, dtheta = se2.between(a.pose, b.pose)
             if np.hypot(dx, dy) < RIGHT_DISTANCE and abs(dtheta) < RIGHT_ANGLE:
-                return a if a.result.confidence >= b.result.confidence else b
+                return a if a.confidence >= b.confidence else b
     return None
 
 
@@ -98,6 +131,7 @@ class Reference:
     segments: FloatArray
     view: LaserScanData
     anchor: Anchor
+    stamp: float  # when it was taken (s)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,6 +181,7 @@ def match_scan(
     tracking: bool,
     count: Callable[[str, float], None],
     shapes: Shapes | None = None,
+    record: list[Attempt] | None = None,
 ) -> tuple[Attempt, bool, bool]:
     """The placement of the new scan, whether to integrate it, and whether it was tracked:
     against the last keyframe from the predictions ``motions`` (the constant-velocity one
@@ -156,11 +191,14 @@ def match_scan(
     piece than the robot's, only where it can have driven since it was last placed there).
     When none does, the most confident attempt the robot can have driven to is returned (the
     guess a new piece starts from). A search that is not confident is searched again with the
-    shape matching's placements as more hypotheses (``shapes``, Wolter; None: never).
-    ``count(stage, seconds)`` is told where the time went."""
+    shape matching's placements as more hypotheses (``shapes``, Wolter; None: never). Every
+    decision reads an attempt's confidence in its context (:func:`in_context`).
+    ``count(stage, seconds)`` is told where the time went; ``record`` (a list) receives every
+    attempt kept."""
     threshold = config.integrate_confidence
     here, poses, pieces = references.here, references.poses, references.pieces
-    attempts: list[Attempt] = []
+    attempts: list[Attempt] = record if record is not None else []
+    current = pieces[references.keyframe]
 
     def attempt(
         stage: str, reference: Reference, search: bool, guesses_from_last: list[Pose]
@@ -180,7 +218,9 @@ def match_scan(
         )
         checked = result.seconds.get("confidence", 0.0)
         shaping = 0.0
-        if search and shapes is not None and result.confidence < threshold:
+        piece = pieces[anchor.keyframe]
+        context = "other" if piece != current else stage
+        if search and shapes is not None and in_context(result.confidence, context) < threshold:
             # A search that is not confident is searched again with Wolter's shape matching
             # as a second source of hypotheses: its polylines keep clusters too small for
             # segments. Only then: a confident search keeps the hypotheses its confidence
@@ -204,8 +244,11 @@ def match_scan(
             anchor,
             reference.segments,
             se2.compose(poses[anchor.keyframe], T_keyframe_new),
-            pieces[anchor.keyframe],
+            piece,
             stage,
+            context,
+            in_context(result.confidence, context),
+            reference.stamp,
         )
         attempts.append(done)
         count(stage, time.perf_counter() - started - checked - shaping)
@@ -213,8 +256,6 @@ def match_scan(
         if shaping:
             count("shape", shaping)
         return done
-
-    current = pieces[references.keyframe]
 
     def reachable(a: Attempt) -> bool:
         # A placement in another piece puts the robot back where it was when it got lost
@@ -238,14 +279,14 @@ def match_scan(
         if rivals_disagree:
             return corroborated(attempts, reachable)
         recent = [a for a in attempts if a.stage != "recent"]
-        best = max(recent, key=lambda a: a.result.confidence, default=None)
-        if best is not None and best.result.confidence >= threshold:
+        best = max(recent, key=lambda a: a.confidence, default=None)
+        if best is not None and best.confidence >= threshold:
             return best
         return corroborated(attempts, reachable)
 
     def keyframe_reference(keyframe: int) -> Reference:
         scan = references.scans[keyframe]
-        return Reference(scan.segments, scan.view, Anchor(keyframe, (0.0, 0.0, 0.0)))
+        return Reference(scan.segments, scan.view, Anchor(keyframe, (0.0, 0.0, 0.0)), scan.stamp)
 
     if tracking:
         # Tracking needs a prediction: after a new piece starts nothing is known of the
@@ -257,7 +298,7 @@ def match_scan(
         # miss), and a quarter and a half turn (a room of right angles fits those ways too:
         # the look-alike's rival, or the right answer when the prediction found the look-alike).
         quick = attempt("track", start, False, motions[:1])
-        if quick.result.confidence >= threshold and close_to(
+        if quick.confidence >= threshold and close_to(
             se2.between(here, quick.pose), motions[0], NEAR, NEAR_ANGLE
         ):
             return quick, True, True
@@ -265,12 +306,12 @@ def match_scan(
         x, y, theta = motions[0]
         rivals = [(x, y, theta + d) for d in (*TRACK_TURNS, *LOOK_ALIKE_TURNS) if d]
         track = attempt("track", start, False, motions + rivals)
-        if track.result.confidence >= threshold:
+        if track.confidence >= threshold:
             # Far from the prediction (or it would have settled above), the placement may be
             # a look-alike the prediction led to: the search with no guess confirms it, or
             # finds a likely rival, and then neither settles alone.
             search = attempt("search", references.last, True, motions)
-            rivals_disagree = search.result.confidence >= LIKELY and not close_to(
+            rivals_disagree = search.confidence >= LIKELY and not close_to(
                 search.pose, track.pose, RIGHT_DISTANCE, RIGHT_ANGLE
             )
             if not rivals_disagree:
@@ -288,4 +329,4 @@ def match_scan(
     # The guess a new piece starts from: the most confident placement the robot can have
     # driven to (a look-alike far off misleads the join's search).
     guesses = [a for a in attempts if reachable(a)] or attempts
-    return max(guesses, key=lambda a: a.result.confidence), False, False
+    return max(guesses, key=lambda a: a.confidence), False, False

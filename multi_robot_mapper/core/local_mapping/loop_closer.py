@@ -293,8 +293,15 @@ class LoopCloser:
     def _scan_edge(self, first: int, second: int, T_first_second: Pose) -> Edge:
         """The robust edge of a closure or join: the two keyframes' own scans refined from the
         placement their windows agreed on (a window's geometry carries its keyframes' small
-        placement errors; the scans do not), with the scans' information."""
+        placement errors; the scans do not), with the scans' information. When the two scans
+        alone keep no placement (no wall of one matches the other's: INTEGRATE's empty
+        result is the identity) or refine to another minimum, the windows' placement stands:
+        an identity edge turned a join on intel half round (0.5 m, 177 deg)."""
         refined = self._match(first, second, T_first_second, search=False)
+        if refined.value <= 0.0 or not _close(
+            _pose(refined.T_1_2), T_first_second, RIGHT_DISTANCE, RIGHT_ANGLE
+        ):
+            refined = dataclasses.replace(refined, T_1_2=_hypothesis(T_first_second)[0])
         return self._edge(first, second, refined, robust=True)
 
     def _edge(self, first: int, second: int, result: MatchResult, robust: bool) -> Edge:

@@ -12,7 +12,8 @@ add_scan`):
    that is not confident is searched again with Wolter's shape matching as a second source of
    hypotheses (:mod:`core.matching.shape`);
 2. **confidence**: the best match's probability of being right
-   (:mod:`core.matching.confidence`);
+   (:mod:`core.matching.confidence`), in the context it was asked in (the last scan, an older
+   keyframe, another piece: :func:`~core.local_mapping.attempts.in_context`);
 3. **integrate** when it reaches ``integrate_confidence``: the scan is placed; a scan that
    moved ``keyframe_distance`` or turned ``keyframe_angle`` from the last keyframe becomes a
    keyframe, with an edge (its information from the match) to the keyframe it was matched
@@ -84,6 +85,8 @@ class LocalUpdate:
     reason: str  # why a scan was set aside, or why a new piece started ("" otherwise)
     piece: int = 0  # the piece the scan is in
     new_piece: bool = False  # the robot was lost: this scan starts a new piece
+    # the context of the match that placed it (attempts.CONTEXTS; "" when it starts a piece)
+    placed_by: str = ""
     # seconds per stage of this scan: track / search / recent (matching), confidence,
     # handoff (a keyframe's edge to the back end), integrate (the rest)
     seconds: dict[str, float] = dataclasses.field(default_factory=dict)
@@ -122,9 +125,12 @@ class LocalMapper:
         self.scans_accepted = 0
         self.scans_set_aside = 0
         self.scans_tracked = 0  # placed from the prediction alone, without a search
+        self.scans_placed_by: dict[str, int] = {}  # placed scans per context of their match
         self.set_aside_reasons: dict[str, int] = {}
         self.pieces_started = 0  # new pieces after the first (the robot was lost)
         self.stage_seconds: dict[str, float] = {}  # front-end time per stage, summed
+        # The matches the newest scan was tried with (a bench judges them by the reference).
+        self.last_attempts: list[Attempt] = []
         self._scan_seconds: dict[str, float] = {}  # the current scan's
         self.backend_seconds: deque[float] = deque(maxlen=_TIMES_KEPT)  # per keyframe
         self.backend_errors = 0  # back-end steps that failed and were skipped (bugs)
@@ -179,6 +185,7 @@ class LocalMapper:
         """Place one scan (its segments and the scan they came from) and extend the map."""
         started = time.perf_counter()
         self._scan_seconds = {}
+        self.last_attempts = []
         update = self._add_scan(stamp, segments, view)
         spent = time.perf_counter() - started
         self._count("integrate", spent - sum(self._scan_seconds.values()))
@@ -225,8 +232,16 @@ class LocalMapper:
         self._last = _Last(stamp, new, view, placed)
         self._record(stamp, placed)
         self.scans_accepted += 1
+        self.scans_placed_by[chosen.context] = self.scans_placed_by.get(chosen.context, 0) + 1
         return LocalUpdate(
-            True, self.pose, keyframe_added, result.confidence, "", self.piece, False
+            True,
+            self.pose,
+            keyframe_added,
+            chosen.confidence,
+            "",
+            self.piece,
+            False,
+            chosen.context,
         )
 
     def _match(
@@ -253,7 +268,7 @@ class LocalMapper:
             left = self._left(last.stamp + dt, {self._pieces[k] for k in older} - {piece})
             references = References(
                 here=self._placed_pose_unlocked(last.anchor),
-                last=Reference(last.segments, last.view, last.anchor),
+                last=Reference(last.segments, last.view, last.anchor, last.stamp),
                 keyframe=keyframe,
                 older=older,
                 poses={k: self._poses[k] for k in (keyframe, *older)},
@@ -272,6 +287,7 @@ class LocalMapper:
             self._velocity is not None,
             self._count,
             self._shapes,
+            self.last_attempts,
         )
         self.scans_tracked += tracked
         return chosen, integrated
