@@ -456,6 +456,44 @@ def test_a_placement_that_puts_walls_in_the_other_robots_free_space_is_refused()
     assert verdict.accepted and sorted(c.centre for c in verdict.links) == [2, 7, 12]
 
 
+def test_a_map_that_bends_between_its_places_keeps_its_walls_out_of_free_space() -> None:
+    # b's map bends 0.1 rad at its keyframe 10 (its own drift): four right links, two places
+    # each side of the bend. As rigid bodies at one link the maps cross each other's corridor
+    # beyond the bend (3.3 m of wall in free space); each wall placed by its nearest link,
+    # none. A look-alike's links agree on one placement: both readings are the same for it.
+    frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.0, 0.0)}
+    truth = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
+    keyframes = line_units(["a", "b"], [frames["a"], frames["b"]])
+    pivot = se2.matrix_from_pose(*keyframes["b"][10].T_robotmap_keyframe)
+    T_bend = pivot @ se2.matrix_from_pose(0.0, 0.0, 0.1) @ se2.invert(pivot)
+    keyframes["b"] = [
+        kf
+        if kf.index <= 10
+        else dataclasses.replace(
+            kf,
+            T_robotmap_keyframe=np.array(
+                se2.pose_from_matrix(T_bend @ se2.matrix_from_pose(*kf.T_robotmap_keyframe))
+            ),
+        )
+        for kf in keyframes["b"]
+    ]
+    units = units_of(keyframes)
+    views = {key: MapViews.of(u.segments, u.poses, CONFIG) for key, u in units.items()}
+    right = [link(truth, frames, "b", k, "a", k + 3, 0.97) for k in (2, 6, 12, 15)]
+    verdict = consistent_set(
+        (("a", 0), ("b", 0)),
+        right,
+        units,
+        CONFIG,
+        lambda links: seen_through_near(links, units, views.get, CONFIG),
+    )
+    assert verdict.accepted, verdict.reason
+    assert len(verdict.links) == 4
+    near, whole = verdict.seen_through
+    assert near == 0.0
+    assert whole > CONFIG.link_max_seen_through  # the rigid reading: walls across the corridor
+
+
 def test_a_link_that_breaks_a_cycle_is_refused() -> None:
     # Three robots in one corridor, each pair linked by a consistent set of two places. a-b
     # and b-c are right; a-c is 2 m off (consistent in itself: both its links are off alike)

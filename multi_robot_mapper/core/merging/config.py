@@ -184,9 +184,9 @@ class MergeConfig:
         doc="validity threshold: a link is refused when more than this length of either map "
         "(and more than link_max_seen_through_fraction of its value) lies in free space the "
         "other robot saw from its keyframes (only when keyframe poses are given); the joint "
-        "merger (pivot) refuses a pair's consistent set of links when its placement puts more "
-        "than this of the walls near its places there (no fraction: near the places the maps' "
-        "own drift is small)",
+        "merger (pivot) refuses a pair's consistent set of links when it puts more than this "
+        "of the walls near its places there, each wall placed by the link nearest to it (no "
+        "fraction: so placed, the maps' own drift is small)",
         minimum=0.0,
         maximum=1000000.0,
     )
