@@ -317,3 +317,37 @@ def test_nodes_exit_cleanly_on_signals_over_udp_only_dds(ros_context, signum: in
     for process, (_, err) in zip((mapper, merger), outputs, strict=True):
         assert process.returncode == 0, err
         assert "Traceback" not in err, err
+
+
+_SIGNAL_WHILE_BUILDING = """
+import os, signal, sys, time
+import rclpy
+from rclpy.node import Node
+from std_msgs.msg import String
+from multi_robot_mapper.ros.entry import run_node
+
+def make_node():
+    node = Node("half_built")
+    os.kill(os.getpid(), {signum})  # the launcher stops the node before it is up
+    deadline = time.monotonic() + 10.0
+    while rclpy.ok() and time.monotonic() < deadline:  # rclpy's signal thread shuts down
+        time.sleep(0.01)
+    node.create_publisher(String, "late", 10)  # fails: the context is shut down
+    raise AssertionError("the signal never shut the context down")
+
+sys.exit(run_node("half_built", make_node))
+"""
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_while_the_node_is_built_is_a_clean_exit(signum: int) -> None:
+    """The signal the test above sends can land before a node's constructor is done (the merger
+    builds for seconds on a busy machine): exit 0 and no traceback then too."""
+    done = subprocess.run(
+        [sys.executable, "-c", _SIGNAL_WHILE_BUILDING.format(signum=int(signum))],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr, done.stderr

@@ -26,23 +26,23 @@ def run_nodes(
     if not faulthandler.is_enabled():
         faulthandler.enable()  # a crash in native code names the Python threads it met
     rclpy.init(args=args)
+    # Made before the nodes, as soon as the context is: a signal shuts the context down, and an
+    # executor made after that fails half-built (and its __del__ prints a traceback).
+    spinner = make_executor()
+    nodes: list[Node] = []
     try:
-        nodes = list(make_nodes())
-    except ConfigError as exc:
-        print(f"{program}: invalid parameters: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    spinner = make_executor()  # after init: an executor belongs to the initialised context
-    for node in nodes:
-        spinner.add_node(node)
-    try:
+        try:
+            nodes = list(make_nodes())
+        except ConfigError as exc:
+            print(f"{program}: invalid parameters: {exc}", file=sys.stderr)
+            return 2
+        for node in nodes:
+            spinner.add_node(node)
         spinner.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        # A SIGTERM can shut the context down while spin() builds its wait set (an rclpy race);
-        # that is a normal shutdown. Anything while the context is still valid is a real error.
-        if rclpy.ok():
+    except BaseException as exc:
+        # Ctrl-C or SIGTERM, while the nodes spin or while they are still being built (a
+        # launcher stopping them early), is a normal shutdown.
+        if not _shutdown_requested(exc):
             raise
     finally:
         spinner.shutdown()
@@ -61,6 +61,20 @@ def run_node(
 ) -> int:
     """:func:`run_nodes` for one node (``ros2 run multi_robot_mapper <node>``)."""
     return run_nodes(program, lambda: [make_node()], args, make_executor)
+
+
+def _shutdown_requested(exc: BaseException) -> bool:
+    """Whether ``exc`` is how a shutdown request (Ctrl-C, SIGTERM) reached the main thread.
+
+    On SIGINT Python raises KeyboardInterrupt wherever the main thread is. On SIGTERM (and on
+    SIGINT too) rclpy's signal thread shuts the context down, so whatever the main thread does
+    next with it fails: spin() raises ExternalShutdownException, or, when the signal lands
+    while spin() builds its wait set or while a node is still being built, an RCLError
+    ("context is invalid"). Any error once the context is no longer valid is that shutdown;
+    an error while it is still valid is a real one."""
+    if isinstance(exc, (KeyboardInterrupt, ExternalShutdownException)):
+        return True
+    return isinstance(exc, Exception) and not rclpy.ok()
 
 
 def _finish_callbacks(spinner: Executor, timeout: float = 10.0) -> None:
