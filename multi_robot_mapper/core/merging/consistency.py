@@ -285,46 +285,46 @@ def seen_through_near(
         _link_placement(best, units),
         config,
     )
+    # The same walls both ways: those within twice place_radius of the linked keyframes.
     reach = 2.0 * config.place_radius
     sides = [oriented(c, best.first) for c in links]
+    walls_first = segments_near(
+        first.segments, _poses(first, [lk.k_first for lk in sides])[:, :2], reach
+    )
+    walls_second = segments_near(
+        second.segments, _poses(second, [lk.k_second for lk in sides])[:, :2], reach
+    )
     rigid = free_space_conflict(
-        segments_near(first.segments, _poses(first, [lk.k_first for lk in sides])[:, :2], reach),
-        views_first,
-        segments_near(second.segments, _poses(second, [lk.k_second for lk in sides])[:, :2], reach),
-        views_second,
-        _link_placement(best, units),
-        config,
+        walls_first, views_first, walls_second, views_second, _link_placement(best, units), config
     )
     confident = [c for c in links if c.confidence >= config.link_confidence] or list(links)
     piecewise = 0.0
     if views_first is not None:
-        placed = _placed_by_nearest_link(
-            [oriented(c, best.second) for c in confident], units, reach
-        )
+        by_second = [oriented(c, best.second) for c in confident]
+        placed = _placed_by_nearest_link(walls_second, by_second, units)
         piecewise = seen_through_length(views_first, placed, config)
     if views_second is not None:
-        placed = _placed_by_nearest_link([oriented(c, best.first) for c in confident], units, reach)
+        by_first = [oriented(c, best.first) for c in confident]
+        placed = _placed_by_nearest_link(walls_first, by_first, units)
         piecewise = max(piecewise, seen_through_length(views_second, placed, config))
     return min(rigid, piecewise), whole
 
 
 def _placed_by_nearest_link(
-    links: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit], reach: float
+    walls: FloatArray, links: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit]
 ) -> FloatArray:
-    """The walls of map ``first`` within ``reach`` of its linked keyframes, in map
-    ``second``'s frame, each wall moved by the link whose ``first`` keyframe lies nearest
-    its middle (of the links of one keyframe, the best-fitting)."""
-    first = units[links[0].first]
+    """``walls`` of map ``first`` (the links' ``first``) in map ``second``'s frame, each moved
+    by the link whose ``first`` keyframe lies nearest its middle (of the links of one
+    keyframe, the best-fitting)."""
+    if len(walls) == 0:
+        return walls
     by_keyframe: dict[int, OrientedLink] = {}
     for link in links:
         held = by_keyframe.get(link.k_first)
         if held is None or link.candidate.fit > held.candidate.fit:
             by_keyframe[link.k_first] = link
     chosen = list(by_keyframe.values())
-    centres = _poses(first, [link.k_first for link in chosen])[:, :2]
-    walls = segments_near(first.segments, centres, reach)
-    if len(walls) == 0:
-        return walls
+    centres = _poses(units[chosen[0].first], [link.k_first for link in chosen])[:, :2]
     middles = 0.5 * (walls[:, :2] + walls[:, 2:])
     offsets = middles[:, None, :] - centres[None, :, :]
     nearest = np.argmin(np.hypot(offsets[..., 0], offsets[..., 1]), axis=1)
