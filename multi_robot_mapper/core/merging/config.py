@@ -185,8 +185,9 @@ class MergeConfig:
         "(and more than link_max_seen_through_fraction of its value) lies in free space the "
         "other robot saw from its keyframes (only when keyframe poses are given); the joint "
         "merger (pivot) refuses a pair's consistent set of links when it puts more than this "
-        "of the walls near its places there, each wall placed by the link nearest to it (no "
-        "fraction: so placed, the maps' own drift is small)",
+        "of the walls near its places there both with the maps rigid and with each wall "
+        "placed by its nearest confident link (no fraction: so placed, the maps' own drift "
+        "is small)",
         minimum=0.0,
         maximum=1000000.0,
     )
