@@ -277,13 +277,9 @@ def seen_through_near(
     best = oriented(max(links, key=lambda c: c.fit), links[0].source)
     first, second = units[best.first], units[best.second]
     views_first, views_second = views_of(best.first), views_of(best.second)
+    T_first_second = _link_placement(best, units)
     whole = free_space_conflict(
-        first.segments,
-        views_first,
-        second.segments,
-        views_second,
-        _link_placement(best, units),
-        config,
+        first.segments, views_first, second.segments, views_second, T_first_second, config
     )
     # The same walls both ways: those within twice place_radius of the linked keyframes.
     reach = 2.0 * config.place_radius
@@ -295,7 +291,7 @@ def seen_through_near(
         second.segments, _poses(second, [lk.k_second for lk in sides])[:, :2], reach
     )
     rigid = free_space_conflict(
-        walls_first, views_first, walls_second, views_second, _link_placement(best, units), config
+        walls_first, views_first, walls_second, views_second, T_first_second, config
     )
     confident = [c for c in links if c.confidence >= config.link_confidence] or list(links)
     piecewise = 0.0
