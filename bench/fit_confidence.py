@@ -53,7 +53,8 @@ import numpy as np  # noqa: E402
 from scipy.optimize import minimize  # noqa: E402
 
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.fusion import fuse  # noqa: E402
 from multi_robot_mapper.core.matching import IntegrateConfig, integrate  # noqa: E402
 from multi_robot_mapper.core.matching.beams import Viewpoint, Views  # noqa: E402

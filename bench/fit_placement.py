@@ -49,7 +49,8 @@ from scipy.optimize import minimize  # noqa: E402
 
 from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.local_mapping import LocalMapper, LocalMapperConfig  # noqa: E402
 from multi_robot_mapper.core.local_mapping.attempts import CONTEXTS, pose_of_match  # noqa: E402
 from multi_robot_mapper.core.matching.confidence import is_right  # noqa: E402

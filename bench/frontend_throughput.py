@@ -21,16 +21,11 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.scan import LaserScanData  # noqa: E402
-from multi_robot_mapper.core.simulation import (  # noqa: E402
-    ROUTES,
-    LaserModel,
-    _arc_length,
-    drive_path,
-    office_world,
-    simulate_scan,
-)
+from multi_robot_mapper.core.simulation import LaserModel, _arc_length, drive_path, simulate_scan  # noqa: E402
+from multi_robot_mapper.core.worlds import ROUTES, office_world  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
 INTEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen" / "intel.log.gz"

@@ -42,7 +42,7 @@ import numpy as np  # noqa: E402
 
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
-from multi_robot_mapper.core.extraction import ExtractionConfig  # noqa: E402
+from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE  # noqa: E402
 from multi_robot_mapper.core.merging import MergeConfig  # noqa: E402
 from multi_robot_mapper.core.pipeline import OfflineMap, TimedLaserScan, run_offline  # noqa: E402

@@ -1,6 +1,6 @@
 """Load: 8 simulated robots at 40 Hz x 1081 beams, live, for a long run on this machine.
 
-Every robot drives the office world's closed tour (``core/simulation.py``), one eighth of a
+Every robot drives the office world's closed tour (``core/worlds.py``), one eighth of a
 lap apart, round and round at 0.8 m/s; its laser is a Hokuyo UTM-30LX (40 Hz, 1081 beams,
 270 deg, noise and dropouts). One lap of scans is ray cast once (the tour is closed and the
 path periodic, so lap after lap joins without a jump; robot k plays it k/8 of a lap later) and
@@ -56,14 +56,13 @@ from sensor_msgs.msg import LaserScan  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 
 from multi_robot_mapper.core.simulation import (  # noqa: E402
-    ROUTES,
     SIM_START_S,
-    WORLDS,
     LaserModel,
     _arc_length,
     drive_path,
     simulate_scan,
 )
+from multi_robot_mapper.core.worlds import ROUTES, WORLDS  # noqa: E402
 from multi_robot_mapper.io.messages import stamp_from_seconds  # noqa: E402
 from multi_robot_mapper.ros.live import Observer, ScanPlayer  # noqa: E402
 from multi_robot_mapper.ros.processes import (  # noqa: E402

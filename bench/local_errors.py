@@ -31,7 +31,8 @@ import numpy as np  # noqa: E402
 from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.local_mapping import LocalMapper, LocalMapperConfig  # noqa: E402
 from multi_robot_mapper.evaluation.metrics import (  # noqa: E402
     PAIR_ROTATION_RAD,

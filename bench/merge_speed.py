@@ -47,7 +47,8 @@ import numpy as np  # noqa: E402
 from multi_robot_mapper.cli.common import add_set_option  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.fusion import fuse  # noqa: E402
 from multi_robot_mapper.core.local_mapping import Keyframe  # noqa: E402
 from multi_robot_mapper.core.matching import IntegrateConfig  # noqa: E402

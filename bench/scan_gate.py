@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.extraction import extract_scan
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.matching import IntegrateConfig, cross_support, integrate
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen
 

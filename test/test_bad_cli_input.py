@@ -377,7 +377,7 @@ def _quick_demo(monkeypatch: pytest.MonkeyPatch) -> None:
     import numpy as np
 
     from multi_robot_mapper.cli import demo
-    from multi_robot_mapper.core.simulation import WORLDS
+    from multi_robot_mapper.core.worlds import WORLDS
     from multi_robot_mapper.io.results import ReplayResult
     from multi_robot_mapper.ros.live import PlayStats
 

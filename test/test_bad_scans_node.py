@@ -148,7 +148,7 @@ def test_degenerate_scans_never_reach_the_mapper_and_poses_stay_right(ros_contex
 
 
 def big_room_scan(beams: int) -> LaserScanData:
-    from multi_robot_mapper.core.simulation import polygon
+    from multi_robot_mapper.core.worlds import polygon
 
     room = polygon([(-4.0, -3.0), (6.0, -3.0), (6.0, 5.0), (-4.0, 5.0)])
     angles = np.linspace(-math.radians(135), math.radians(135), beams)

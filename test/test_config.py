@@ -12,7 +12,7 @@ from multi_robot_mapper.core.config import (
     config_to_flat,
     parse_override,
 )
-from multi_robot_mapper.core.extraction import ExtractionConfig
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.io.config_files import (
     default_params_file,

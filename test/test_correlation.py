@@ -21,7 +21,7 @@ from multi_robot_mapper.core.merging.correlation import (
     placement_scores,
     rotation_candidates,
 )
-from multi_robot_mapper.core.simulation import WORLDS, polygon
+from multi_robot_mapper.core.worlds import WORLDS, polygon
 
 CONFIG = CorrelationConfig()
 NO_FREE = np.zeros((0, 2))

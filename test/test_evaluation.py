@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.simulation import LaserModel, polygon, simulate_scan
+from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
+from multi_robot_mapper.core.worlds import polygon
 from multi_robot_mapper.evaluation.metrics import (
     RobotTrack,
     align_se2,

@@ -8,9 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_segments
+from multi_robot_mapper.core.extraction import extract_segments
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.geometry import point_segment_distance
-from multi_robot_mapper.core.simulation import polygon, raycast
+from multi_robot_mapper.core.simulation import raycast
+from multi_robot_mapper.core.worlds import polygon
 
 ROOM = polygon([(-2.0, -1.5), (3.0, -1.5), (3.0, 2.5), (-2.0, 2.5)])
 CORNERS = ROOM[:, :2]

@@ -120,7 +120,7 @@ def test_the_config_cools_down_and_says_so_when_it_would_not() -> None:
 def test_method_ffs_merges_simulated_robots_where_the_truth_has_them() -> None:
     # Two office robots mapped offline without odometry, merged by 'ffs': the joint graph
     # places them, FFS moves every body; both robots' trajectories stay on the truth.
-    from multi_robot_mapper.core.extraction import ExtractionConfig
+    from multi_robot_mapper.core.extraction_config import ExtractionConfig
     from multi_robot_mapper.core.pipeline import TimedLaserScan, run_offline
     from multi_robot_mapper.core.simulation import LaserModel, simulate_robots
 

@@ -21,7 +21,8 @@ from hypothesis import strategies as st
 from test_merging import LASER, random_frames, stranger_walls
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.extraction import extract_scan
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.matching import IntegrateConfig
@@ -40,14 +41,13 @@ from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.places import MapUnit, units_of
 from multi_robot_mapper.core.pipeline import TimedLaserScan, run_offline
 from multi_robot_mapper.core.simulation import (
-    ROUTES,
-    WORLDS,
     LaserModel,
     drive_path,
     plan_paths,
     simulate_robots,
     simulate_scan,
 )
+from multi_robot_mapper.core.worlds import ROUTES, WORLDS
 
 CONFIG = MergeConfig()
 DISTANCE = 40.0  # m driven per robot

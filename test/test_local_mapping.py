@@ -10,7 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.extraction import extract_scan
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.local_mapping import (
     LocalMapper,
     LocalMapperConfig,
@@ -24,16 +25,14 @@ from multi_robot_mapper.core.local_mapping import (
 from multi_robot_mapper.core.matching import MatchResult, integrate
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import (
-    ROUTES,
-    WORLDS,
     LaserModel,
-    box,
     clutter_for,
     drive_path,
     route_section,
     simulate_robots,
     simulate_scan,
 )
+from multi_robot_mapper.core.worlds import ROUTES, WORLDS, box
 
 EXTRACTION = ExtractionConfig()
 

@@ -34,10 +34,10 @@ from multi_robot_mapper.core.simulation import (
     LaserModel,
     SimulatedRobot,
     drive_path,
-    office_world,
     simulate_robots,
     simulate_scan,
 )
+from multi_robot_mapper.core.worlds import office_world
 from multi_robot_mapper.io.bags import (
     RobotRecording,
     read_recordings,

@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.extraction import extract_scan
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.matching import (
     HEURISTICS,
     IntegrateConfig,
@@ -23,7 +24,8 @@ from multi_robot_mapper.core.matching import (
 from multi_robot_mapper.core.matching.confidence import is_right
 from multi_robot_mapper.core.matching.integrate import _distinct_candidates
 from multi_robot_mapper.core.scan import LaserScanData
-from multi_robot_mapper.core.simulation import ROUTES, WORLDS, LaserModel, simulate_scan
+from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
+from multi_robot_mapper.core.worlds import ROUTES, WORLDS
 
 CONFIG = IntegrateConfig()
 LASER = LaserModel(beams=361, range_noise=0.005, dropout=0.0)

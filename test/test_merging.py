@@ -19,7 +19,8 @@ from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError, config_from_flat
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.extraction import extract_scan
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.merging import (
@@ -35,16 +36,8 @@ from multi_robot_mapper.core.merging import (
     seen_through_length,
     spanning_tree,
 )
-from multi_robot_mapper.core.simulation import (
-    ROUTES,
-    WORLDS,
-    LaserModel,
-    arc,
-    drive_path,
-    plan_paths,
-    polygon,
-    simulate_scan,
-)
+from multi_robot_mapper.core.simulation import LaserModel, drive_path, plan_paths, simulate_scan
+from multi_robot_mapper.core.worlds import ROUTES, WORLDS, arc, polygon
 
 CONFIG = MergeConfig()
 LASER = LaserModel(beams=361, range_noise=0.01, dropout=0.0, range_max=10.0)

@@ -20,7 +20,7 @@ from multi_robot_mapper.core.merging.occupancy import (
     global_grid,
     occupancy_grid,
 )
-from multi_robot_mapper.core.simulation import polygon
+from multi_robot_mapper.core.worlds import polygon
 
 ROOM = polygon([(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0)])  # closed 4 x 4 m room
 CONFIG = GridConfig(resolution=0.1)

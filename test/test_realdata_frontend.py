@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from conftest import CARMEN_LOGS, carmen_log
 
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.extraction import extract_scan
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.geometry import point_segment_distance, ranges_index
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen
 

@@ -20,13 +20,8 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError
 from multi_robot_mapper.core.local_mapping import attempts as front_end_attempts
 from multi_robot_mapper.core.scan import LaserScanData
-from multi_robot_mapper.core.simulation import (
-    LaserModel,
-    SimulatedRobot,
-    polygon,
-    raycast,
-    simulate_robots,
-)
+from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, raycast, simulate_robots
+from multi_robot_mapper.core.worlds import polygon
 from multi_robot_mapper.io.messages import (
     keyframes_from_markers,
     pose_from_msg,

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from multi_robot_mapper.core.extraction import ExtractionConfig, extract_scan
+from multi_robot_mapper.core.extraction import extract_scan
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.scan import LaserScanData, ScanError, scan_points
 
 ONE_DEGREE = math.radians(1.0)

@@ -26,7 +26,8 @@ from multi_robot_mapper.core.matching.shape import (
     similarity,
 )
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
-from multi_robot_mapper.core.simulation import WORLDS, LaserModel, simulate_scan
+from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
+from multi_robot_mapper.core.worlds import WORLDS
 
 CONFIG = ShapeConfig()
 

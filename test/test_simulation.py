@@ -9,20 +9,17 @@ import numpy as np
 import pytest
 
 from multi_robot_mapper.core.simulation import (
-    ROUTES,
     SIM_START_S,
-    WORLDS,
     LaserModel,
     drive_path,
-    office_world,
     plan_paths,
-    polygon,
     raycast,
     raycast_fan,
     route_section,
     simulate_robots,
     simulate_scan,
 )
+from multi_robot_mapper.core.worlds import ROUTES, WORLDS, office_world, polygon
 from multi_robot_mapper.io.bags import read_recordings
 
 CLEARANCE_M = 0.3

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from multi_robot_mapper.core.extraction import ExtractionConfig
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 

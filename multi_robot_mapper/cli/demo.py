@@ -1,13 +1,13 @@
 """``mrm demo``: three simulated robots mapped live, merged into one map, drawn and scored.
 
 The scenario: three robots drive partly overlapping stretches of the built-in office world
-(``core/simulation.py``), each with a simulated Hokuyo UTM-30LX (40 Hz, 1081 beams, 270°),
-starting ``stagger`` seconds apart, none knowing where the others are. Their scans are
-published live on ``/robotK/scan`` at the laser's own rate (``--speed`` plays faster or
-slower) into real ``robot_mapper`` nodes and a real ``map_merger`` spun in this process over
-real DDS topics, with the shipped default parameters. Everything drawn and scored comes back
-over the nodes' topics (``/global_map``, ``/robot_frames/<robot>``, ``/<robot>/pose``,
-``/<robot>/partial_map``, ``/global_grid``, ``/diagnostics``).
+(``core/worlds.py``, ray cast by ``core/simulation.py``), each with a simulated Hokuyo UTM-30LX
+(40 Hz, 1081 beams, 270°), starting ``stagger`` seconds apart, none knowing where the others
+are. Their scans are published live on ``/robotK/scan`` at the laser's own rate (``--speed``
+plays faster or slower) into real ``robot_mapper`` nodes and a real ``map_merger`` spun in this
+process over real DDS topics, with the shipped default parameters. Everything drawn and scored
+comes back over the nodes' topics (``/global_map``, ``/robot_frames/<robot>``,
+``/<robot>/pose``, ``/<robot>/partial_map``, ``/global_grid``, ``/diagnostics``).
 
 Written to ``--out``: ``bag/`` (the simulated scans and ground truth), ``result/`` (map.json,
 robots.json, trajectories, metrics.json: what ``mrm replay`` writes, so ``mrm evaluate
@@ -30,7 +30,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.simulation import WORLDS, LaserModel, SimulatedRobot, simulate_robots
+from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, simulate_robots
+from multi_robot_mapper.core.worlds import WORLDS
 from multi_robot_mapper.evaluation.metrics import Metrics, evaluate
 from multi_robot_mapper.io import pictures
 from multi_robot_mapper.io.bags import RobotRecording, recording_of, write_recordings

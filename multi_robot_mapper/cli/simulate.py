@@ -18,7 +18,8 @@ from multi_robot_mapper.cli.common import (
     check_limits,
     check_output,
 )
-from multi_robot_mapper.core.simulation import ROUTES, LaserModel, clutter_for, simulate_robots
+from multi_robot_mapper.core.simulation import LaserModel, clutter_for, simulate_robots
+from multi_robot_mapper.core.worlds import ROUTES
 
 DEFAULT_LASER = LaserModel()  # Hokuyo UTM-30LX
 DEFAULT_DURATION_S = 20.0  # about 16 m of driving per robot at the default speed

@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 from multi_robot_mapper.core.config import param, validate
-from multi_robot_mapper.core.extraction import ExtractionConfig
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.local_mapping import LocalMapperConfig
 
 
