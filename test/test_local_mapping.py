@@ -401,6 +401,44 @@ def test_a_tracked_placement_far_from_the_prediction_needs_the_search_to_agree(
         np.testing.assert_allclose(chosen.pose, tracked)
 
 
+@pytest.mark.usefixtures("as_matched")
+@pytest.mark.parametrize(
+    ("refined_to", "matches"),
+    [
+        ((0.75, 0.05, 0.06), 1),  # 0.25 m and 3.4 deg from the prediction: settled alone
+        ((0.85, 0.0, 0.0), 3),  # 0.35 m: the rivals, then the search
+        ((0.5, 0.0, 0.1), 3),  # 5.7 deg: the rivals, then the search
+    ],
+)
+def test_a_confident_track_within_the_tolerance_of_its_prediction_needs_no_search(
+    monkeypatch,  # type: ignore[no-untyped-def]
+    refined_to: tuple[float, float, float],
+    matches: int,
+) -> None:
+    # The prediction (0.5 m ahead) refined alone lands at ``refined_to``, confident (0.95):
+    # within the correctness tolerance (0.30 m, 5 deg) of the prediction, the motion model
+    # and the match agree and nothing else is tried; beyond it, the rivals and the search
+    # with no guess (which confirms it here) are.
+    calls: list[bool] = []
+
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
+        calls.append(bool(heuristics))
+        return _match(refined_to, 0.95)
+
+    monkeypatch.setattr(attempts, "integrate", fake)
+    scan = _stranger()
+    segments, _ = extract_scan(scan, EXTRACTION)
+    references = _only_the_last_scan(segments.segments, scan)
+    motions = [(0.5, 0.0, 0.0), (0.0, 0.0, 0.0)]
+    chosen, placed, tracked = attempts.match_scan(
+        LocalMapperConfig(), references, segments.segments, scan, motions, True, lambda *_: None
+    )
+    assert placed and tracked and chosen.stage == "track"
+    np.testing.assert_allclose(chosen.pose, refined_to)
+    assert len(calls) == matches
+    assert calls[-1] == (matches == 3)  # the last one the search, when made
+
+
 def test_a_cluttered_office_is_tracked_within_centimetres() -> None:
     # Chairs, tables, pillars and people walking to and fro: a third of the returns or more
     # fall in clusters too small for a segment. The drive is still tracked.
