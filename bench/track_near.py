@@ -1,0 +1,129 @@
+"""When does a confident track need a second opinion? (issues 11 and 17, the front end's speed)
+
+The front end first refines the constant-velocity prediction against the last keyframe
+(``attempts.match_scan``). A confident placement near the prediction settles alone; farther
+off, it is refined again with rivals and confirmed by a search with no guess, which costs
+tens of milliseconds per scan. This bench measures where "near" may end: every confident
+first refinement, its distance from the prediction (in units of the correctness tolerance,
+0.30 m and 5 deg: ``max(d / 0.30 m, turn / 5 deg)``) and whether it is right by the
+reference (the motion from the last placed scan within 0.30 m / 5 deg of the reference's).
+
+Each shared log is cut into ``--robots`` runs as ``mrm import-carmen`` cuts it, and each run
+is mapped by one LocalMapper (back end in line, as a replay), with the defaults. The bench
+only observes: it wraps ``attempts.match_scan`` (to see the prediction) and
+``attempts.close_to`` (called with the first refinement and the prediction, only when that
+refinement is confident), and changes no decision.
+
+    .venv/bin/python bench/track_near.py [--logs intel aces fhw csail edmonton freiburg-079]
+        [--robots 4] [--jobs 2]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import itertools  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+from fit_confidence import DATA  # noqa: E402  (bench/ is on a script's path)
+
+from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
+from multi_robot_mapper.core import se2  # noqa: E402
+from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
+from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
+from multi_robot_mapper.core.local_mapping import (  # noqa: E402
+    LocalMapper,
+    LocalMapperConfig,
+    attempts,
+    mapper,
+)
+from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE  # noqa: E402
+from multi_robot_mapper.io.carmen import (  # noqa: E402
+    carmen_scan_data,
+    monotonic_stamps,
+    read_carmen,
+)
+
+LOGS = ("intel", "aces", "fhw", "csail", "edmonton", "freiburg-079")
+# Bins of the distance from the prediction, in units of the correctness tolerance.
+BINS = (0.0, 1 / 3, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0, 5.0, np.inf)
+
+
+def observe(name: str, robots: int) -> list[tuple[float, bool]]:
+    """(distance from the prediction in tolerances, right) of every confident first
+    refinement while mapping ``name`` cut into ``robots`` runs."""
+    seen: dict[str, Any] = {}
+    match_scan, close_to = mapper.match_scan, attempts.close_to
+
+    def watched_match_scan(*args: Any, **kwargs: Any) -> Any:
+        seen["prediction"] = args[4][0] if args[5] else None  # motions[0], when tracking
+        return match_scan(*args, **kwargs)
+
+    def watched_close_to(a: Any, b: Any, distance: float, angle: float) -> bool:
+        if b is seen.get("prediction") and "first" not in seen:
+            seen["first"] = a  # the first refinement's motion from the last placed scan
+        return close_to(a, b, distance, angle)
+
+    mapper.match_scan, attempts.close_to = watched_match_scan, watched_close_to
+    try:
+        scans = read_carmen(DATA / f"{name}.log.gz")
+        stamps, _ = monotonic_stamps(np.array([s.timestamp for s in scans]), name)
+        extraction = ExtractionConfig()
+        found: list[tuple[float, bool]] = []
+        for start, stop in split_runs(len(scans), robots, 0):
+            local = LocalMapper(LocalMapperConfig())
+            last_placed: np.ndarray | None = None  # reference pose of the last placed scan
+            for index in range(start, stop):
+                data = carmen_scan_data(scans[index])
+                segments, _ = extract_scan(data, extraction)
+                seen.clear()
+                update = local.add_scan(float(stamps[index]), segments, data)
+                reference = np.asarray(scans[index].reference_pose)
+                if "first" in seen and last_placed is not None:
+                    prediction = seen["prediction"]
+                    dx, dy, dtheta = se2.between(prediction, seen["first"])
+                    away = max(np.hypot(dx, dy) / RIGHT_DISTANCE, abs(dtheta) / RIGHT_ANGLE)
+                    truth = se2.between(tuple(last_placed), tuple(reference))
+                    ex, ey, etheta = se2.between(truth, seen["first"])
+                    right = np.hypot(ex, ey) < RIGHT_DISTANCE and abs(etheta) < RIGHT_ANGLE
+                    found.append((float(away), bool(right)))
+                if update.accepted:
+                    last_placed = reference
+        return found
+    finally:
+        mapper.match_scan, attempts.close_to = match_scan, close_to
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--logs", nargs="+", default=list(LOGS))
+    parser.add_argument("--robots", type=int, default=4)
+    parser.add_argument("--jobs", type=int, default=1)
+    args = parser.parse_args()
+    logs = [name for name in args.logs if (DATA / f"{name}.log.gz").is_file()]
+    for name in sorted(set(args.logs) - set(logs)):
+        print(f"{name}: skipped, {DATA / f'{name}.log.gz'} not found")
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        results = dict(zip(logs, pool.map(observe, logs, [args.robots] * len(logs)), strict=True))
+    print(f"Confident first refinements, every log cut into {args.robots} robots: right / all")
+    print("| distance from the prediction (tolerances) | " + " | ".join(logs) + " | all |")
+    print("| --- " * (len(logs) + 2) + "|")
+    for lo, hi in itertools.pairwise(BINS):
+        cells = []
+        every = [0, 0]
+        for name in logs:
+            kept = [right for away, right in results[name] if lo < away <= hi or (lo == 0 == away)]
+            cells.append(f"{sum(kept)} / {len(kept)}")
+            every[0] += sum(kept)
+            every[1] += len(kept)
+        print(f"| {lo:.2f}–{hi:.2f} | " + " | ".join(cells) + f" | {every[0]} / {every[1]} |")
+
+
+if __name__ == "__main__":
+    main()
