@@ -405,7 +405,8 @@ def test_a_tracked_placement_far_from_the_prediction_needs_the_search_to_agree(
 @pytest.mark.parametrize(
     ("refined_to", "matches"),
     [
-        ((0.75, 0.05, 0.06), 1),  # 0.25 m and 3.4 deg from the prediction: settled alone
+        ((0.55, 0.05, 0.02), 1),  # 0.07 m, 1.1 deg from the prediction: settled alone
+        ((0.75, 0.05, 0.06), 2),  # 0.25 m, 3.4 deg: the rivals, which do not move it
         ((0.85, 0.0, 0.0), 3),  # 0.35 m: the rivals, then the search
         ((0.5, 0.0, 0.1), 3),  # 5.7 deg: the rivals, then the search
     ],
@@ -415,10 +416,11 @@ def test_a_confident_track_within_the_tolerance_of_its_prediction_needs_no_searc
     refined_to: tuple[float, float, float],
     matches: int,
 ) -> None:
-    # The prediction (0.5 m ahead) refined alone lands at ``refined_to``, confident (0.95):
-    # within the correctness tolerance (0.30 m, 5 deg) of the prediction, the motion model
-    # and the match agree and nothing else is tried; beyond it, the rivals and the search
-    # with no guess (which confirms it here) are.
+    # The prediction (0.5 m ahead), refined alone and with its rivals, lands at
+    # ``refined_to``, confident (0.95). Within a third of the correctness tolerance it settles
+    # alone; within the tolerance (0.30 m, 5 deg) the rivals are tried and, when they do not
+    # move it, the motion model and the match agree and no search is made; beyond it the
+    # search with no guess (which confirms it here) is made too.
     calls: list[bool] = []
 
     def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
@@ -437,6 +439,35 @@ def test_a_confident_track_within_the_tolerance_of_its_prediction_needs_no_searc
     np.testing.assert_allclose(chosen.pose, refined_to)
     assert len(calls) == matches
     assert calls[-1] == (matches == 3)  # the last one the search, when made
+
+
+@pytest.mark.usefixtures("as_matched")
+def test_a_rival_moves_a_confident_track_that_stayed_near_a_wrong_prediction(
+    monkeypatch,  # type: ignore[no-untyped-def]
+) -> None:
+    # aces: the robot started to turn between two scans; the prediction refined alone stays
+    # 3.4 deg from it, confident (0.81), but 17 deg from the truth. Its rivals (turned copies)
+    # find the truth, which the search confirms: that placement is kept.
+    truth = (0.5, 0.0, 0.3)
+    calls: list[bool] = []
+
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
+        calls.append(bool(heuristics))
+        if len(extra_hypotheses) == 1:
+            return _match((0.5, 0.0, 0.06), 0.81)  # the prediction alone
+        return _match(truth, 0.95)  # with the rivals, and the search
+
+    monkeypatch.setattr(attempts, "integrate", fake)
+    scan = _stranger()
+    segments, _ = extract_scan(scan, EXTRACTION)
+    references = _only_the_last_scan(segments.segments, scan)
+    motions = [(0.5, 0.0, 0.0), (0.0, 0.0, 0.0)]
+    chosen, placed, _ = attempts.match_scan(
+        LocalMapperConfig(), references, segments.segments, scan, motions, True, lambda *_: None
+    )
+    assert placed
+    np.testing.assert_allclose(chosen.pose, truth)
+    assert calls == [False, False, True]
 
 
 def test_a_cluttered_office_is_tracked_within_centimetres() -> None:
