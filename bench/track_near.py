@@ -120,8 +120,8 @@ def main() -> None:
         print(f"{name}: skipped, {DATA / f'{name}.log.gz'} not found")
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         results = dict(zip(logs, pool.map(observe, logs, [args.robots] * len(logs)), strict=True))
-    for kind, title in (("alone", "the prediction alone"), ("rivals", "with its rivals")):
-        print(f"\nConfident refinements of {title}, every log cut into {args.robots} robots:")
+    for kind, title in (("alone", "refined alone"), ("rivals", "refined with its rivals")):
+        print(f"\nThe prediction {title}, when confident; every log cut into {args.robots} robots:")
         print("right / all, by distance from the prediction (in tolerances)\n")
         print("| distance | " + " | ".join(logs) + " | all |")
         print("| --- " * (len(logs) + 2) + "|")
