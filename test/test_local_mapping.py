@@ -97,6 +97,18 @@ def _only_the_last_scan(segments: np.ndarray, scan: LaserScanData) -> attempts.R
     )
 
 
+def _track_half_a_metre_ahead() -> tuple[attempts.Attempt, bool, bool]:
+    """:func:`attempts.match_scan` of a scan tracked from a prediction 0.5 m ahead, against
+    only the last scan (with a fake INTEGRATE installed by the test)."""
+    scan = _stranger()
+    segments, _ = extract_scan(scan, EXTRACTION)
+    references = _only_the_last_scan(segments.segments, scan)
+    motions = [(0.5, 0.0, 0.0), (0.0, 0.0, 0.0)]
+    return attempts.match_scan(
+        LocalMapperConfig(), references, segments.segments, scan, motions, True, lambda *_: None
+    )
+
+
 def _ate(stamps: np.ndarray, poses: np.ndarray, truth: dict[float, np.ndarray]) -> float:
     """RMSE of the positions after the best rigid alignment (Umeyama without scale)."""
     est = poses[:, :2]
@@ -387,13 +399,7 @@ def test_a_tracked_placement_far_from_the_prediction_needs_the_search_to_agree(
         return _match(pose, confidence)
 
     monkeypatch.setattr(attempts, "integrate", fake)
-    scan = _stranger()
-    segments, _ = extract_scan(scan, EXTRACTION)
-    references = _only_the_last_scan(segments.segments, scan)
-    motions = [(0.5, 0.0, 0.0), (0.0, 0.0, 0.0)]
-    chosen, placed, _ = attempts.match_scan(
-        LocalMapperConfig(), references, segments.segments, scan, motions, True, lambda *_: None
-    )
+    chosen, placed, _ = _track_half_a_metre_ahead()
     assert placed == integrated
     assert searched == [False, False, True]  # the prediction, with its rivals, the search
     if integrated:
@@ -428,13 +434,7 @@ def test_a_confident_track_within_the_tolerance_of_its_prediction_needs_no_searc
         return _match(refined_to, 0.95)
 
     monkeypatch.setattr(attempts, "integrate", fake)
-    scan = _stranger()
-    segments, _ = extract_scan(scan, EXTRACTION)
-    references = _only_the_last_scan(segments.segments, scan)
-    motions = [(0.5, 0.0, 0.0), (0.0, 0.0, 0.0)]
-    chosen, placed, tracked = attempts.match_scan(
-        LocalMapperConfig(), references, segments.segments, scan, motions, True, lambda *_: None
-    )
+    chosen, placed, tracked = _track_half_a_metre_ahead()
     assert placed and tracked and chosen.stage == "track"
     np.testing.assert_allclose(chosen.pose, refined_to)
     assert len(calls) == matches
@@ -458,13 +458,7 @@ def test_a_rival_moves_a_confident_track_that_stayed_near_a_wrong_prediction(
         return _match(truth, 0.95)  # with the rivals, and the search
 
     monkeypatch.setattr(attempts, "integrate", fake)
-    scan = _stranger()
-    segments, _ = extract_scan(scan, EXTRACTION)
-    references = _only_the_last_scan(segments.segments, scan)
-    motions = [(0.5, 0.0, 0.0), (0.0, 0.0, 0.0)]
-    chosen, placed, _ = attempts.match_scan(
-        LocalMapperConfig(), references, segments.segments, scan, motions, True, lambda *_: None
-    )
+    chosen, placed, _ = _track_half_a_metre_ahead()
     assert placed
     np.testing.assert_allclose(chosen.pose, truth)
     assert calls == [False, False, True]

@@ -306,16 +306,15 @@ def match_scan(
         x, y, theta = motions[0]
         rivals = [(x, y, theta + d) for d in (*TRACK_TURNS, *LOOK_ALIKE_TURNS) if d]
         track = attempt("track", start, False, motions + rivals)
-        if track.confidence >= threshold and close_to(
-            se2.between(here, track.pose), motions[0], RIGHT_DISTANCE, RIGHT_ANGLE
-        ):
-            # No rival moved it out of the correctness tolerance of the prediction: the motion
-            # model and the match agree, and a search would only cost time. Measured on every
-            # shared log cut into 4 robots (bench/track_near.py): 1917 of 1917 such placements
-            # were right, 1802 of 1813 beyond the tolerance. Without the rivals a prediction
-            # refined alone stayed 17 deg off on aces (README "Local mapping", front end).
-            return track, True, True
         if track.confidence >= threshold:
+            if close_to(se2.between(here, track.pose), motions[0], RIGHT_DISTANCE, RIGHT_ANGLE):
+                # No rival moved it out of the correctness tolerance of the prediction: the
+                # motion model and the match agree, and a search would only cost time.
+                # Measured on every shared log cut into 4 robots (bench/track_near.py): 1917
+                # of 1917 such placements were right, 1802 of 1813 beyond the tolerance.
+                # Without the rivals a prediction refined alone stayed 17 deg off on aces
+                # (README "Local mapping", front end).
+                return track, True, True
             # Far from the prediction, the placement may be a look-alike the prediction led
             # to: the search with no guess confirms it, or finds a likely rival, and then
             # neither settles alone.
