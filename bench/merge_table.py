@@ -31,8 +31,6 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from multi_robot_mapper.cli.evaluate import METRICS_FILE
 from multi_robot_mapper.io.results import read_results
 
@@ -41,7 +39,8 @@ DATA = REPO.parent / "shared" / "data" / "carmen"
 ONE_THREAD = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 COLUMNS = (
     "log | robots | merged | placed | ATE merged (m) | ATE all (m) | map error (m) | coverage | "
-    "precision | merge (s) | merge update (s) | replay (s) | pair_success | links | wrong links"
+    "precision | merge (s) | merge update (s) | replay (s) | pair_success | links | wrong links "
+    "(wrong only by the reference)"
 )
 
 
@@ -95,36 +94,26 @@ def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]
     return row
 
 
-def wrong_links(links: list[list[Any]], bag: Path) -> int | None:
+def wrong_links(links: list[list[Any]], bag: Path) -> tuple[int, int] | None:
     """How many of the joint graph's links (``[robot_a, stamp_a, robot_b, stamp_b, x, y,
     theta]``: keyframe b at T_a_b in keyframe a's frame) are wrong against the bag's reference
-    poses: off by more than the confidence's own tolerance (0.30 m / 5 deg). None when a link's
-    keyframe has no reference pose."""
-    from multi_robot_mapper.core import se2
-    from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
-    from multi_robot_mapper.io.bags import read_recordings, reference_poses
+    poses (off by more than the confidence's own tolerance, 0.30 m / 5 deg), and how many more
+    are wrong only by the reference's own error at one of their scans
+    (``reference_check.ReferenceJudge``). None when a link's keyframe has no reference pose."""
+    from reference_check import ReferenceJudge
+
+    from multi_robot_mapper.io.bags import read_recordings
 
     if not links:
-        return 0
-    recordings = read_recordings(bag)
-    wanted: dict[str, list[float]] = {}
-    for a, stamp_a, b, stamp_b, *_ in links:
-        wanted.setdefault(a, []).append(stamp_a)
-        wanted.setdefault(b, []).append(stamp_b)
-    truth: dict[tuple[str, float], Any] = {}
-    for robot, stamps in wanted.items():
-        poses, found = reference_poses(recordings[robot], np.asarray(stamps, dtype=np.float64))
-        for stamp, pose, ok in zip(stamps, poses, found, strict=True):
-            if ok:
-                truth[(robot, stamp)] = se2.matrix_from_pose(*pose)
-    wrong = 0
-    for a, stamp_a, b, stamp_b, x, y, theta in links:
-        if (a, stamp_a) not in truth or (b, stamp_b) not in truth:
-            return None
-        T_true = se2.invert(truth[(a, stamp_a)]) @ truth[(b, stamp_b)]
-        dx, dy, dt = se2.pose_from_matrix(se2.invert(T_true) @ se2.matrix_from_pose(x, y, theta))
-        wrong += not (np.hypot(dx, dy) < RIGHT_DISTANCE and abs(dt) < RIGHT_ANGLE)
-    return wrong
+        return 0, 0
+    judge = ReferenceJudge(read_recordings(bag))
+    verdicts = [
+        judge.verdict(a, stamp_a, b, stamp_b, (x, y, theta))
+        for a, stamp_a, b, stamp_b, x, y, theta in links
+    ]
+    if None in verdicts:
+        return None
+    return verdicts.count("wrong"), verdicts.count("reference")
 
 
 def fmt(value: Any, digits: int = 3) -> str:
@@ -137,6 +126,7 @@ def table_row(row: dict[str, Any]) -> str:
         return head + f"failed: {row['error'][:90]} |" + " |" * 12  # all of it in the JSON
     m, s = row["metrics"], row["stats"]
     links = str(s.get("merge_links_valid", "?"))
+    wrong = row.get("links_wrong")
     # placed: robots the merger put in the map frame (not reported "unmerged"), however well.
     placed = sum(not r["reported_unmerged"] for r in m["robots"].values())
     cells = [
@@ -152,7 +142,7 @@ def table_row(row: dict[str, Any]) -> str:
         fmt(s.get("total_s"), 1),
         fmt(m["pair_success"]),
         links,
-        str(row.get("links_wrong", "?")),
+        "?" if wrong is None else f"{wrong[0]} ({wrong[1]})",
     ]
     return head + " | ".join(cells) + " |"
 
