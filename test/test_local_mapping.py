@@ -716,35 +716,33 @@ def test_the_front_end_decides_on_the_confidence_in_context(
     assert chosen in record
 
 
-@pytest.mark.parametrize(
-    ("refined_to", "value", "expected"),
-    [
-        ((0.52, 0.11, 0.31), 4.0, (0.52, 0.11, 0.31)),  # the scans refine it: kept
-        ((0.0, 0.0, 0.0), 0.0, (0.5, 0.1, 0.3)),  # the scans keep nothing (INTEGRATE's zero)
-        ((-0.4, 0.2, 3.1), 4.0, (0.5, 0.1, 0.3)),  # another minimum, a half turn away
-    ],
-)
-def test_a_closure_edge_keeps_the_windows_placement_when_the_scans_cannot_refine_it(
+def test_a_closure_edge_is_the_windows_placement_with_the_scans_information(
     office_drive,  # type: ignore[no-untyped-def]
     monkeypatch,  # type: ignore[no-untyped-def]
-    refined_to: tuple[float, float, float],
-    value: float,
-    expected: tuple[float, float, float],
 ) -> None:
-    # Two keyframes' windows agree on a placement; the closure's edge refines it with the two
-    # keyframes' own scans. When those keep no placement, or refine to another minimum, the
-    # edge must say what the windows found, never INTEGRATE's empty identity.
+    # Two keyframes' windows agree on a placement; the closure's edge keeps it as it is (the
+    # two scans alone refined it to worse placements on the shared logs) and takes its
+    # information from the two scans' walls at that placement.
     stamps, scans, _ = office_drive
     local = LocalMapper()
     for t, s in zip(stamps, scans, strict=True):
         _feed(local, float(t), s)
     assert len(local.keyframes()) >= 2
-    x, y, theta = refined_to
-    failed = MatchResult(np.array([theta, x, y]), value, 0.5, value > 0, 1, 1, 0.9)
-    monkeypatch.setattr(local.closer, "_match", lambda *a, **k: failed)
-    edge = local.closer._scan_edge(0, 1, (0.5, 0.1, 0.3))
-    np.testing.assert_allclose(edge.T_first_second, expected)
+    closer = local.closer
+
+    def no_match(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the closure edge must not match the scans again")
+
+    monkeypatch.setattr(closer, "_match", no_match)
+    placement = se2.between(closer.keyframes.pose(0), closer.keyframes.pose(1))
+    edge = closer._scan_edge(0, 1, placement)
+    np.testing.assert_allclose(edge.T_first_second, placement)
     assert edge.robust
+    # Walls of both scans overlap there: tighter than the ceiling of an unconstrained edge
+    # (10 m, 1 rad), in every direction.
+    assert np.all(np.linalg.eigvalsh(edge.information) > 1.0)
+    apart = closer._scan_edge(0, 1, (placement[0] + 40.0, placement[1], placement[2]))
+    assert np.linalg.eigvalsh(apart.information).min() < np.linalg.eigvalsh(edge.information).min()
 
 
 @pytest.mark.parametrize(
