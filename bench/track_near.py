@@ -17,6 +17,11 @@ only observes: it wraps ``attempts.match_scan`` (to see the prediction) and
 refinement is confident: first the prediction alone, then with rivals), and changes no
 decision.
 
+A third table follows every confident track that lands beyond the tolerance of its prediction,
+the case where the search runs: whether the track was right, whether the search disagreed
+(a likely placement elsewhere), and what was finally placed (right, wrong, or nothing: the
+robot started a new piece). It says what the search buys for its tens of milliseconds.
+
     .venv/bin/python bench/track_near.py [--logs intel aces fhw csail edmonton freiburg-079]
         [--robots 4] [--jobs 2]
 """
@@ -46,7 +51,11 @@ from multi_robot_mapper.core.local_mapping import (  # noqa: E402
     attempts,
     mapper,
 )
-from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE  # noqa: E402
+from multi_robot_mapper.core.matching.confidence import (  # noqa: E402
+    LIKELY,
+    RIGHT_ANGLE,
+    RIGHT_DISTANCE,
+)
 from multi_robot_mapper.io.carmen import (  # noqa: E402
     carmen_scan_data,
     monotonic_stamps,
@@ -58,16 +67,19 @@ LOGS = ("intel", "aces", "fhw", "csail", "edmonton", "freiburg-079")
 BINS = (0.0, 1 / 3, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0, 5.0, np.inf)
 
 
-def observe(name: str, robots: int) -> dict[str, list[tuple[float, bool]]]:
+def observe(name: str, robots: int) -> dict[str, list[Any]]:
     """(distance from the prediction in tolerances, right) of every confident refinement, per
-    kind ("alone": the prediction alone; "rivals": with its rivals) while mapping ``name``
-    cut into ``robots`` runs."""
+    kind ("alone": the prediction alone; "rivals": with its rivals), and ("far") the outcome
+    of every confident track beyond the tolerance (:func:`far_outcome`), while mapping
+    ``name`` cut into ``robots`` runs."""
     seen: dict[str, Any] = {}
     match_scan, close_to = mapper.match_scan, attempts.close_to
 
     def watched_match_scan(*args: Any, **kwargs: Any) -> Any:
         seen["prediction"] = args[4][0] if args[5] else None  # motions[0], when tracking
-        return match_scan(*args, **kwargs)
+        seen["here"], seen["threshold"] = args[1].here, args[0].integrate_confidence
+        seen["decision"] = match_scan(*args, **kwargs)
+        return seen["decision"]
 
     def watched_close_to(a: Any, b: Any, distance: float, angle: float) -> bool:
         if b is seen.get("prediction"):
@@ -81,7 +93,7 @@ def observe(name: str, robots: int) -> dict[str, list[tuple[float, bool]]]:
         scans = read_carmen(DATA / f"{name}.log.gz")
         stamps, _ = monotonic_stamps(np.array([s.timestamp for s in scans]), name)
         extraction = ExtractionConfig()
-        found: dict[str, list[tuple[float, bool]]] = {"alone": [], "rivals": []}
+        found: dict[str, list[Any]] = {"alone": [], "rivals": [], "far": []}
         for start, stop in split_runs(len(scans), robots, 0):
             local = LocalMapper(LocalMapperConfig())
             last_placed: np.ndarray | None = None  # reference pose of the last placed scan
@@ -102,11 +114,45 @@ def observe(name: str, robots: int) -> dict[str, list[tuple[float, bool]]]:
                         ex, ey, etheta = se2.between(truth, motion)
                         right = np.hypot(ex, ey) < RIGHT_DISTANCE and abs(etheta) < RIGHT_ANGLE
                         found[kind].append((float(away), bool(right)))
+                    if "decision" in seen and (outcome := far_outcome(seen, local, truth)):
+                        found["far"].append(outcome)
                 if update.accepted:
                     last_placed = reference
         return found
     finally:
         mapper.match_scan, attempts.close_to = match_scan, close_to
+
+
+def far_outcome(seen: dict[str, Any], local: LocalMapper, truth: Any) -> tuple[str, ...] | None:
+    """(track right or wrong, search agrees or disagrees, placed right / wrong / nothing) of a
+    confident track beyond the tolerance of its prediction, which the search was run to
+    confirm (None: not that case)."""
+    made = local.last_attempts
+    tracks = [a for a in made if a.stage == "track"]
+    searches = [a for a in made if a.stage == "search"]
+    if not tracks or not searches or tracks[0].confidence < seen["threshold"]:
+        return None
+    track, search = tracks[0], searches[0]
+
+    def right(motion: Any) -> bool:
+        ex, ey, etheta = se2.between(truth, motion)
+        return bool(np.hypot(ex, ey) < RIGHT_DISTANCE and abs(etheta) < RIGHT_ANGLE)
+
+    chosen, integrated, _ = seen["decision"]
+    disagrees = search.confidence >= LIKELY and not attempts.close_to(
+        search.pose, track.pose, RIGHT_DISTANCE, RIGHT_ANGLE
+    )
+    if not integrated:
+        placed = "nothing"
+    elif chosen.piece != track.piece:
+        placed = "another piece"  # not comparable with the last scan's reference
+    else:
+        placed = "right" if right(se2.between(seen["here"], chosen.pose)) else "wrong"
+    return (
+        "right" if right(se2.between(seen["here"], track.pose)) else "wrong",
+        "disagrees" if disagrees else "agrees",
+        placed,
+    )
 
 
 def main() -> None:
@@ -138,6 +184,14 @@ def main() -> None:
                 every[0] += sum(kept)
                 every[1] += len(kept)
             print(f"| {lo:.2f}–{hi:.2f} | " + " | ".join(cells) + f" | {every[0]} / {every[1]} |")
+    outcomes = sorted({o for name in logs for o in results[name]["far"]})
+    print(f"\nConfident tracks beyond the tolerance, searched; {args.robots} robots:")
+    print("track / search / placed, count per log\n")
+    print("| track | search | placed | " + " | ".join(logs) + " | all |")
+    print("| --- " * (len(logs) + 4) + "|")
+    for outcome in outcomes:
+        counts = [results[name]["far"].count(outcome) for name in logs]
+        print(f"| {' | '.join(outcome)} | " + " | ".join(map(str, counts)) + f" | {sum(counts)} |")
 
 
 if __name__ == "__main__":
