@@ -18,9 +18,10 @@ refinement is confident: first the prediction alone, then with rivals), and chan
 decision.
 
 A third table follows every confident track that lands beyond the tolerance of its prediction,
-the case where the search runs: whether the track was right, whether the search disagreed
-(a likely placement elsewhere), and what was finally placed (right, wrong, or nothing: the
-robot started a new piece). It says what the search buys for its tens of milliseconds.
+the case where the search confirms it unless the track is sure (``attempts.SURE``): by the
+track's confidence, whether the track was right, whether the search disagreed (a likely
+placement elsewhere) or was not run, and what was finally placed (right, wrong, or nothing:
+the robot started a new piece). It says what the search buys for its tens of milliseconds.
 
     .venv/bin/python bench/track_near.py [--logs intel aces fhw csail edmonton freiburg-079]
         [--robots 4] [--jobs 2]
@@ -124,33 +125,44 @@ def observe(name: str, robots: int) -> dict[str, list[Any]]:
 
 
 def far_outcome(seen: dict[str, Any], local: LocalMapper, truth: Any) -> tuple[str, ...] | None:
-    """(track right or wrong, search agrees or disagrees, placed right / wrong / nothing) of a
-    confident track beyond the tolerance of its prediction, which the search was run to
-    confirm (None: not that case)."""
+    """(track confidence band, track right or wrong, search agrees / disagrees / not searched,
+    placed right / wrong / nothing) of a confident track beyond the tolerance of its
+    prediction, which the search confirms unless the track is sure (None: not that case)."""
     made = local.last_attempts
     tracks = [a for a in made if a.stage == "track"]
     searches = [a for a in made if a.stage == "search"]
-    if not tracks or not searches or tracks[0].confidence < seen["threshold"]:
+    if not tracks or tracks[0].confidence < seen["threshold"] or seen["prediction"] is None:
         return None
-    track, search = tracks[0], searches[0]
+    track = tracks[0]
+    motion = se2.between(seen["here"], track.pose)
+    if attempts.close_to(motion, seen["prediction"], RIGHT_DISTANCE, RIGHT_ANGLE):
+        return None  # settled near its prediction, never searched
 
     def right(motion: Any) -> bool:
         ex, ey, etheta = se2.between(truth, motion)
         return bool(np.hypot(ex, ey) < RIGHT_DISTANCE and abs(etheta) < RIGHT_ANGLE)
 
     chosen, integrated, _ = seen["decision"]
-    disagrees = search.confidence >= LIKELY and not attempts.close_to(
-        search.pose, track.pose, RIGHT_DISTANCE, RIGHT_ANGLE
-    )
+    if not searches:
+        verdict = "not searched"  # sure enough (attempts.SURE)
+    elif searches[0].confidence >= LIKELY and not attempts.close_to(
+        searches[0].pose, track.pose, RIGHT_DISTANCE, RIGHT_ANGLE
+    ):
+        verdict = "disagrees"
+    else:
+        verdict = "agrees"
     if not integrated:
         placed = "nothing"
     elif chosen.piece != track.piece:
         placed = "another piece"  # not comparable with the last scan's reference
     else:
         placed = "right" if right(se2.between(seen["here"], chosen.pose)) else "wrong"
+    bands = ((attempts.SURE, f"≥ {attempts.SURE}"), (0.99, "≥ 0.99"), (0.0, "< 0.99"))
+    band = next(label for low, label in bands if track.confidence >= low)
     return (
-        "right" if right(se2.between(seen["here"], track.pose)) else "wrong",
-        "disagrees" if disagrees else "agrees",
+        band,
+        "right" if right(motion) else "wrong",
+        verdict,
         placed,
     )
 
@@ -186,9 +198,9 @@ def main() -> None:
             print(f"| {lo:.2f}–{hi:.2f} | " + " | ".join(cells) + f" | {every[0]} / {every[1]} |")
     outcomes = sorted({o for name in logs for o in results[name]["far"]})
     print(f"\nConfident tracks beyond the tolerance, searched; {args.robots} robots:")
-    print("track / search / placed, count per log\n")
-    print("| track | search | placed | " + " | ".join(logs) + " | all |")
-    print("| --- " * (len(logs) + 4) + "|")
+    print("track confidence / track / search / placed, count per log\n")
+    print("| confidence | track | search | placed | " + " | ".join(logs) + " | all |")
+    print("| --- " * (len(logs) + 5) + "|")
     for outcome in outcomes:
         counts = [results[name]["far"].count(outcome) for name in logs]
         print(f"| {' | '.join(outcome)} | " + " | ".join(map(str, counts)) + f" | {sum(counts)} |")

@@ -409,29 +409,31 @@ def test_a_tracked_placement_far_from_the_prediction_needs_the_search_to_agree(
 
 @pytest.mark.usefixtures("as_matched")
 @pytest.mark.parametrize(
-    ("refined_to", "matches"),
+    ("refined_to", "confidence", "matches"),
     [
-        ((0.55, 0.05, 0.02), 1),  # 0.07 m, 1.1 deg from the prediction: settled alone
-        ((0.75, 0.05, 0.06), 2),  # 0.25 m, 3.4 deg: the rivals, which do not move it
-        ((0.85, 0.0, 0.0), 3),  # 0.35 m: the rivals, then the search
-        ((0.5, 0.0, 0.1), 3),  # 5.7 deg: the rivals, then the search
+        ((0.55, 0.05, 0.02), 0.95, 1),  # 0.07 m, 1.1 deg from the prediction: settled alone
+        ((0.75, 0.05, 0.06), 0.95, 2),  # 0.25 m, 3.4 deg: the rivals, which do not move it
+        ((0.85, 0.0, 0.0), 0.95, 3),  # 0.35 m: the rivals, then the search
+        ((0.5, 0.0, 0.1), 0.95, 3),  # 5.7 deg: the rivals, then the search
+        ((0.85, 0.0, 0.0), 0.9999, 2),  # 0.35 m but sure (attempts.SURE): no search
     ],
 )
 def test_a_confident_track_within_the_tolerance_of_its_prediction_needs_no_search(
     monkeypatch,  # type: ignore[no-untyped-def]
     refined_to: tuple[float, float, float],
+    confidence: float,
     matches: int,
 ) -> None:
     # The prediction (0.5 m ahead), refined alone and with its rivals, lands at
-    # ``refined_to``, confident (0.95). Within a third of the correctness tolerance it settles
-    # alone; within the tolerance (0.30 m, 5 deg) the rivals are tried and, when they do not
-    # move it, the motion model and the match agree and no search is made; beyond it the
-    # search with no guess (which confirms it here) is made too.
+    # ``refined_to`` with ``confidence``. Within a third of the correctness tolerance it
+    # settles alone; within the tolerance (0.30 m, 5 deg) the rivals are tried and, when they
+    # do not move it, the motion model and the match agree and no search is made; beyond it
+    # the search with no guess (which confirms it here) is made too, unless the track is sure.
     calls: list[bool] = []
 
     def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
         calls.append(bool(heuristics))
-        return _match(refined_to, 0.95)
+        return _match(refined_to, confidence)
 
     monkeypatch.setattr(attempts, "integrate", fake)
     chosen, placed, tracked = _track_half_a_metre_ahead()
