@@ -23,6 +23,7 @@ from multi_robot_mapper.core.local_mapping import (
     mapper,
 )
 from multi_robot_mapper.core.matching import MatchResult, integrate
+from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import (
     LaserModel,
@@ -563,6 +564,37 @@ def test_closures_of_one_new_keyframe_are_not_each_others_partner() -> None:
     neighbour = dataclasses.replace(closure, first=11, T_first_second=(0.5, 0.0, 0.0))
     assert local.closer._pairwise(closure, neighbour) is None
     assert local.closer._pairwise(neighbour, closure) is None
+
+
+def test_two_closures_agree_in_heading_within_the_drift_of_their_cycle(
+    office_drive,  # type: ignore[no-untyped-def]
+) -> None:
+    # Two closures between neighbouring keyframes, consistent with the graph; then one of them
+    # turned. Just inside the correctness tolerance they still agree; beyond it by 0.1 deg per
+    # metre of the cycle's path (about twice the local maps' heading drift) they do not:
+    # metres of path must not buy radians one for one.
+    stamps, scans, _ = office_drive
+    local = LocalMapper()
+    for t, s in zip(stamps, scans, strict=True):
+        _feed(local, float(t), s)
+    keyframes = local.closer.keyframes
+    last = len(keyframes.scans) - 1
+    assert last >= 3
+
+    def closure(first: int, second: int, turn: float) -> loop_closer.Closure:
+        x, y, theta = se2.between(keyframes.pose(first), keyframes.pose(second))
+        return loop_closer.Closure(first, second, (x, y, theta + turn), 0.99, "loop", True, "")
+
+    other = closure(1, last - 1, 0.0)
+    path = float(
+        np.hypot(*se2.between(keyframes.pose(0), keyframes.pose(1))[:2])
+        + np.hypot(*se2.between(keyframes.pose(last - 1), keyframes.pose(last))[:2])
+    )
+    assert path > 0.5
+    inside = RIGHT_ANGLE - np.radians(0.5)
+    beyond = RIGHT_ANGLE + np.radians(0.1 * path)
+    assert local.closer._pairwise(closure(0, last, inside), other) is True
+    assert local.closer._pairwise(closure(0, last, beyond), other) is False
 
 
 @pytest.mark.usefixtures("as_matched")
