@@ -55,6 +55,14 @@ def _feed(mapper: LocalMapper, stamp: float, scan: LaserScanData) -> LocalUpdate
     return mapper.add_scan(stamp, segments, scan)
 
 
+def _mapped(stamps: np.ndarray, scans: list[LaserScanData]) -> LocalMapper:
+    """A LocalMapper (defaults, back end in line) fed every scan of a drive."""
+    local = LocalMapper()
+    for t, s in zip(stamps, scans, strict=True):
+        _feed(local, float(t), s)
+    return local
+
+
 def _stranger(seed: int = 5) -> LaserScanData:
     """A round room with a pillar, nothing like the office."""
     octagon = np.array(
@@ -244,9 +252,7 @@ def test_a_heading_bias_is_straightened_by_loop_closures(monkeypatch) -> None:  
         return dataclasses.replace(result, T_1_2=T)
 
     monkeypatch.setattr(attempts, "integrate", biased)
-    local = LocalMapper()
-    for t, s in zip(stamps, scans, strict=True):
-        _feed(local, float(t), s)
+    local = _mapped(stamps, scans)
     assert local.pieces_started == 0
     assert len(local.closures) >= 10
     times, poses = local.trajectory()
@@ -574,9 +580,7 @@ def test_two_closures_agree_in_heading_within_the_drift_of_their_cycle(
     # metre of the cycle's path (about twice the local maps' heading drift) they do not:
     # metres of path must not buy radians one for one.
     stamps, scans, _ = office_drive
-    local = LocalMapper()
-    for t, s in zip(stamps, scans, strict=True):
-        _feed(local, float(t), s)
+    local = _mapped(stamps, scans)
     keyframes = local.closer.keyframes
     last = len(keyframes.scans) - 1
     assert last >= 3
@@ -758,9 +762,7 @@ def test_a_closure_edge_is_the_windows_placement_with_the_scans_information(
     # two scans alone refined it to worse placements on the shared logs) and takes its
     # information from the two scans' walls at that placement.
     stamps, scans, _ = office_drive
-    local = LocalMapper()
-    for t, s in zip(stamps, scans, strict=True):
-        _feed(local, float(t), s)
+    local = _mapped(stamps, scans)
     assert len(local.keyframes()) >= 2
     closer = local.closer
 
