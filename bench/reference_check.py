@@ -90,10 +90,13 @@ class ReferenceJudge:
     def __init__(self, recordings: Mapping[str, RobotRecording]) -> None:
         self.recordings = recordings
         self._corrected: dict[tuple[str, int], Pose | None] = {}
+        self._stamps = {
+            robot: np.array([s.stamp for s in recording.scans], dtype=np.float64)
+            for robot, recording in recordings.items()
+        }
 
     def _index(self, robot: str, stamp: float) -> int:
-        stamps = np.array([s.stamp for s in self.recordings[robot].scans], dtype=np.float64)
-        index, _ = nearest_stamps(stamps, np.array([stamp], dtype=np.float64))
+        index, _ = nearest_stamps(self._stamps[robot], np.array([stamp], dtype=np.float64))
         return int(index[0])
 
     def reference(self, robot: str, stamp: float) -> Pose | None:

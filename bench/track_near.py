@@ -41,6 +41,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 from fit_confidence import DATA  # noqa: E402  (bench/ is on a script's path)
+from reference_check import right  # noqa: E402
 
 from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
@@ -138,10 +139,6 @@ def far_outcome(seen: dict[str, Any], local: LocalMapper, truth: Any) -> tuple[s
     if attempts.close_to(motion, seen["prediction"], RIGHT_DISTANCE, RIGHT_ANGLE):
         return None  # settled near its prediction, never searched
 
-    def right(motion: Any) -> bool:
-        ex, ey, etheta = se2.between(truth, motion)
-        return bool(np.hypot(ex, ey) < RIGHT_DISTANCE and abs(etheta) < RIGHT_ANGLE)
-
     chosen, integrated, _ = seen["decision"]
     if not searches:
         verdict = "not searched"  # sure enough (attempts.SURE)
@@ -156,12 +153,12 @@ def far_outcome(seen: dict[str, Any], local: LocalMapper, truth: Any) -> tuple[s
     elif chosen.piece != track.piece:
         placed = "another piece"  # not comparable with the last scan's reference
     else:
-        placed = "right" if right(se2.between(seen["here"], chosen.pose)) else "wrong"
+        placed = "right" if right(se2.between(seen["here"], chosen.pose), truth) else "wrong"
     bands = ((attempts.SURE, f"≥ {attempts.SURE}"), (0.99, "≥ 0.99"), (0.0, "< 0.99"))
     band = next(label for low, label in bands if track.confidence >= low)
     return (
         band,
-        "right" if right(motion) else "wrong",
+        "right" if right(motion, truth) else "wrong",
         verdict,
         placed,
     )
