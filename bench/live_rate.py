@@ -31,7 +31,8 @@ log cut into ``--robots`` contiguous runs (as ``mrm import-carmen`` cuts it), ea
 published when its own stamp comes (times ``1 / --speed``). The table adds the time per
 stage of the node's scan callback: front end (LaserScan to segments), matching (tracking,
 search, recent keyframes), confidence, integrate (placing the scan), graph hand-off (a
-keyframe's edge to the back end, which runs on its own thread), and the back end's time per
+keyframe's edge to the back end, which runs in a worker process, or with
+``--set backend_process=false`` on a thread of the node), and the back end's time per
 keyframe (matching, loop closures, optimisation; not on the scan's path).
 
 Targets (issue 4, simulated): dropped <= 1 %, latency p95 < 25 ms on one core. Issue 17 (real
@@ -294,7 +295,7 @@ def print_table(r: dict[str, Any]) -> None:
     row("  the rest", ms(r["front_end_ms"]), "conversion, extraction, publishing")
     for stage, times in r["stage_ms"].items():
         row(f"    {stage}", ms(times), f"in {r['stage_scans'][stage]} scans")
-    row("back end per keyframe", ms(r["backend_per_keyframe_ms"]), "on its own thread")
+    row("back end per keyframe", ms(r["backend_per_keyframe_ms"]), "not on the scan's path")
     row("  of which optimisation", ms(r["optimisation_per_keyframe_ms"]))
     row("pieces started / closures", f"{r['pieces_started']} / {r['closures']}")
     row(

@@ -148,7 +148,7 @@ def test_a_simulated_drive_is_tracked_within_centimetres(office_drive) -> None: 
         assert keyframe.segments.shape[1] == 4 and keyframe.piece == 0
     assert [k.index for k in keyframes] == list(range(len(keyframes)))
     # Every keyframe has an edge to the one before; the graph holds them all.
-    assert len(mapper.closer.graph) == len(keyframes)
+    assert len(mapper.backend.closer.graph) == len(keyframes)
     # The trajectory follows the optimised keyframes: every scan, in the robot's map frame,
     # where the live poses were give or take what the graph moved since (millimetres here).
     trajectory_stamps, trajectory = mapper.trajectory()
@@ -310,7 +310,7 @@ def test_a_lost_robot_maps_on_in_a_piece_that_joins_the_map_again(monkeypatch) -
         assert update.new_piece == (k in lost_at)
     assert local.pieces_started == 2
     assert [c.kind for c in local.closures].count("join") == 2
-    assert set(local.map.pieces.tolist()) == {0}
+    assert set(local.backend.map.pieces.tolist()) == {0}
     times, poses = local.trajectory()
     np.testing.assert_array_equal(times, stamps)
     truth_at = {
@@ -360,13 +360,13 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
     joins = [c for c in local.closures if c.kind == "join"]
     if turn_limit < np.pi:
         assert joins == []
-        assert local.closer.refused["turned round from the robot's last pose (join)"] > 0
-        assert len(set(local.map.pieces.tolist())) == 2
+        assert local.backend.closer.refused["turned round from the robot's last pose (join)"] > 0
+        assert len(set(local.backend.map.pieces.tolist())) == 2
     else:
         # The look-alike joined: the map is decimetres off (the right join: under 2 cm, the
         # test above).
         assert len(joins) == 1
-        assert set(local.map.pieces.tolist()) == {0}
+        assert set(local.backend.map.pieces.tolist()) == {0}
         times, poses = local.trajectory()
         truth_at = {
             float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
@@ -568,8 +568,8 @@ def test_closures_of_one_new_keyframe_are_not_each_others_partner() -> None:
     local = LocalMapper()
     closure = loop_closer.Closure(10, 50, (1.0, 0.0, 0.0), 0.99, "loop", True, "")
     neighbour = dataclasses.replace(closure, first=11, T_first_second=(0.5, 0.0, 0.0))
-    assert local.closer._pairwise(closure, neighbour) is None
-    assert local.closer._pairwise(neighbour, closure) is None
+    assert local.backend.closer._pairwise(closure, neighbour) is None
+    assert local.backend.closer._pairwise(neighbour, closure) is None
 
 
 def test_two_closures_agree_in_heading_within_the_drift_of_their_cycle(
@@ -581,7 +581,7 @@ def test_two_closures_agree_in_heading_within_the_drift_of_their_cycle(
     # metres of path must not buy radians one for one.
     stamps, scans, _ = office_drive
     local = _mapped(stamps, scans)
-    keyframes = local.closer.keyframes
+    keyframes = local.backend.closer.keyframes
     last = len(keyframes.scans) - 1
     assert last >= 3
 
@@ -597,8 +597,8 @@ def test_two_closures_agree_in_heading_within_the_drift_of_their_cycle(
     assert path > 0.5
     inside = RIGHT_ANGLE - np.radians(0.5)
     beyond = RIGHT_ANGLE + np.radians(0.1 * path)
-    assert local.closer._pairwise(closure(0, last, inside), other) is True
-    assert local.closer._pairwise(closure(0, last, beyond), other) is False
+    assert local.backend.closer._pairwise(closure(0, last, inside), other) is True
+    assert local.backend.closer._pairwise(closure(0, last, beyond), other) is False
 
 
 @pytest.mark.usefixtures("as_matched")
@@ -764,7 +764,7 @@ def test_a_closure_edge_is_the_windows_placement_with_the_scans_information(
     stamps, scans, _ = office_drive
     local = _mapped(stamps, scans)
     assert len(local.keyframes()) >= 2
-    closer = local.closer
+    closer = local.backend.closer
 
     def no_match(*args: object, **kwargs: object) -> None:
         raise AssertionError("the closure edge must not match the scans again")

@@ -77,6 +77,14 @@ class RobotMapperConfig:
         minimum=0.0,
         maximum=1000.0,
     )
+    backend_process: bool = param(
+        True,
+        unit="",
+        doc="run the local mapper's back end (loop closures, the pose graph) in a worker "
+        "process: on a thread of this process it would take Python's interpreter lock from "
+        "the scan callback for hundreds of milliseconds per keyframe; false: on a thread. "
+        "Read when the node starts (and when its map starts over)",
+    )
     diagnostics_period: float = param(
         1.0,
         unit="s",

@@ -29,6 +29,7 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import SegmentScan, extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.backend import Backend
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult, merge
 from multi_robot_mapper.core.merging.joint import JointState, place_scans
 from multi_robot_mapper.core.merging.methods import merge_method
@@ -213,7 +214,9 @@ def _run_local(
         backend_times += mapper.backend_seconds
         optimise_times += mapper.optimise_seconds
         main = mapper.main_piece()
-        map_segments = mapper.map.map_segments(piece=main)
+        backend = mapper.backend  # in line: this process's
+        assert isinstance(backend, Backend)
+        map_segments = backend.map.map_segments(piece=main)
         keyframes = [kf for kf in mapper.keyframes() if kf.piece == main]
         keyframe_poses[robot] = np.array(
             [kf.T_robotmap_keyframe for kf in keyframes], dtype=np.float64
@@ -229,7 +232,7 @@ def _run_local(
             np.concatenate([a[1] for a in placed]) if placed else np.zeros(0, dtype=np.int64),
             np.vstack([a[2] for a in placed]) if placed else np.zeros((0, 3)),
         )
-        scans = mapper.map.scans
+        scans = backend.map.scans
         per_robot[robot] = {
             "scans_accepted": mapper.scans_accepted,
             "scans_set_aside": mapper.scans_set_aside,
@@ -238,13 +241,13 @@ def _run_local(
             "scans_in_main_piece": len(trajectories[robot][0]),
             "set_aside_reasons": dict(mapper.set_aside_reasons),
             "pieces_started": mapper.pieces_started,
-            "pieces_left": len(set(mapper.map.pieces.tolist())),
+            "pieces_left": len(set(backend.map.pieces.tolist())),
             "keyframes": len(keyframes),
             "keyframes_all_pieces": len(scans),
             "map_segments": len(map_segments),
-            "local_edges": mapper.closer.local_edges,
+            "local_edges": backend.closer.local_edges,
             "closures_accepted": len(mapper.closures),
-            "closures_refused": dict(mapper.closer.refused),
+            "closures_refused": dict(backend.closer.refused),
             "closures": [
                 {
                     "kind": c.kind,

@@ -154,7 +154,7 @@ class MapMerger(SavedMapServices, Node):
         # makes the merge fail falls back to.
         self._merged_inputs: dict[str, tuple[FloatArray, FloatArray, list[Keyframe]]] = {}
         self._culprits: set[str] = set()  # robots set back by the last failed merge
-        self._worker = WorkerProcess()  # started on the first merge
+        self._worker = WorkerProcess("merge worker")  # started on the first merge
         self._shown: tuple[object, ...] | None = None  # what the last global_map showed
         self._marker_ids: set[MarkerKey] = set()  # its markers (deleted once gone)
         self._marker_cache: MarkerCache = {}  # each keyframe's marker, rebuilt when it changes

@@ -57,6 +57,7 @@ from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
 from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.parameters import declare_config, on_config_change
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
+from multi_robot_mapper.ros.worker_process import WorkerProcess
 
 # Notices about the laser itself (it is mounted upside down, its intensities are of another
 # length): one warning, then only counted.
@@ -107,10 +108,9 @@ class RobotMapper(Node):
         self._last_scan_ns: int | None = None  # node clock when the last scan arrived
         self._last_stamp = Time()  # header stamp of the newest scan
         self._reported = (0, 0, 0)  # received, accepted, rejected at the last diagnostics
-        # The back end (keyframe graph, loop closures, fusion) works on a thread of its own:
-        # a scan never waits for it.
-        self.mapper = LocalMapper(self.config.local_mapping, backend=False, trajectory=False)
-        self.mapper.start_worker()
+        # The back end (keyframe graph, loop closures, fusion) works on a thread of its own,
+        # by default waiting on a worker process: a scan never waits for it.
+        self.mapper = self._new_mapper()
         self._backend_errors_logged = 0
         self.last_update: LocalUpdate | None = None
         # Header stamps of the keyframes' scans, exact (a float second near 1e9 is not).
@@ -279,6 +279,13 @@ class RobotMapper(Node):
         self._mapped_stamp = stamp
         return False
 
+    def _new_mapper(self) -> LocalMapper:
+        """An empty local mapper, its back end started (module doc)."""
+        mapper = LocalMapper(self.config.local_mapping, backend=False, trajectory=False)
+        process = self.config.backend_process
+        mapper.start_worker(WorkerProcess(f"{self.robot} back end") if process else None)
+        return mapper
+
     def destroy_node(self) -> None:
         self.mapper.stop_worker()
         super().destroy_node()
@@ -299,8 +306,7 @@ class RobotMapper(Node):
         self.map_resets += 1
         self.warnings.warn("map_reset", f"{self.robot}: {why}")
         self.mapper.stop_worker()
-        self.mapper = LocalMapper(self.config.local_mapping, backend=False, trajectory=False)
-        self.mapper.start_worker()
+        self.mapper = self._new_mapper()
         self._backend_errors_logged = 0
         self.last_update = None
         self._keyframe_stamps.clear()

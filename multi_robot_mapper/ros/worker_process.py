@@ -1,5 +1,5 @@
-"""One worker process for a node's long numpy work (the merge), so that the node's own threads
-keep Python's interpreter lock while it runs."""
+"""One worker process for a node's long numpy work (the merge, the local mapper's back end), so
+that the node's own threads keep Python's interpreter lock while it runs."""
 
 from __future__ import annotations
 
@@ -44,7 +44,8 @@ class WorkerProcess:
     leaves an exit hook that writes to a closed pipe (``OSError: Bad file descriptor`` as the
     interpreter exits)."""
 
-    def __init__(self) -> None:
+    def __init__(self, name: str = "worker") -> None:
+        self.name = name  # the process's name, and what errors call it
         self._process: BaseProcess | None = None
         self._pipe: Connection | None = None
         self._lock = threading.Lock()  # one job at a time
@@ -59,7 +60,7 @@ class WorkerProcess:
                 ok, value = pipe.recv()
             except (EOFError, OSError) as exc:
                 self._stop()  # a new one next time
-                raise WorkerDiedError("the merge worker process ended before it answered") from exc
+                raise WorkerDiedError(f"the {self.name} process ended before it answered") from exc
         if not ok:
             raise cast(BaseException, value)
         return cast(R, value)
@@ -71,7 +72,7 @@ class WorkerProcess:
         # spawn, not fork: forking a process that runs DDS threads is unsafe.
         context = multiprocessing.get_context("spawn")
         ours, theirs = context.Pipe()
-        process = context.Process(target=_serve, args=(theirs,), name="merge-worker", daemon=True)
+        process = context.Process(target=_serve, args=(theirs,), name=self.name, daemon=True)
         process.start()
         theirs.close()  # the worker's end lives in the worker: its death closes the pipe here
         self._process, self._pipe = process, ours

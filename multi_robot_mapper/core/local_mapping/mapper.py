@@ -19,12 +19,12 @@ add_scan`):
    keyframe, with an edge (its information from the match) to the keyframe it was matched
    against; **otherwise the robot is lost** and maps on in a new piece, from this scan.
 
-The back end (:class:`LoopCloser`) takes each new keyframe: local edges, loop closures, joins
-between pieces, optimisation of the pose graph (:class:`PoseGraph`), fusion into the partial
-map (:class:`KeyframeMap`). Replay calls it in line (:meth:`LocalMapper.add_scan` returns
-once the keyframe is in the graph); a node can hand keyframes to it on another thread
-(``backend=False`` and :meth:`LocalMapper.run_backend`), so a scan never waits for it. A
-pose can jump when a closure moves the keyframes: that is expected.
+The back end (:mod:`.backend`: the loop closer and the keyframe map) takes each new keyframe:
+local edges, loop closures, joins between pieces, optimisation of the pose graph, fusion into
+the partial map. Replay calls it in line (:meth:`LocalMapper.add_scan` returns once the
+keyframe is in the graph); a node hands keyframes to it on another thread, which waits on a
+worker process (:meth:`LocalMapper.start_worker`), so a scan never waits for it. A pose can
+jump when a closure moves the keyframes: that is expected.
 """
 
 from __future__ import annotations
@@ -50,14 +50,10 @@ from multi_robot_mapper.core.local_mapping.attempts import (
     match_scan,
     pose_of_match,
 )
+from multi_robot_mapper.core.local_mapping.backend import Backend, HostedBackend, Runner
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
-from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeMap, KeyframeScan
-from multi_robot_mapper.core.local_mapping.loop_closer import (
-    BackendUpdate,
-    Closure,
-    LoopCloser,
-    LostFrom,
-)
+from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeScan
+from multi_robot_mapper.core.local_mapping.loop_closer import BackendUpdate, Closure, LostFrom
 from multi_robot_mapper.core.matching import MatchResult
 from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.pose_graph import Edge
@@ -115,10 +111,8 @@ class LocalMapper:
         on the thread :meth:`start_worker` starts. ``trajectory`` False: every placed scan is
         not remembered (a node running for hours needs only the keyframes)."""
         self.config = config if config is not None else LocalMapperConfig()
-        self.map = KeyframeMap(
-            self.config.integrate, self.config.fusion_tolerance, self.config.fusion_radius
-        )
-        self.closer = LoopCloser(self.config, self.map)
+        # keyframe map and loop closer, here or in a worker process (start_worker)
+        self.backend: Backend | HostedBackend = Backend(self.config)
         self._shapes = Shapes(self.config.shape)  # of the scans the front end searches
         self.inline_backend = backend  # run the back end inside add_scan
         self.version = 0  # bumped whenever the partial map changes
@@ -393,18 +387,22 @@ class LocalMapper:
     def reconfigure(self, config: LocalMapperConfig) -> None:
         """New settings from the next scan and the next keyframe on; the map is kept."""
         self.config = config
-        self.closer.config = config
-        self.map.config = config.integrate
-        self.map.tolerance, self.map.radius = config.fusion_tolerance, config.fusion_radius
+        self.backend.reconfigure(config)
         if config.shape != self._shapes.config:
             self._shapes = Shapes(config.shape)
 
-    def start_worker(self) -> None:
+    def start_worker(self, runner: Runner | None = None) -> None:
         """Run the back end on a thread of its own from now on: :meth:`add_scan` only hands
         keyframes over and never waits for matching or the optimiser (what a node does; a
-        replay runs it in line and is deterministic)."""
+        replay runs it in line and is deterministic). With ``runner`` (a worker process:
+        ``ros.worker_process.WorkerProcess``), the thread only waits while the back end
+        works in that process (:mod:`.backend`); only before the first keyframe."""
         if self._worker is not None:
             return
+        if runner is not None:
+            if self._scans:
+                raise ValueError("the back end moves to a worker process before any keyframe")
+            self.backend = HostedBackend(self.config, runner)
         self._stop.clear()
         self._worker = threading.Thread(target=self._work, name="local-mapping-back-end")
         self._worker.daemon = True  # never holds a process open at exit
@@ -419,6 +417,8 @@ class LocalMapper:
             return
         self._stop.set()
         self._wake.set()
+        if isinstance(self.backend, HostedBackend):
+            self.backend.shutdown()  # no gtsam in this process: the keyframe is abandoned
         worker.join(timeout)
 
     def _work(self) -> None:
@@ -429,6 +429,8 @@ class LocalMapper:
                 while not self._stop.is_set() and self.run_backend(limit=1):
                     pass
             except Exception:  # a bug must not end the thread: the next keyframe is tried
+                if self._stop.is_set():
+                    return  # a worker process shut down under the keyframe it was on
                 self.backend_errors += 1
                 self.last_backend_error = traceback.format_exc()
 
@@ -448,9 +450,7 @@ class LocalMapper:
                 # The front end may have moved the keyframe since (earlier closures).
                 pose, piece = self._poses[scan.index], self._pieces[scan.index]
             try:
-                update = self.closer.add_keyframe(scan, pose, piece, edge, lost_from)
-                # What readers see, whole and consistent: the changed keyframes rebuilt.
-                fresh = self.map.keyframes(self.map.take_changed())
+                update, fresh = self.backend.add_keyframe((scan, pose, piece, edge, lost_from))
             except Exception:
                 with self._lock:
                     self._busy = False
@@ -574,7 +574,9 @@ class LocalMapper:
 
     @property
     def closures(self) -> list[Closure]:
-        return list(self.closer.accepted.values())
+        """The loop closures and joins in the graph (from a worker process: after the
+        keyframe it is on)."""
+        return self.backend.closures
 
     def _placed_pose(self, anchor: Anchor) -> Pose:
         return se2.compose(self._poses[anchor.keyframe], anchor.T_keyframe_scan)
