@@ -22,6 +22,9 @@ the case where the search confirms it unless the track is sure (``attempts.SURE`
 track's confidence, whether the track was right, whether the search disagreed (a likely
 placement elsewhere) or was not run, and what was finally placed (right, wrong, or nothing:
 the robot started a new piece). It says what the search buys for its tens of milliseconds.
+Before it, the confident predictions refined alone that landed beyond a third of the
+tolerance but within it (where the rivals are tried), by their confidence in context (the
+bench also wraps ``attempts.integrate`` to read it): what the rivals can buy there.
 
     .venv/bin/python bench/track_near.py [--logs intel aces fhw csail edmonton freiburg-079]
         [--robots 4] [--jobs 2]
@@ -75,13 +78,19 @@ def observe(name: str, robots: int) -> dict[str, list[Any]]:
     of every confident track beyond the tolerance (:func:`far_outcome`), while mapping
     ``name`` cut into ``robots`` runs."""
     seen: dict[str, Any] = {}
-    match_scan, close_to = mapper.match_scan, attempts.close_to
+    match_scan, close_to, integrate = mapper.match_scan, attempts.close_to, attempts.integrate
 
     def watched_match_scan(*args: Any, **kwargs: Any) -> Any:
         seen["prediction"] = args[4][0] if args[5] else None  # motions[0], when tracking
         seen["here"], seen["threshold"] = args[1].here, args[0].integrate_confidence
         seen["decision"] = match_scan(*args, **kwargs)
         return seen["decision"]
+
+    def watched_integrate(*args: Any, **kwargs: Any) -> Any:
+        result = integrate(*args, **kwargs)
+        # the first match of a tracked scan is the prediction refined alone
+        seen.setdefault("alone_confidence", attempts.in_context(result.confidence, "track"))
+        return result
 
     def watched_close_to(a: Any, b: Any, distance: float, angle: float) -> bool:
         if b is seen.get("prediction"):
@@ -91,6 +100,7 @@ def observe(name: str, robots: int) -> dict[str, list[Any]]:
         return close_to(a, b, distance, angle)
 
     mapper.match_scan, attempts.close_to = watched_match_scan, watched_close_to
+    attempts.integrate = watched_integrate
     try:
         scans = read_carmen(DATA / f"{name}.log.gz")
         stamps, _ = monotonic_stamps(np.array([s.timestamp for s in scans]), name)
@@ -115,7 +125,8 @@ def observe(name: str, robots: int) -> dict[str, list[Any]]:
                         away = max(np.hypot(dx, dy) / RIGHT_DISTANCE, abs(dtheta) / RIGHT_ANGLE)
                         ex, ey, etheta = se2.between(truth, motion)
                         right = np.hypot(ex, ey) < RIGHT_DISTANCE and abs(etheta) < RIGHT_ANGLE
-                        found[kind].append((float(away), bool(right)))
+                        confidence = seen["alone_confidence"] if kind == "alone" else None
+                        found[kind].append((float(away), bool(right), confidence))
                     if "decision" in seen and (outcome := far_outcome(seen, local, truth)):
                         found["far"].append(outcome)
                 if update.accepted:
@@ -123,6 +134,7 @@ def observe(name: str, robots: int) -> dict[str, list[Any]]:
         return found
     finally:
         mapper.match_scan, attempts.close_to = match_scan, close_to
+        attempts.integrate = integrate
 
 
 def far_outcome(seen: dict[str, Any], local: LocalMapper, truth: Any) -> tuple[str, ...] | None:
@@ -186,13 +198,34 @@ def main() -> None:
             for name in logs:
                 kept = [
                     right
-                    for away, right in results[name][kind]
+                    for away, right, _ in results[name][kind]
                     if lo < away <= hi or (lo == 0 == away)
                 ]
                 cells.append(f"{sum(kept)} / {len(kept)}")
                 every[0] += sum(kept)
                 every[1] += len(kept)
             print(f"| {lo:.2f}–{hi:.2f} | " + " | ".join(cells) + f" | {every[0]} / {every[1]} |")
+    print(
+        "\nThe prediction refined alone, confident, beyond a third of the tolerance "
+        "(attempts.NEAR) but within it, where the rivals are tried: right / all by its "
+        "confidence in context\n"
+    )
+    print("| confidence | " + " | ".join(logs) + " | all |")
+    print("| --- " * (len(logs) + 2) + "|")
+    bands = ((attempts.SURE, 2.0), (0.99, attempts.SURE), (0.0, 0.99))
+    for low, high in bands:
+        cells, every = [], [0, 0]
+        for name in logs:
+            kept = [
+                right
+                for away, right, confidence in results[name]["alone"]
+                if 1 / 3 < away <= 1.0 and low <= confidence < high
+            ]
+            cells.append(f"{sum(kept)} / {len(kept)}")
+            every[0] += sum(kept)
+            every[1] += len(kept)
+        label = f"≥ {low}" if high > 1.0 else f"{low}–{high}"
+        print(f"| {label} | " + " | ".join(cells) + f" | {every[0]} / {every[1]} |")
     outcomes = sorted({o for name in logs for o in results[name]["far"]})
     print(f"\nConfident tracks beyond the tolerance, searched; {args.robots} robots:")
     print("track confidence / track / search / placed, count per log\n")
