@@ -15,7 +15,8 @@ is mapped by one LocalMapper (back end in line, as a replay), with the defaults.
 only observes: it wraps ``attempts.match_scan`` (to see the prediction) and
 ``attempts.close_to`` (called with a refinement and the prediction, only when that
 refinement is confident: first the prediction alone, then with rivals), and changes no
-decision.
+decision. The prediction alone settles within a third of the tolerance (``attempts.NEAR``),
+or within all of it when sure (``attempts.SURE``).
 
 A third table follows every confident track that lands beyond the tolerance of its prediction,
 the case where the search confirms it unless the track is sure (``attempts.SURE``): by the
@@ -95,8 +96,8 @@ def observe(name: str, robots: int) -> dict[str, list[Any]]:
     def watched_close_to(a: Any, b: Any, distance: float, angle: float) -> bool:
         if b is seen.get("prediction"):
             # the refinement's motion from the last placed scan: the prediction alone is
-            # checked against a third of the tolerance (NEAR), with its rivals against all of it
-            seen["alone" if distance == attempts.NEAR else "rivals"] = a
+            # checked first, with its rivals next
+            seen["rivals" if "alone" in seen else "alone"] = a
         return close_to(a, b, distance, angle)
 
     mapper.match_scan, attempts.close_to = watched_match_scan, watched_close_to
