@@ -177,6 +177,17 @@ def far_outcome(seen: dict[str, Any], local: LocalMapper, truth: Any) -> tuple[s
     )
 
 
+def right_of_all(per_log: list[list[Any]], keep: Any) -> str:
+    """Table cells "right / all" of the refinements ``(away, right, confidence)`` that
+    ``keep(away, confidence)`` selects, one per log, then over all logs."""
+    counts = [
+        [right for away, right, confidence in seen if keep(away, confidence)] for seen in per_log
+    ]
+    cells = [f"{sum(kept)} / {len(kept)}" for kept in counts]
+    cells.append(f"{sum(sum(kept) for kept in counts)} / {sum(len(kept) for kept in counts)}")
+    return " | ".join(cells)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--logs", nargs="+", default=list(LOGS))
@@ -194,18 +205,11 @@ def main() -> None:
         print("| distance | " + " | ".join(logs) + " | all |")
         print("| --- " * (len(logs) + 2) + "|")
         for lo, hi in itertools.pairwise(BINS):
-            cells = []
-            every = [0, 0]
-            for name in logs:
-                kept = [
-                    right
-                    for away, right, _ in results[name][kind]
-                    if lo < away <= hi or (lo == 0 == away)
-                ]
-                cells.append(f"{sum(kept)} / {len(kept)}")
-                every[0] += sum(kept)
-                every[1] += len(kept)
-            print(f"| {lo:.2f}–{hi:.2f} | " + " | ".join(cells) + f" | {every[0]} / {every[1]} |")
+            cells = right_of_all(
+                [results[name][kind] for name in logs],
+                lambda away, _, lo=lo, hi=hi: lo < away <= hi or (lo == 0 == away),
+            )
+            print(f"| {lo:.2f}–{hi:.2f} | {cells} |")
     print(
         "\nThe prediction refined alone, confident, beyond a third of the tolerance "
         "(attempts.NEAR) but within it, where the rivals are tried: right / all by its "
@@ -215,18 +219,14 @@ def main() -> None:
     print("| --- " * (len(logs) + 2) + "|")
     bands = ((attempts.SURE, 2.0), (0.99, attempts.SURE), (0.0, 0.99))
     for low, high in bands:
-        cells, every = [], [0, 0]
-        for name in logs:
-            kept = [
-                right
-                for away, right, confidence in results[name]["alone"]
-                if 1 / 3 < away <= 1.0 and low <= confidence < high
-            ]
-            cells.append(f"{sum(kept)} / {len(kept)}")
-            every[0] += sum(kept)
-            every[1] += len(kept)
+        cells = right_of_all(
+            [results[name]["alone"] for name in logs],
+            lambda away, confidence, low=low, high=high: (
+                1 / 3 < away <= 1.0 and low <= confidence < high
+            ),
+        )
         label = f"≥ {low}" if high > 1.0 else f"{low}–{high}"
-        print(f"| {label} | " + " | ".join(cells) + f" | {every[0]} / {every[1]} |")
+        print(f"| {label} | {cells} |")
     outcomes = sorted({o for name in logs for o in results[name]["far"]})
     print(f"\nConfident tracks beyond the tolerance, searched; {args.robots} robots:")
     print("track confidence / track / search / placed, count per log\n")

@@ -280,7 +280,8 @@ class RobotMapper(Node):
         return False
 
     def _new_mapper(self) -> LocalMapper:
-        """An empty local mapper, its back end started (module doc)."""
+        """An empty local mapper, its back end started: in a worker process unless
+        ``backend_process`` is off."""
         mapper = LocalMapper(self.config.local_mapping, backend=False, trajectory=False)
         process = self.config.backend_process
         mapper.start_worker(WorkerProcess(f"{self.robot} back end") if process else None)
