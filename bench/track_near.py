@@ -16,7 +16,9 @@ only observes: it wraps ``attempts.match_scan`` (to see the prediction) and
 ``attempts.close_to`` (called with a refinement and the prediction, only when that
 refinement is confident: first the prediction alone, then with rivals), and changes no
 decision. The prediction alone settles within a third of the tolerance (``attempts.NEAR``),
-or within all of it when sure (``attempts.SURE``).
+or within all of it when sure (``attempts.SURE``). Beyond the tolerance the front end no
+longer computes its confidence (the placement is discarded whatever it is), so the first
+table's rows beyond 1.00 stay empty; runs before that change counted them too.
 
 A third table follows every confident track that lands beyond the tolerance of its prediction,
 the case where the search confirms it unless the track is sure (``attempts.SURE``): by the

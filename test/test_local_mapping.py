@@ -86,11 +86,16 @@ def as_matched(monkeypatch) -> None:  # type: ignore[no-untyped-def]
     monkeypatch.setattr(context_model, "CALIBRATION", {c: (1.0, 0.0) for c in attempts.CONTEXTS})
 
 
-def _match(pose: tuple[float, float, float], confidence: float) -> MatchResult:
+def _match(
+    pose: tuple[float, float, float], confidence: float, judged: object = None
+) -> MatchResult:
     """A match that places the new scan at ``pose`` with ``confidence`` (for a fake
-    INTEGRATE)."""
+    INTEGRATE; as the real one, confidence 0 where ``judged`` does not want it)."""
     x, y, theta = pose
-    return MatchResult(np.array([theta, x, y]), 5.0, 0.9, True, 1, 1, confidence)
+    T_1_2 = np.array([theta, x, y])
+    if callable(judged) and not judged(T_1_2):
+        confidence = 0.0
+    return MatchResult(T_1_2, 5.0, 0.9, True, 1, 1, confidence)
 
 
 def _only_the_last_scan(segments: np.ndarray, scan: LaserScanData) -> attempts.References:
@@ -395,7 +400,7 @@ def test_a_tracked_placement_far_from_the_prediction_needs_the_search_to_agree(
     tracked = (0.5, 0.0, np.pi / 2)
     searched: list[bool] = []
 
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
         searched.append(bool(heuristics))
         if heuristics:
             pose, confidence = search_finds, 0.9
@@ -403,7 +408,7 @@ def test_a_tracked_placement_far_from_the_prediction_needs_the_search_to_agree(
             pose, confidence = (0.5, 0.0, 0.0), 0.3  # the prediction alone
         else:
             pose, confidence = tracked, 0.95
-        return _match(pose, confidence)
+        return _match(pose, confidence, judged)
 
     monkeypatch.setattr(attempts, "integrate", fake)
     chosen, placed, _ = _track_half_a_metre_ahead()
@@ -440,9 +445,9 @@ def test_a_confident_track_within_the_tolerance_of_its_prediction_needs_no_searc
     # made too, unless the track is sure.
     calls: list[bool] = []
 
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
         calls.append(bool(heuristics))
-        return _match(refined_to, confidence)
+        return _match(refined_to, confidence, judged)
 
     monkeypatch.setattr(attempts, "integrate", fake)
     chosen, placed, tracked = _track_half_a_metre_ahead()
@@ -462,17 +467,57 @@ def test_a_rival_moves_a_confident_track_that_stayed_near_a_wrong_prediction(
     truth = (0.5, 0.0, 0.3)
     calls: list[bool] = []
 
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
         calls.append(bool(heuristics))
         if len(extra_hypotheses) == 1:
-            return _match((0.5, 0.0, 0.06), 0.81)  # the prediction alone
-        return _match(truth, 0.95)  # with the rivals, and the search
+            return _match((0.5, 0.0, 0.06), 0.81, judged)  # the prediction alone
+        return _match(truth, 0.95, judged)  # with the rivals, and the search
 
     monkeypatch.setattr(attempts, "integrate", fake)
     chosen, placed, _ = _track_half_a_metre_ahead()
     assert placed
     np.testing.assert_allclose(chosen.pose, truth)
     assert calls == [False, False, True]
+
+
+@pytest.mark.parametrize("turn", [0.3, 0.15])
+def test_a_turn_that_started_between_scans_is_found_by_the_rivals(
+    monkeypatch,  # type: ignore[no-untyped-def]
+    turn: float,
+) -> None:
+    # The robot drove straight, then turned 9-17 deg between two scans: the constant-velocity
+    # prediction (straight on) is far off in angle. With the real INTEGRATE, the prediction
+    # refined alone lands beyond the tolerance (its confidence is not even computed), and the
+    # rivals pass (the prediction and its turned copies) places the scan within centimetres.
+    rng = np.random.default_rng(7)
+    walls = WORLDS["office"]()
+    laser = LaserModel(beams=361, range_noise=0.01)
+    start, truth = (6.0, 3.0, 0.0), (0.4, 0.05, turn)
+    scans = [simulate_scan(walls, pose, laser, rng) for pose in (start, se2.compose(start, truth))]
+    first, second = (extract_scan(scan, EXTRACTION)[0].segments for scan in scans)
+    confidences: list[tuple[int, float]] = []
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        result = integrate(*args, **kwargs)
+        confidences.append((len(kwargs["extra_hypotheses"]), result.confidence))
+        return result
+
+    monkeypatch.setattr(attempts, "integrate", counted)
+    chosen, placed, tracked = attempts.match_scan(
+        LocalMapperConfig(),
+        _only_the_last_scan(first, scans[0]),
+        second,
+        scans[1],
+        [(0.4, 0.0, 0.0), (0.0, 0.0, 0.0)],
+        True,
+        lambda *_: None,
+    )
+    # the prediction alone (not judged), then with its rivals (confident)
+    assert [count for count, _ in confidences] == [1, 13]
+    assert confidences[0][1] == 0.0 and confidences[1][1] > 0.99
+    assert placed and tracked
+    error = se2.between(truth, chosen.pose)
+    assert np.hypot(error[0], error[1]) < 0.05 and abs(error[2]) < np.radians(1.0)
 
 
 def test_a_cluttered_office_is_tracked_within_centimetres() -> None:
@@ -619,14 +664,14 @@ def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
     segments, _ = extract_scan(scan, EXTRACTION)
     own, first, second = (segments.segments.copy() for _ in range(3))
 
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
         if reference is first:
             pose, confidence = (placed_at, 0.0, 0.0), 0.7  # keyframe 0 at the origin
         elif reference is second:
             pose, confidence = (placed_at - 1.0, 0.0, 0.0), 0.6  # keyframe 2, 1 m along x
         else:
             pose, confidence = (0.0, 0.0, 0.0), 0.2  # the last scan: no idea
-        return _match(pose, confidence)
+        return _match(pose, confidence, judged)
 
     monkeypatch.setattr(attempts, "integrate", fake)
     references = attempts.References(
@@ -669,13 +714,13 @@ def test_a_search_that_is_not_confident_is_searched_again_with_the_shapes(
     segments, _ = extract_scan(scan, EXTRACTION)
     calls: list[int] = []
 
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None):  # type: ignore[no-untyped-def]
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
         calls.append(len(extra_hypotheses))
         if len(calls) == 1:
             pose, confidence = (0.2, 0.0, 0.0), 0.3
         else:
             pose, confidence = (0.5, 0.1, 0.0), second_confidence
-        return _match(pose, confidence)
+        return _match(pose, confidence, judged)
 
     monkeypatch.setattr(attempts, "integrate", fake)
     references = _only_the_last_scan(segments.segments, scan)

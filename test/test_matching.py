@@ -68,6 +68,33 @@ def test_the_next_scan_of_a_drive_is_matched_within_centimetres() -> None:
     assert result.valid
 
 
+def test_a_confidence_not_wanted_is_not_computed_and_changes_nothing_else() -> None:
+    # A caller that discards placements far from its prediction asks for no confidence there:
+    # the placement is the same, with confidence 0 and no evidence; where it is wanted, the
+    # result is the one without the question.
+    s2, view2 = scan("office", (8.7, 3.2, 0.45), seed=1)
+    views = (ROOM_VIEW, view2)
+    plain = integrate(ROOM, s2, CONFIG, views=views)
+    asked: list[np.ndarray] = []
+
+    def wanted(answer: bool):  # type: ignore[no-untyped-def]
+        def judged(T_1_2: np.ndarray) -> bool:
+            asked.append(T_1_2.copy())
+            return answer
+
+        return judged
+
+    kept = integrate(ROOM, s2, CONFIG, views=views, judged=wanted(True))
+    skipped = integrate(ROOM, s2, CONFIG, views=views, judged=wanted(False))
+    np.testing.assert_array_equal(asked[0], plain.T_1_2)
+    for result in (kept, skipped):
+        np.testing.assert_array_equal(result.T_1_2, plain.T_1_2)
+        assert (result.value, result.valid) == (plain.value, plain.valid)
+    assert kept.confidence == plain.confidence > 0.9 and kept.evidence == plain.evidence
+    assert skipped.confidence == 0.0 and skipped.evidence is None
+    assert "confidence" not in skipped.seconds
+
+
 @pytest.mark.parametrize(("world", "stop"), [("corridors", 0), ("corridors", 2), ("rooms", 1)])
 def test_a_scan_of_an_unrelated_place_is_refused(world: str, stop: int) -> None:
     x, y = ROUTES[world][stop]

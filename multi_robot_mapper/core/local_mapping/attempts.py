@@ -207,7 +207,11 @@ def match_scan(
     current = pieces[references.keyframe]
 
     def attempt(
-        stage: str, reference: Reference, search: bool, guesses_from_last: list[Pose]
+        stage: str,
+        reference: Reference,
+        search: bool,
+        guesses_from_last: list[Pose],
+        judge_near_prediction: bool = False,
     ) -> Attempt:
         started = time.perf_counter()
         anchor = reference.anchor
@@ -221,6 +225,11 @@ def match_scan(
             heuristics=HEURISTICS if search else (),
             extra_hypotheses=hypotheses_of(guesses),
             views=(reference.view, view),
+            judged=(
+                (lambda T: close_to(pose_of_match(T), guesses[0], RIGHT_DISTANCE, RIGHT_ANGLE))
+                if judge_near_prediction
+                else None
+            ),
         )
         checked = result.seconds.get("confidence", 0.0)
         shaping = 0.0
@@ -303,7 +312,9 @@ def match_scan(
         # hide from: turned either way (a turn that starts between two scans is the usual
         # miss), and a quarter and a half turn (a room of right angles fits those ways too:
         # the look-alike's rival, or the right answer when the prediction found the look-alike).
-        quick = attempt("track", start, False, motions[:1])
+        # Its confidence is read only within the tolerance of the prediction: beyond it the
+        # placement is discarded whatever its confidence (most scans that need the rivals).
+        quick = attempt("track", start, False, motions[:1], judge_near_prediction=True)
         # A sure one settles anywhere within the tolerance: on every shared log cut into 4
         # robots (bench/track_near.py, its fourth table) the 1 599 sure ones there were all
         # right; the 0.81 that stayed 17 deg off on aces (below) is far from sure.

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,8 +87,13 @@ def integrate(
     extra_hypotheses: FloatArray | None = None,
     views: tuple[Views, Views] = (None, None),
     hypothesis_sets: tuple[FloatArray, FloatArray] | None = None,
+    judged: Callable[[FloatArray], bool] | None = None,
 ) -> MatchResult:
     """Find how S2 lies in S1's frame with no initial guess (INTEGRATE steps 1-2).
+
+    ``judged(T_1_2)`` says whether the chosen placement's confidence is wanted (None:
+    always); where it is not, the result has confidence 0 and no evidence, and the beams of
+    both sets are not read for it (a caller that will discard such a placement saves that).
 
     ``hypothesis_sets`` (same frames as S1 and S2) are the sets whose landmarks generate the
     hypotheses when they differ from the sets evaluated: a local mapper draws hypotheses from
@@ -191,6 +197,16 @@ def integrate(
         and fraction >= config.min_match_fraction
         and best_support >= config.min_cross_support
     )
+    if judged is not None and not judged(best_T):
+        return MatchResult(
+            best_T.copy(),
+            best_value,
+            fraction,
+            bool(valid),
+            len(transforms),
+            evaluated,
+            seconds=clock.seconds,
+        )
     # The confidence: the beams of both sets on the chosen placement, how far it beats its
     # best rival (a distinct placement, beyond the correctness tolerance), the fit's spread.
     rivals = _distinct_from(refined, best_T)
