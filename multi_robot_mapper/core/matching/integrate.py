@@ -197,34 +197,27 @@ def integrate(
         and fraction >= config.min_match_fraction
         and best_support >= config.min_cross_support
     )
-    if judged is not None and not judged(best_T):
-        return MatchResult(
-            best_T.copy(),
-            best_value,
-            fraction,
-            bool(valid),
-            len(transforms),
-            evaluated,
-            seconds=clock.seconds,
+    probability, evidence = 0.0, None
+    if judged is None or judged(best_T):
+        # The confidence: the beams of both sets on the chosen placement, how far it beats
+        # its best rival (a distinct placement, beyond the correctness tolerance), the fit's
+        # spread.
+        rivals = _distinct_from(refined, best_T)
+        evidence = match_evidence(
+            segments1,
+            segments2,
+            best_T,
+            views,
+            config,
+            score=float(scores[pick]),
+            rival_score=float(scores[rivals].max()) if rivals.any() else 0.0,
+            rival_T=refined[rivals][int(np.argmax(scores[rivals]))] if rivals.any() else None,
+            support=best_support,
+            fraction=fraction,
+            slide=slide,
         )
-    # The confidence: the beams of both sets on the chosen placement, how far it beats its
-    # best rival (a distinct placement, beyond the correctness tolerance), the fit's spread.
-    rivals = _distinct_from(refined, best_T)
-    evidence = match_evidence(
-        segments1,
-        segments2,
-        best_T,
-        views,
-        config,
-        score=float(scores[pick]),
-        rival_score=float(scores[rivals].max()) if rivals.any() else 0.0,
-        rival_T=refined[rivals][int(np.argmax(scores[rivals]))] if rivals.any() else None,
-        support=best_support,
-        fraction=fraction,
-        slide=slide,
-    )
-    probability = confidence(evidence.features())
-    clock.lap("confidence")
+        probability = confidence(evidence.features())
+        clock.lap("confidence")
     return MatchResult(
         best_T.copy(),
         best_value,
