@@ -65,7 +65,9 @@ class MatchResult:
     valid: bool  # passes min_match_value and min_match_fraction
     hypotheses: int  # distinct hypotheses generated
     evaluated: int  # hypotheses fully evaluated after pruning
-    confidence: float = 0.0  # P(right within 0.30 m / 5 deg), see core.matching.confidence
+    # P(right within 0.30 m / 5 deg), see core.matching.confidence; 0 and no evidence where
+    # the caller did not want it (integrate's ``judged``)
+    confidence: float = 0.0
     evidence: MatchEvidence | None = None  # what the confidence was computed from
     # seconds per stage: hypotheses, evaluation, refinement, ranking (free space and slides),
     # confidence
