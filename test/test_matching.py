@@ -19,6 +19,7 @@ from multi_robot_mapper.core.matching import (
     integrate,
     refine,
     refine_many,
+    scoring,
     seen_through,
 )
 from multi_robot_mapper.core.matching.confidence import is_right
@@ -268,3 +269,59 @@ def test_a_corridor_that_fits_at_many_places_gets_a_low_confidence() -> None:
     result = integrate(*segments, CONFIG, views=(first, second))
     right = is_right(result.matrix, se2.matrix_from_pose(0.8, 0.0, 0.0))
     assert result.confidence > 0.9 if right else result.confidence < 0.5
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    first=st.lists(st.floats(-np.pi, np.pi), min_size=1, max_size=12),
+    second=st.lists(st.floats(-np.pi, np.pi), min_size=1, max_size=12),
+    turns=st.lists(st.floats(-2 * np.pi, 2 * np.pi), min_size=1, max_size=20),
+    max_angle=st.floats(0.01, 0.5),
+)
+def test_candidate_pairs_are_every_pair_a_hypothesis_turns_parallel(
+    first: list[float], second: list[float], turns: list[float], max_angle: float
+) -> None:
+    def unit_segments(angles: list[float]) -> np.ndarray:
+        a = np.asarray(angles)
+        return np.column_stack((np.zeros_like(a), np.zeros_like(a), np.cos(a), np.sin(a)))
+
+    segments1, segments2 = unit_segments(first), unit_segments(second)
+    theta = np.asarray(turns)
+    geometry = scoring.pair_geometry(segments1, segments2)
+    h, a, b = scoring._candidate_triples(geometry, theta, max_angle)
+    found = set(zip(h.tolist(), a.tolist(), b.tolist(), strict=True))
+    assert len(found) == h.size  # each triple once
+    # Brute force: S2's direction turned by theta against S1's, mod pi (lines have no sign).
+    angle1 = np.arctan2(segments1[:, 3], segments1[:, 2])
+    angle2 = np.arctan2(segments2[:, 3], segments2[:, 2])
+    off = np.mod(angle1[None, :, None] - angle2[None, None, :] - theta[:, None, None], np.pi)
+    apart = np.minimum(off, np.pi - off)
+    margin = 1e-9  # the two computations round differently at the interval's ends
+    assert found >= set(map(tuple, np.argwhere(apart < max_angle - margin).tolist()))
+    assert found <= set(map(tuple, np.argwhere(apart <= max_angle + margin).tolist()))
+
+
+def test_pair_scores_follow_a_segment_set_changed_in_place() -> None:
+    # The pair geometry is remembered by content: a set changed in place is a new set.
+    moved = se2.transform_segments(se2.matrix_from_pose(0.3, -0.2, 0.1), ROOM)
+    T = np.array([[0.0, 0.0, 0.0], [-0.1, -0.3, 0.2]])
+    edited = moved.copy()
+    before = scoring.score_pairs(ROOM, edited, T, CONFIG)
+    edited[:, [0, 2]] += 1.0  # the same array, new content
+    again = scoring.score_pairs(ROOM, edited, T, CONFIG)
+    fresh = scoring.score_pairs(ROOM.copy(), edited.copy(), T, CONFIG)
+    for field in dataclasses.fields(again):
+        assert np.array_equal(getattr(again, field.name), getattr(fresh, field.name))
+    assert not np.array_equal(before.value, again.value)
+
+
+def test_large_pair_geometries_are_not_kept() -> None:
+    rng = np.random.default_rng(0)
+    many = rng.uniform(-20.0, 20.0, (250, 4))  # 62 500 pairs, over the kept size
+    kept = scoring._kept_geometry.cache_info().currsize
+    scores = scoring.score_pairs(many, many, np.zeros((1, 3)), CONFIG)
+    assert scoring._kept_geometry.cache_info().currsize == kept
+    # identity: every segment matches itself fully (its own length, no penalty: it crosses)
+    itself = scores.first == scores.second
+    length = np.hypot(many[:, 2] - many[:, 0], many[:, 3] - many[:, 1])
+    assert np.allclose(scores.value[itself], length[scores.first[itself]])

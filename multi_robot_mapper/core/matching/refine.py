@@ -6,9 +6,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.geometry import lines_of
 from multi_robot_mapper.core.matching.config import IntegrateConfig
-from multi_robot_mapper.core.matching.scoring import score_pairs
+from multi_robot_mapper.core.matching.scoring import pair_geometry, score_pairs
 
 FloatArray = NDArray[np.float64]
 
@@ -78,34 +77,31 @@ def normal_equations(
     scores = score_pairs(segments1, segments2, transforms, config)
     if scores.first.size == 0:
         return None
-    lines1, lines2 = lines_of(segments1), lines_of(segments2)
+    geometry = pair_geometry(segments1, segments2)  # the one score_pairs used
+    lines1, lines2 = geometry.lines1, geometry.lines2
     h, a, b = scores.hypothesis, scores.first, scores.second
     c, s = np.cos(transforms[h, 0]), np.sin(transforms[h, 0])
     tx, ty = transforms[h, 1], transforms[h, 2]
-    ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
+    ux, uy = (column[a] for column in geometry.first_direction)
+    e1x, e1y = geometry.first_columns[0][a], geometry.first_columns[1][a]
     # Where S2's end points fall along S1's line: the part of s2 over s1.
-    p1, p2 = segments2[b, :2], segments2[b, 2:]
-    t1 = ux * (c * p1[:, 0] - s * p1[:, 1] + tx - segments1[a, 0]) + uy * (
-        s * p1[:, 0] + c * p1[:, 1] + ty - segments1[a, 1]
-    )
-    t2 = ux * (c * p2[:, 0] - s * p2[:, 1] + tx - segments1[a, 0]) + uy * (
-        s * p2[:, 0] + c * p2[:, 1] + ty - segments1[a, 1]
-    )
+    p1x, p1y, p2x, p2y = (column[b] for column in geometry.second_columns)
+    t1 = ux * (c * p1x - s * p1y + tx - e1x) + uy * (s * p1x + c * p1y + ty - e1y)
+    t2 = ux * (c * p2x - s * p2y + tx - e1x) + uy * (s * p2x + c * p2y + ty - e1y)
     span = np.where(np.abs(t2 - t1) > 1e-9, t2 - t1, 1e-9)
     lo = np.clip(np.minimum(-t1 / span, (lines1.length[a] - t1) / span), 0.0, 1.0)
     hi = np.clip(np.maximum(-t1 / span, (lines1.length[a] - t1) / span), 0.0, 1.0)
     weight = 0.5 * (hi - lo) * lines2.length[b]
     # Two Gauss points per pair on the overlapping part of s2 (in S2's frame).
     lam = lo[:, None] + (hi - lo)[:, None] * _GAUSS[None, :]
-    px = (p1[:, 0, None] + lam * (p2[:, 0] - p1[:, 0])[:, None]).ravel()
-    py = (p1[:, 1, None] + lam * (p2[:, 1] - p1[:, 1])[:, None]).ravel()
+    px = (p1x[:, None] + lam * (p2x - p1x)[:, None]).ravel()
+    py = (p1y[:, None] + lam * (p2y - p1y)[:, None]).ravel()
     hh = np.repeat(h, 2)
-    aa = np.repeat(a, 2)
     cc, ss = np.repeat(c, 2), np.repeat(s, 2)
     qx = cc * px - ss * py + np.repeat(tx, 2)
     qy = ss * px + cc * py + np.repeat(ty, 2)
-    nx, ny = -lines1.direction[aa, 1], lines1.direction[aa, 0]
-    r = nx * qx + ny * qy - lines1.normal_offset[aa]
+    nx, ny = -np.repeat(uy, 2), np.repeat(ux, 2)
+    r = nx * qx + ny * qy - np.repeat(lines1.normal_offset[a], 2)
     w = np.repeat(weight, 2) / (1.0 + (r / config.point_distance_tolerance) ** 2)
     # d q / d theta = (-(s px + c py), c px - s py)
     j0 = nx * -(ss * px + cc * py) + ny * (cc * px - ss * py)

@@ -4,6 +4,7 @@ crossings, the cheap prescreen, and the support of a match across its weakest di
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,30 +31,102 @@ class PairScores:
     crossing: BoolArray  # the two segments intersect under the hypothesis
 
 
+@dataclasses.dataclass(frozen=True)
+class PairGeometry:
+    """What every evaluation of two segment sets shares, whatever the hypotheses: the sets
+    (one contiguous column per coordinate, which gathers faster than a 2-D index), their
+    lines, and every segment pair (``first`` x ``second``, first-major) with the angle mod pi
+    that a hypothesis must turn S2 by to make the pair parallel."""
+
+    first_columns: tuple[FloatArray, FloatArray, FloatArray, FloatArray]  # x1, y1, x2, y2
+    second_columns: tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+    first_direction: tuple[FloatArray, FloatArray]  # ux, uy
+    second_direction: tuple[FloatArray, FloatArray]
+    lines1: Lines
+    lines2: Lines
+    first: IntArray  # (N1 * N2,) index into S1 of each pair
+    second: IntArray  # (N1 * N2,) index into S2
+    parallel_at: FloatArray  # (N1 * N2,) theta mod pi that makes the pair parallel
+
+
+# Pair geometries kept: the matcher evaluates the same two sets about ten times per match
+# (values, each refinement iteration, refusal, ranking, slides); larger problems (whole maps)
+# are rebuilt each time rather than kept in memory.
+_KEPT_GEOMETRIES = 16
+_KEPT_PAIRS = 40_000
+
+
+def pair_geometry(segments1: FloatArray, segments2: FloatArray) -> PairGeometry:
+    """The :class:`PairGeometry` of S1 and S2, remembered by content (a pure function of the
+    two arrays: one changed in place is a new key)."""
+    first = np.ascontiguousarray(segments1, dtype=np.float64).reshape(-1, 4)
+    second = np.ascontiguousarray(segments2, dtype=np.float64).reshape(-1, 4)
+    if len(first) * len(second) > _KEPT_PAIRS:
+        return _build_geometry(first, second)
+    return _kept_geometry(first.tobytes(), second.tobytes())
+
+
+@functools.lru_cache(maxsize=_KEPT_GEOMETRIES)
+def _kept_geometry(first: bytes, second: bytes) -> PairGeometry:
+    segments1 = np.frombuffer(first, dtype=np.float64).reshape(-1, 4)
+    segments2 = np.frombuffer(second, dtype=np.float64).reshape(-1, 4)
+    return _build_geometry(segments1, segments2)
+
+
+def _build_geometry(segments1: FloatArray, segments2: FloatArray) -> PairGeometry:
+    lines1, lines2 = lines_of(segments1), lines_of(segments2)
+    grid_a, grid_b = np.meshgrid(
+        np.arange(len(segments1), dtype=np.int64),
+        np.arange(len(segments2), dtype=np.int64),
+        indexing="ij",
+    )
+    first, second = grid_a.ravel(), grid_b.ravel()
+
+    def columns(segments: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        x1, y1, x2, y2 = (np.ascontiguousarray(segments[:, k]) for k in range(4))
+        return x1, y1, x2, y2
+
+    return PairGeometry(
+        columns(segments1),
+        columns(segments2),
+        (
+            np.ascontiguousarray(lines1.direction[:, 0]),
+            np.ascontiguousarray(lines1.direction[:, 1]),
+        ),
+        (
+            np.ascontiguousarray(lines2.direction[:, 0]),
+            np.ascontiguousarray(lines2.direction[:, 1]),
+        ),
+        lines1,
+        lines2,
+        first,
+        second,
+        np.mod(lines1.angle[first] - lines2.angle[second], np.pi),
+    )
+
+
 def _candidate_triples(
-    lines1: Lines, lines2: Lines, theta: FloatArray, second_subset: IntArray, max_angle: float
+    geometry: PairGeometry, theta: FloatArray, max_angle: float
 ) -> tuple[IntArray, IntArray, IntArray]:
     """(h, a, b) whose directions agree within ``max_angle`` (mod pi) under hypothesis h.
 
     For each segment pair the hypotheses that make it parallel form an interval of theta
     (mod pi): hypotheses sorted by theta mod pi are cut by searchsorted, so the work is
-    proportional to the candidates, not to hypotheses x pairs.
+    proportional to the pairs and the candidates, not to hypotheses x pairs.
     """
     key = np.mod(theta, np.pi)
     order = np.argsort(key, kind="stable")
     sorted_key = key[order]
     ext_key = np.concatenate((sorted_key - np.pi, sorted_key, sorted_key + np.pi))
     ext_idx = np.concatenate((order, order, order))
-    grid_a, grid_b = np.meshgrid(np.arange(len(lines1.angle)), second_subset, indexing="ij")
-    a, b = grid_a.ravel(), grid_b.ravel()
-    centre = np.mod(lines1.angle[a] - lines2.angle[b], np.pi)
+    centre = geometry.parallel_at
     lo = np.searchsorted(ext_key, centre - max_angle, side="left")
     hi = np.searchsorted(ext_key, centre + max_angle, side="right")
     count = hi - lo
-    pair = np.repeat(np.arange(a.size), count)
+    pair = np.repeat(np.arange(centre.size), count)
     start = np.repeat(np.cumsum(count) - count, count)
     position = lo[pair] + np.arange(pair.size) - start
-    return ext_idx[position].astype(np.int64), a[pair].astype(np.int64), b[pair].astype(np.int64)
+    return ext_idx[position].astype(np.int64), geometry.first[pair], geometry.second[pair]
 
 
 def score_pairs(
@@ -61,7 +134,6 @@ def score_pairs(
     segments2: FloatArray,
     transforms: FloatArray,
     config: IntegrateConfig,
-    second_subset: IntArray | None = None,
 ) -> PairScores:
     """Matching value of every candidate triple (Alg. 4 l. 5-19), all hypotheses at once.
 
@@ -70,28 +142,30 @@ def score_pairs(
     segments of the max distance of the other's end points to its line) exceeds
     ``match_distance`` score 0; pairs that do not intersect are penalised by 0.95^(d/tol).
     """
-    lines1, lines2 = lines_of(segments1), lines_of(segments2)
-    subset = np.arange(len(segments2)) if second_subset is None else second_subset
     empty = PairScores(*(np.zeros(0, dtype=np.int64),) * 3, np.zeros(0), np.zeros(0, dtype=bool))
-    if len(transforms) == 0 or len(segments1) == 0 or len(subset) == 0:
+    if len(transforms) == 0 or len(segments1) == 0 or len(segments2) == 0:
         return empty
-    h, a, b = _candidate_triples(lines1, lines2, transforms[:, 0], subset, config.max_match_angle)
+    geometry = pair_geometry(segments1, segments2)
+    lines1, lines2 = geometry.lines1, geometry.lines2
+    h, a, b = _candidate_triples(geometry, transforms[:, 0], config.max_match_angle)
     if h.size == 0:
         return empty
     cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
     c, s = cos_h[h], sin_h[h]
-    tx, ty = transforms[h, 1], transforms[h, 2]
+    tx, ty = np.ascontiguousarray(transforms[:, 1])[h], np.ascontiguousarray(transforms[:, 2])[h]
     # S2 end points under the hypothesis, and their distances to s1's line (Alg. 4 l. 9).
-    q1x = c * segments2[b, 0] - s * segments2[b, 1] + tx
-    q1y = s * segments2[b, 0] + c * segments2[b, 1] + ty
-    q2x = c * segments2[b, 2] - s * segments2[b, 3] + tx
-    q2y = s * segments2[b, 2] + c * segments2[b, 3] + ty
-    ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
+    p1x, p1y, p2x, p2y = (column[b] for column in geometry.second_columns)
+    q1x = c * p1x - s * p1y + tx
+    q1y = s * p1x + c * p1y + ty
+    q2x = c * p2x - s * p2y + tx
+    q2y = s * p2x + c * p2y + ty
+    ux, uy = (column[a] for column in geometry.first_direction)
     ca = lines1.normal_offset[a]
     dq = np.maximum(np.abs(-uy * q1x + ux * q1y - ca), np.abs(-uy * q2x + ux * q2y - ca))
-    vx = c * lines2.direction[b, 0] - s * lines2.direction[b, 1]
-    vy = s * lines2.direction[b, 0] + c * lines2.direction[b, 1]
-    e1x, e1y, e2x, e2y = segments1[a, 0], segments1[a, 1], segments1[a, 2], segments1[a, 3]
+    wx, wy = (column[b] for column in geometry.second_direction)
+    vx = c * wx - s * wy
+    vy = s * wx + c * wy
+    e1x, e1y, e2x, e2y = (column[a] for column in geometry.first_columns)
     cb = -vy * q1x + vx * q1y
     de = np.maximum(np.abs(-vy * e1x + vx * e1y - cb), np.abs(-vy * e2x + vx * e2y - cb))
     d = np.minimum(dq, de)
@@ -276,10 +350,9 @@ def _prescreen_values(
     count = len(transforms)
     if count == 0 or len(segments1) == 0 or len(segments2) == 0:
         return np.zeros(count)
-    lines1, lines2 = lines_of(segments1), lines_of(segments2)
-    h, a, b = _candidate_triples(
-        lines1, lines2, transforms[:, 0], np.arange(len(segments2)), config.prescreen_match_angle
-    )
+    geometry = pair_geometry(segments1, segments2)
+    lines1 = geometry.lines1
+    h, a, b = _candidate_triples(geometry, transforms[:, 0], config.prescreen_match_angle)
     if h.size == 0:
         return np.zeros(count)
     cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
