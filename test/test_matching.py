@@ -325,3 +325,82 @@ def test_large_pair_geometries_are_not_kept() -> None:
     itself = scores.first == scores.second
     length = np.hypot(many[:, 2] - many[:, 0], many[:, 3] - many[:, 1])
     assert np.allclose(scores.value[itself], length[scores.first[itself]])
+
+
+def _pair_values_by_hand(
+    segments1: np.ndarray, segments2: np.ndarray, transforms: np.ndarray, config: IntegrateConfig
+) -> dict[tuple[int, int, int], float]:
+    """Alg. 4 l. 5-19 one triple at a time, straight from its definition."""
+
+    def overlap(s: np.ndarray, t: np.ndarray) -> float:
+        # t's end points projected on s's line, against s itself (along s's direction).
+        u = (s[2:] - s[:2]) / np.hypot(*(s[2:] - s[:2]))
+        lo, hi = sorted((float(u @ (t[:2] - s[:2])), float(u @ (t[2:] - s[:2]))))
+        return max(0.0, min(hi, float(np.hypot(*(s[2:] - s[:2])))) - max(lo, 0.0))
+
+    def line_distance(s: np.ndarray, p: np.ndarray) -> float:
+        u = (s[2:] - s[:2]) / np.hypot(*(s[2:] - s[:2]))
+        return abs(float(u[0] * (p[1] - s[1]) - u[1] * (p[0] - s[0])))
+
+    def crosses(s: np.ndarray, t: np.ndarray) -> bool:
+        def orient(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> float:
+            return float((q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]))
+
+        return (
+            orient(s[:2], s[2:], t[:2]) * orient(s[:2], s[2:], t[2:]) <= 0.0
+            and orient(t[:2], t[2:], s[:2]) * orient(t[:2], t[2:], s[2:]) <= 0.0
+        )
+
+    values = {}
+    for h, (theta, tx, ty) in enumerate(transforms):
+        T = se2.matrix_from_pose(tx, ty, theta)
+        for b, moved in enumerate(se2.transform_segments(T, segments2)):
+            for a, s in enumerate(segments1):
+                turn = np.arctan2(moved[3] - moved[1], moved[2] - moved[0]) - np.arctan2(
+                    s[3] - s[1], s[2] - s[0]
+                )
+                if abs(se2.wrap_angle(2.0 * turn)) > 2.0 * config.max_match_angle + 1e-9:
+                    continue  # not parallel (mod pi)
+                d = min(
+                    max(line_distance(s, moved[:2]), line_distance(s, moved[2:])),
+                    max(line_distance(moved, s[:2]), line_distance(moved, s[2:])),
+                )
+                if d > config.match_distance:
+                    continue
+                penalty = (
+                    1.0 if crosses(s, moved) else 0.95 ** (d / config.point_distance_tolerance)
+                )
+                value = 0.5 * (overlap(s, moved) + overlap(moved, s)) * penalty
+                if value > 1e-9:
+                    values[(h, a, b)] = value
+    return values
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_pair_values_are_alg4_triple_by_triple(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+
+    def segments(count: int) -> np.ndarray:
+        start = rng.uniform(-3.0, 3.0, (count, 2))
+        angle = rng.choice([0.0, np.pi / 2, rng.uniform(-np.pi, np.pi)], count)
+        length = rng.uniform(0.1, 4.0, count)
+        return np.column_stack(
+            (start, start + length[:, None] * np.column_stack((np.cos(angle), np.sin(angle))))
+        )
+
+    segments1, segments2 = segments(12), segments(12)
+    transforms = np.column_stack(
+        (rng.choice([0.0, np.pi / 2, 0.15], 6) + rng.normal(0, 0.05, 6), rng.normal(0, 0.5, (6, 2)))
+    )
+    scores = scoring.score_pairs(segments1, segments2, transforms, CONFIG)
+    found = {
+        (int(h), int(a), int(b)): float(v)
+        for h, a, b, v in zip(
+            scores.hypothesis, scores.first, scores.second, scores.value, strict=True
+        )
+        if v > 1e-9
+    }
+    expected = _pair_values_by_hand(segments1, segments2, transforms, CONFIG)
+    assert found.keys() == expected.keys()
+    assert all(abs(found[k] - expected[k]) < 1e-9 for k in found)

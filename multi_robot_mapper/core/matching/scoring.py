@@ -42,6 +42,8 @@ class PairGeometry:
     second_columns: tuple[FloatArray, FloatArray, FloatArray, FloatArray]
     first_direction: tuple[FloatArray, FloatArray]  # ux, uy
     second_direction: tuple[FloatArray, FloatArray]
+    first_centres: tuple[FloatArray, FloatArray]  # x, y of each segment's midpoint
+    second_centres: tuple[FloatArray, FloatArray]
     lines1: Lines
     lines2: Lines
     first: IntArray  # (N1 * N2,) index into S1 of each pair
@@ -86,22 +88,21 @@ def _build_geometry(segments1: FloatArray, segments2: FloatArray) -> PairGeometr
         x1, y1, x2, y2 = (np.ascontiguousarray(segments[:, k]) for k in range(4))
         return x1, y1, x2, y2
 
+    def xy(vectors: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return np.ascontiguousarray(vectors[:, 0]), np.ascontiguousarray(vectors[:, 1])
+
     return PairGeometry(
-        columns(segments1),
-        columns(segments2),
-        (
-            np.ascontiguousarray(lines1.direction[:, 0]),
-            np.ascontiguousarray(lines1.direction[:, 1]),
-        ),
-        (
-            np.ascontiguousarray(lines2.direction[:, 0]),
-            np.ascontiguousarray(lines2.direction[:, 1]),
-        ),
-        lines1,
-        lines2,
-        first,
-        second,
-        np.mod(lines1.angle[first] - lines2.angle[second], np.pi),
+        first_columns=columns(segments1),
+        second_columns=columns(segments2),
+        first_direction=xy(lines1.direction),
+        second_direction=xy(lines2.direction),
+        first_centres=xy(0.5 * (segments1[:, :2] + segments1[:, 2:])),
+        second_centres=xy(0.5 * (segments2[:, :2] + segments2[:, 2:])),
+        lines1=lines1,
+        lines2=lines2,
+        first=first,
+        second=second,
+        parallel_at=np.mod(lines1.angle[first] - lines2.angle[second], np.pi),
     )
 
 
@@ -153,6 +154,19 @@ def score_pairs(
     cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
     c, s = cos_h[h], sin_h[h]
     tx, ty = np.ascontiguousarray(transforms[:, 1])[h], np.ascontiguousarray(transforms[:, 2])[h]
+    # A pair scores only if it overlaps along one of its lines (l1 or l2 > 0 below) while one
+    # segment's end points lie within match_distance of the other's line: its midpoints are
+    # then at most reach apart (half the lengths along the line; across it match_distance,
+    # widened by the lines' angle, at most max_match_angle). Nine in ten candidates are
+    # farther: dropping them first gives the same scores with a fraction of the arithmetic.
+    angle = config.max_match_angle
+    reach = (lines1.length[a] + lines2.length[b]) * (0.5 * (1.0 + np.tan(angle)))
+    reach += config.match_distance / np.cos(angle) + 1e-6  # 1e-6 m: rounding, never a score
+    m2x, m2y = (column[b] for column in geometry.second_centres)
+    gap_x = c * m2x - s * m2y + tx - geometry.first_centres[0][a]
+    gap_y = s * m2x + c * m2y + ty - geometry.first_centres[1][a]
+    close = np.flatnonzero(gap_x * gap_x + gap_y * gap_y <= reach * reach)
+    h, a, b, c, s, tx, ty = h[close], a[close], b[close], c[close], s[close], tx[close], ty[close]
     # S2 end points under the hypothesis, and their distances to s1's line (Alg. 4 l. 9).
     p1x, p1y, p2x, p2y = (column[b] for column in geometry.second_columns)
     q1x = c * p1x - s * p1y + tx
