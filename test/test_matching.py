@@ -136,6 +136,20 @@ def test_seen_through_marks_points_in_front_of_a_return() -> None:
     np.testing.assert_array_equal(seen_through(view, points, 0.15), [True, False, False, False])
 
 
+def test_each_view_judges_by_its_own_beams_when_many_are_judged_in_turn() -> None:
+    # The beams of the views judged last are kept (a keyframe's scan is judged many times
+    # per match): each view still answers from its own ranges, whatever was judged before.
+    points = np.array([[1.0, 0.0], [3.0, 0.0], [4.95, 0.0]])
+    walls = {2.0: [True, False, False], 5.0: [True, True, False], 3.05: [True, False, False]}
+    for spread in (0, 1, 0):
+        for distance, expected in walls.items():
+            view = LaserScanData(
+                np.full(181, distance), -np.pi / 2, np.pi / 2, np.pi / 180, 0.1, 10.0
+            )
+            for _ in range(2):  # the second time from the kept beams
+                np.testing.assert_array_equal(seen_through(view, points, 0.15, spread), expected)
+
+
 def test_distinct_hypotheses_merge_cells_and_count_votes() -> None:
     raw = np.array([[0.1, 1.0, 2.0], [0.1001, 1.001, 2.0], [1.0, 0.0, 0.0]])
     unique, votes = distinct_hypotheses(raw, np.radians(0.5), 0.02, 10)

@@ -41,22 +41,57 @@ def _beam_position(view: LaserScanData, bearing: FloatArray) -> FloatArray:
     return np.clip(position, -1.0, float(np.asarray(view.ranges).size))
 
 
-def _beam_evidence(
-    view: LaserScanData, points: FloatArray, margin: float, spread: int
-) -> tuple[BoolArray, BoolArray]:
-    """For points in the view's laser frame: seen through (:func:`seen_through`), and
-    confirmed, lying within ``margin`` of the return of the beam nearest their bearing."""
-    ranges = np.asarray(view.ranges, dtype=np.float64)
+@dataclasses.dataclass(frozen=True)
+class _BeamTable:
+    """What a view's beams say before any point is asked (read only)."""
+
+    ranges: FloatArray
+    valid: BoolArray  # a return within the laser's limits
+    returned: FloatArray  # the range where valid, else inf (confirms nothing)
+    nearest: FloatArray  # the shortest valid return within ``spread`` beams, else -inf
+
+
+# The tables of the views matched most recently: a keyframe's scan is judged many times per
+# match (each hypothesis, rival and slide). id -> (the view itself, which keeps the id from
+# being reused, spread, table), as for the returns below.
+_TABLES: OrderedDict[int, tuple[LaserScanData, int, _BeamTable]] = OrderedDict()
+_TABLES_KEPT = 256
+_TABLES_LOCK = threading.Lock()
+
+
+def _beam_table(view: LaserScanData, spread: int) -> _BeamTable:
+    with _TABLES_LOCK:  # a node's front end and back end share it
+        cached = _TABLES.get(id(view))
+        if cached is not None and cached[0] is view and cached[1] == spread:
+            _TABLES.move_to_end(id(view))
+            return cached[2]
+    ranges = np.array(view.ranges, dtype=np.float64)  # a copy: the table is read only
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(ranges) & (ranges >= view.range_min) & (ranges < view.range_max)
     # Invalid beams never contradict nor confirm; the shortest return around each beam is the
     # free-space test.
-    returned = np.where(valid, ranges, np.inf)
     nearest = np.where(valid, ranges, -np.inf)
     if spread > 0:
         padded = np.concatenate((np.full(spread, -np.inf), nearest, np.full(spread, -np.inf)))
         window = np.lib.stride_tricks.sliding_window_view(padded, 2 * spread + 1).min(axis=1)
         nearest = np.where(valid, window, -np.inf)
+    table = _BeamTable(ranges, valid, np.where(valid, ranges, np.inf), nearest)
+    for array in (table.ranges, table.valid, table.returned, table.nearest):
+        array.flags.writeable = False
+    with _TABLES_LOCK:
+        _TABLES[id(view)] = (view, spread, table)
+        if len(_TABLES) > _TABLES_KEPT:
+            _TABLES.popitem(last=False)
+    return table
+
+
+def _beam_evidence(
+    view: LaserScanData, points: FloatArray, margin: float, spread: int
+) -> tuple[BoolArray, BoolArray]:
+    """For points in the view's laser frame: seen through (:func:`seen_through`), and
+    confirmed, lying within ``margin`` of the return of the beam nearest their bearing."""
+    table = _beam_table(view, spread)
+    ranges, nearest, returned = table.ranges, table.nearest, table.returned
     bearing = np.arctan2(points[:, 1], points[:, 0])
     distance = np.hypot(points[:, 0], points[:, 1])
     beam = np.rint(_beam_position(view, bearing)).astype(np.int64)
@@ -190,15 +225,9 @@ def beam_categories(
     one short beam is not free space). *Visible*: on a bearing with a valid return and not
     behind it by more than ``margin``. Beams without a valid return say nothing.
     """
-    ranges = np.asarray(view.ranges, dtype=np.float64)
+    table = _beam_table(view, spread)
+    ranges, valid, nearest = table.ranges, table.valid, table.nearest
     count = ranges.size
-    with np.errstate(invalid="ignore"):
-        valid = np.isfinite(ranges) & (ranges >= view.range_min) & (ranges < view.range_max)
-    nearest = np.where(valid, ranges, -np.inf)
-    if spread > 0:
-        padded = np.concatenate((np.full(spread, -np.inf), nearest, np.full(spread, -np.inf)))
-        window = np.lib.stride_tricks.sliding_window_view(padded, 2 * spread + 1).min(axis=1)
-        nearest = np.where(valid, window, -np.inf)
     bearing = np.arctan2(points[:, 1], points[:, 0])
     distance = np.hypot(points[:, 0], points[:, 1])
     position = _beam_position(view, bearing)
