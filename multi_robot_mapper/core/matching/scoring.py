@@ -155,10 +155,13 @@ def score_pairs(
     c, s = cos_h[h], sin_h[h]
     tx, ty = np.ascontiguousarray(transforms[:, 1])[h], np.ascontiguousarray(transforms[:, 2])[h]
     # A pair scores only if it overlaps along one of its lines (l1 or l2 > 0 below) while one
-    # segment's end points lie within match_distance of the other's line: its midpoints are
-    # then at most reach apart (half the lengths along the line; across it match_distance,
-    # widened by the lines' angle, at most max_match_angle). Nine in ten candidates are
-    # farther: dropping them first gives the same scores with a fraction of the arithmetic.
+    # segment's end points lie within match_distance of the other's line (d below). Then its
+    # midpoints are at most reach apart: along the overlapping line by less than half the
+    # two lengths; across it by at most match_distance where that same line holds the near
+    # end points (a midpoint is no farther from a line than both its end points), else by
+    # (match_distance + half the lengths x sin a) / cos a, the other line being turned by a
+    # <= max_match_angle. Nine in ten candidates are farther: dropping them first gives the
+    # same scores with a fraction of the arithmetic.
     angle = config.max_match_angle
     reach = (lines1.length[a] + lines2.length[b]) * (0.5 * (1.0 + np.tan(angle)))
     reach += config.match_distance / np.cos(angle) + 1e-6  # 1e-6 m: rounding, never a score
