@@ -91,7 +91,7 @@ def _build_geometry(segments1: FloatArray, segments2: FloatArray) -> PairGeometr
     def xy(vectors: FloatArray) -> tuple[FloatArray, FloatArray]:
         return np.ascontiguousarray(vectors[:, 0]), np.ascontiguousarray(vectors[:, 1])
 
-    return PairGeometry(
+    geometry = PairGeometry(
         first_columns=columns(segments1),
         second_columns=columns(segments2),
         first_direction=xy(lines1.direction),
@@ -104,6 +104,15 @@ def _build_geometry(segments1: FloatArray, segments2: FloatArray) -> PairGeometr
         second=second,
         parallel_at=np.mod(lines1.angle[first] - lines2.angle[second], np.pi),
     )
+    # Kept geometries are shared by every later evaluation of the same sets: read only.
+    for field in dataclasses.fields(geometry):
+        value = getattr(geometry, field.name)
+        parts = value if isinstance(value, tuple) else [value]
+        if isinstance(value, Lines):
+            parts = [getattr(value, f.name) for f in dataclasses.fields(value)]
+        for array in parts:
+            array.flags.writeable = False
+    return geometry
 
 
 def _candidate_triples(
