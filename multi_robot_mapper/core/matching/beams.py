@@ -6,6 +6,8 @@ import dataclasses
 import math
 import threading
 from collections import OrderedDict
+from collections.abc import Callable
+from typing import TypeVar, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,6 +19,7 @@ from multi_robot_mapper.core.scan import LaserScanData, scan_points
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+T = TypeVar("T")
 
 
 def seen_through(
@@ -51,20 +54,39 @@ class _BeamTable:
     nearest: FloatArray  # the shortest valid return within ``spread`` beams, else -inf
 
 
-# The tables of the views matched most recently: a keyframe's scan is judged many times per
-# match (each hypothesis, rival and slide). id -> (the view itself, which keeps the id from
-# being reused, spread, table), as for the returns below.
-_TABLES: OrderedDict[int, tuple[LaserScanData, int, _BeamTable]] = OrderedDict()
-_TABLES_KEPT = 256
-_TABLES_LOCK = threading.Lock()
+class _KeptPerView:
+    """What was made from the views matched most recently (a keyframe's scan is judged many
+    times per match: each hypothesis, rival and slide), keyed by the view object and one
+    parameter; the view is kept with it, so its id is not reused while kept. Thread-safe: a
+    node's front end and back end share it."""
+
+    def __init__(self, size: int = 256) -> None:
+        self._size = size
+        self._kept: OrderedDict[int, tuple[LaserScanData, object, object]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, view: LaserScanData, parameter: object, make: Callable[[], T]) -> T:
+        with self._lock:
+            kept = self._kept.get(id(view))
+            if kept is not None and kept[0] is view and kept[1] == parameter:
+                self._kept.move_to_end(id(view))
+                return cast(T, kept[2])
+        made = make()
+        with self._lock:
+            self._kept[id(view)] = (view, parameter, made)
+            if len(self._kept) > self._size:
+                self._kept.popitem(last=False)
+        return made
+
+
+_TABLES = _KeptPerView()
 
 
 def _beam_table(view: LaserScanData, spread: int) -> _BeamTable:
-    with _TABLES_LOCK:  # a node's front end and back end share it
-        cached = _TABLES.get(id(view))
-        if cached is not None and cached[0] is view and cached[1] == spread:
-            _TABLES.move_to_end(id(view))
-            return cached[2]
+    return _TABLES.get(view, spread, lambda: _make_beam_table(view, spread))
+
+
+def _make_beam_table(view: LaserScanData, spread: int) -> _BeamTable:
     ranges = np.array(view.ranges, dtype=np.float64)  # a copy: the table is read only
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(ranges) & (ranges >= view.range_min) & (ranges < view.range_max)
@@ -78,10 +100,6 @@ def _beam_table(view: LaserScanData, spread: int) -> _BeamTable:
     table = _BeamTable(ranges, valid, np.where(valid, ranges, np.inf), nearest)
     for array in (table.ranges, table.valid, table.returned, table.nearest):
         array.flags.writeable = False
-    with _TABLES_LOCK:
-        _TABLES[id(view)] = (view, spread, table)
-        if len(_TABLES) > _TABLES_KEPT:
-            _TABLES.popitem(last=False)
     return table
 
 
@@ -139,30 +157,14 @@ class ViewReturns:
         return float(self.weights.sum())
 
 
-# The returns of the scans matched most recently (a keyframe's scan is matched many times):
-# id -> (the scan itself, which keeps the id from being reused, cap, points, weights).
-_RETURNS: OrderedDict[int, tuple[LaserScanData, float, FloatArray, FloatArray]] = OrderedDict()
-_RETURNS_KEPT = 256
-_RETURNS_LOCK = threading.Lock()
+_RETURNS = _KeptPerView()
 
 
 def scan_returns(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArray]:
     """A scan's returns in its laser frame (at most one per degree), each weighted by the
     surface it stands for: the smaller gap to a neighbouring return, at most ``cap``. Kept
     for the scans matched most recently (read only)."""
-    with _RETURNS_LOCK:  # a node's front end and back end share it
-        cached = _RETURNS.get(id(view))
-        if cached is not None and cached[0] is view and cached[1] == cap:
-            _RETURNS.move_to_end(id(view))
-            return cached[2], cached[3]
-    points, weights = _scan_returns(view, cap)
-    points.flags.writeable = False
-    weights.flags.writeable = False
-    with _RETURNS_LOCK:
-        _RETURNS[id(view)] = (view, cap, points, weights)
-        if len(_RETURNS) > _RETURNS_KEPT:
-            _RETURNS.popitem(last=False)
-    return points, weights
+    return _RETURNS.get(view, cap, lambda: _scan_returns(view, cap))
 
 
 def _scan_returns(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArray]:
@@ -172,10 +174,14 @@ def _scan_returns(view: LaserScanData, cap: float) -> tuple[FloatArray, FloatArr
     stride = min(math.radians(1.0) / abs(view.angle_increment), max(len(points), 1))
     points = points[:: max(1, round(stride))]
     if len(points) < 2:
-        return points, np.full(len(points), cap)
-    gap = np.hypot(*np.diff(points, axis=0).T)
-    gap = np.minimum(np.concatenate((gap, gap[-1:])), np.concatenate((gap[:1], gap)))
-    return points, np.minimum(gap, cap)
+        weights = np.full(len(points), cap)
+    else:
+        gap = np.hypot(*np.diff(points, axis=0).T)
+        gap = np.minimum(np.concatenate((gap, gap[-1:])), np.concatenate((gap[:1], gap)))
+        weights = np.minimum(gap, cap)
+    points.flags.writeable = False  # kept: read only
+    weights.flags.writeable = False
+    return points, weights
 
 
 @dataclasses.dataclass(frozen=True)
