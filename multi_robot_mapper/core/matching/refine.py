@@ -7,7 +7,11 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.matching.config import IntegrateConfig
-from multi_robot_mapper.core.matching.scoring import pair_geometry, score_pairs
+from multi_robot_mapper.core.matching.scoring import (
+    PairGeometry,
+    geometry_scores,
+    pair_geometry,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -38,12 +42,13 @@ def refine_many(
     count = len(T)
     if count == 0 or len(segments1) == 0 or len(segments2) == 0 or config.refine_iterations == 0:
         return T
+    geometry = pair_geometry(segments1, segments2)
     active = np.ones(count, dtype=bool)
     for _ in range(config.refine_iterations):
         live = np.flatnonzero(active)
         if live.size == 0:
             break
-        system = normal_equations(segments1, segments2, T[live], config)
+        system = _normal_equations(geometry, T[live], config)
         if system is None:
             break
         H, g = system
@@ -73,11 +78,16 @@ def normal_equations(
     per pair integrate the normal equations exactly (before weighting): ``w`` is metres of
     overlapping segment, times a Cauchy weight (scale ``point_distance_tolerance``).
     """
+    return _normal_equations(pair_geometry(segments1, segments2), transforms, config)
+
+
+def _normal_equations(
+    geometry: PairGeometry, transforms: FloatArray, config: IntegrateConfig
+) -> tuple[FloatArray, FloatArray] | None:
     count = len(transforms)
-    scores = score_pairs(segments1, segments2, transforms, config)
+    scores = geometry_scores(geometry, transforms, config)
     if scores.first.size == 0:
         return None
-    geometry = pair_geometry(segments1, segments2)  # the one score_pairs used
     lines1, lines2 = geometry.lines1, geometry.lines2
     h, a, b = scores.hypothesis, scores.first, scores.second
     c, s = np.cos(transforms[h, 0]), np.sin(transforms[h, 0])

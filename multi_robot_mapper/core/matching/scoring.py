@@ -152,10 +152,16 @@ def score_pairs(
     segments of the max distance of the other's end points to its line) exceeds
     ``match_distance`` score 0; pairs that do not intersect are penalised by 0.95^(d/tol).
     """
+    return geometry_scores(pair_geometry(segments1, segments2), transforms, config)
+
+
+def geometry_scores(
+    geometry: PairGeometry, transforms: FloatArray, config: IntegrateConfig
+) -> PairScores:
+    """:func:`score_pairs` of the two sets whose :func:`pair_geometry` is given."""
     empty = PairScores(*(np.zeros(0, dtype=np.int64),) * 3, np.zeros(0), np.zeros(0, dtype=bool))
-    if len(transforms) == 0 or len(segments1) == 0 or len(segments2) == 0:
+    if len(transforms) == 0 or geometry.first.size == 0:
         return empty
-    geometry = pair_geometry(segments1, segments2)
     lines1, lines2 = geometry.lines1, geometry.lines2
     h, a, b = _candidate_triples(geometry, transforms[:, 0], config.max_match_angle)
     if h.size == 0:
