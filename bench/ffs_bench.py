@@ -40,6 +40,11 @@ from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.ffs import FfsConfig, make_bodies, run_ffs  # noqa: E402
+from multi_robot_mapper.core.ffs.merge import (  # noqa: E402
+    body_chunks,
+    body_segments,
+    moved_with_bodies,
+)
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -146,44 +151,20 @@ def main() -> None:
 def bias(
     log: str, sets: list[np.ndarray], reference: np.ndarray, body_length: float, config: FfsConfig
 ) -> None:
-    """R0 with the merger's bodies: keyframes grouped until they hold ``body_length`` of wall
-    (a short rest joins the last body), each body in its first keyframe's frame."""
-    chunks: list[list[int]] = [[]]
-    owned = 0.0
-    for k, segments in enumerate(sets):
-        chunks[-1].append(k)
-        owned += float(np.hypot(*(segments[:, 2:] - segments[:, :2]).T).sum())
-        if owned >= body_length:
-            chunks.append([])
-            owned = 0.0
-    if not chunks[-1]:
-        chunks.pop()
-    elif len(chunks) > 1:
-        chunks[-2].extend(chunks.pop())
-    body_start = np.array([reference[members[0]] for members in chunks])
-    body_sets = []
-    for members, pose in zip(chunks, body_start, strict=True):
-        T_body_map = se2.invert(se2.matrix_from_pose(*pose))
-        T_body_keyframes = [T_body_map @ se2.matrix_from_pose(*reference[k]) for k in members]
-        body_sets.append(
-            np.vstack(
-                [
-                    se2.transform_segments(T, sets[k])
-                    for T, k in zip(T_body_keyframes, members, strict=True)
-                ]
-            )
-        )
+    """R0 with the merger's bodies (:func:`body_chunks`: keyframes grouped until they hold
+    ``body_length`` of wall, a short rest joining the last body), each body in its first
+    keyframe's frame. Here a keyframe's wall is its whole scan's; in the merger, only the
+    walls it saw first, so the merger's bodies hold more keyframes."""
+    views = {log: [(k, reference[k], segments) for k, segments in enumerate(sets)]}
+    chunks = body_chunks(views, [(log, k) for k in range(len(sets))], body_length)
+    body_start, body_sets = body_segments(chunks, reference, sets)
     bodies = make_bodies(body_sets, config.spacing, config.roi_radius, config.roi_mass)
     fixed = np.zeros(len(chunks), dtype=bool)
     fixed[0] = True
     started = time.perf_counter()
     r0 = run_ffs(bodies, body_start, config, fixed=fixed)
     seconds = time.perf_counter() - started
-    poses = reference.copy()
-    for members, new, old in zip(chunks, r0.poses, body_start, strict=True):
-        T_motion = se2.matrix_from_pose(*new) @ se2.invert(se2.matrix_from_pose(*old))
-        for k in members:
-            poses[k] = se2.pose_from_matrix(T_motion @ se2.matrix_from_pose(*reference[k]))
+    poses = moved_with_bodies(chunks, reference, body_start, r0.poses)
     gaps = np.hypot(*(poses[:, :2] - reference[:, :2]).T)
     turns = np.abs(se2.wrap_angle(poses[:, 2] - reference[:, 2]))
     # As the evaluation's ATE: positions after the rigid motion that best aligns them.

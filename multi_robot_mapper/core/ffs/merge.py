@@ -48,36 +48,51 @@ def refine_with_ffs(result: MergeResult, config: MergeConfig) -> MergeResult:
     owners = [(robot, row) for robot in robots for row in range(len(views[robot]))]
     start = np.array([views[robot][row][1] for robot, row in owners], dtype=np.float64)
     ffs = config.ffs
-    chunks = _chunks(views, owners, ffs.body_length)
-    # A body's frame is its first keyframe's; its segments are its keyframes' own.
+    chunks = body_chunks(views, owners, ffs.body_length)
+    segments = [views[robot][row][2] for robot, row in owners]
+    body_start, segment_sets = body_segments(chunks, start, segments)
+    bodies = make_bodies(segment_sets, ffs.spacing, ffs.roi_radius, ffs.roi_mass)
+    simulated = run_ffs(bodies, body_start, ffs)
+    poses = moved_with_bodies(chunks, start, body_start, simulated.poses)
+    poses = _regauged(poses, start, owners, result.reference)
+    return _moved(result, robots, owners, start, poses, simulated)
+
+
+def body_segments(
+    chunks: list[list[int]], start: FloatArray, segments: Sequence[FloatArray]
+) -> tuple[FloatArray, list[FloatArray]]:
+    """Each body's pose (its first keyframe's, from the keyframe poses ``start``) and its
+    segments in its frame: its keyframes' own ``segments``, each at its keyframe's pose."""
     body_start = np.array([start[members[0]] for members in chunks])
     segment_sets = []
     for members, T_map_body in zip(chunks, se2.matrices_from_poses(body_start), strict=True):
         T_body_map = se2.invert(T_map_body)
         parts = [
-            se2.transform_segments(
-                T_body_map @ se2.matrix_from_pose(*start[k]), views[owners[k][0]][owners[k][1]][2]
-            )
+            se2.transform_segments(T_body_map @ se2.matrix_from_pose(*start[k]), segments[k])
             for k in members
         ]
         segment_sets.append(np.vstack(parts) if parts else np.zeros((0, 4)))
-    bodies = make_bodies(segment_sets, ffs.spacing, ffs.roi_radius, ffs.roi_mass)
-    simulated = run_ffs(bodies, body_start, ffs)
-    # Every keyframe moves with its body.
-    poses = start.copy()
-    moved = se2.matrices_from_poses(simulated.poses)
+    return body_start, segment_sets
+
+
+def moved_with_bodies(
+    chunks: list[list[int]], start: FloatArray, body_start: FloatArray, body_poses: FloatArray
+) -> FloatArray:
+    """The keyframe poses ``start``, each moved as its body moved from ``body_start`` to
+    ``body_poses``."""
+    poses = np.array(start, dtype=np.float64)
+    moved = se2.matrices_from_poses(body_poses)
     for members, T_new, T_old in zip(
         chunks, moved, se2.matrices_from_poses(body_start), strict=True
     ):
         T_motion = T_new @ se2.invert(T_old)
         for k in members:
             poses[k] = se2.pose_from_matrix(T_motion @ se2.matrix_from_pose(*start[k]))
-    poses = _regauged(poses, start, owners, result.reference)
-    return _moved(result, robots, owners, start, poses, simulated)
+    return poses
 
 
-def _chunks(
-    views: Mapping[str, list[tuple[int, FloatArray, FloatArray]]],
+def body_chunks(
+    views: Mapping[str, Sequence[tuple[int, FloatArray, FloatArray]]],
     owners: list[tuple[str, int]],
     body_length: float,
 ) -> list[list[int]]:
