@@ -21,7 +21,9 @@ from multi_robot_mapper.core.local_mapping import (
     keyframe_map,
     loop_closer,
     mapper,
+    windows,
 )
+from multi_robot_mapper.core.local_mapping import joins as piece_joins
 from multi_robot_mapper.core.matching import MatchResult, integrate
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE
 from multi_robot_mapper.core.scan import LaserScanData
@@ -266,7 +268,7 @@ def test_a_heading_bias_is_straightened_by_loop_closures(monkeypatch) -> None:  
     }
     assert _ate(times, poses, truth_at) < 0.05
     # Without the back end's edges the same bias bends the map by metres.
-    monkeypatch.setattr(loop_closer, "integrate", biased)
+    monkeypatch.setattr(windows, "integrate", biased)
     unclosed = LocalMapper(
         dataclasses.replace(LocalMapperConfig(), loop_candidates=0, local_edges=0)
     )
@@ -324,7 +326,7 @@ def test_a_lost_robot_maps_on_in_a_piece_that_joins_the_map_again(monkeypatch) -
     assert _ate(times, poses, truth_at) < 0.02
 
 
-@pytest.mark.parametrize("turn_limit", [loop_closer._TURN_BETWEEN_SCANS, 2.0 * np.pi])
+@pytest.mark.parametrize("turn_limit", [piece_joins._TURN_BETWEEN_SCANS, 2.0 * np.pi])
 def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -> None:  # type: ignore[no-untyped-def]
     # The robot is lost once; every match between the two pieces is then made the half-turned
     # look-alike of the right one (the piece turned round about its first scan, consistently,
@@ -356,7 +358,7 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
 
     monkeypatch.setattr(mapper.LocalMapper, "_match", failing)
     monkeypatch.setattr(loop_closer.LoopCloser, "_match_windows", turned_round)
-    monkeypatch.setattr(loop_closer, "_TURN_BETWEEN_SCANS", turn_limit)
+    monkeypatch.setattr(piece_joins, "_TURN_BETWEEN_SCANS", turn_limit)
     local = LocalMapper()
     for k, (t, s) in enumerate(zip(stamps, scans, strict=True)):
         count["scan"] = k
@@ -377,6 +379,55 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
             float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
         }
         assert _ate(times, poses, truth_at) > 0.1
+
+
+@pytest.mark.parametrize("reach_known", [True, False])
+def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
+    monkeypatch, reach_known: bool
+) -> None:  # type: ignore[no-untyped-def]
+    # The robot is lost once and the front end's guess of the new piece is 4 m and 30 degrees
+    # off, so nothing is found near it. The robot's motion still bounds the piece: its first
+    # scan lies within the robot's reach of its last placed scan. Searched on the ring of the
+    # old piece's keyframes that this allows, two keyframes of the new piece find the same
+    # placement and the piece joins the map where it belongs. Without a known reach (no
+    # speed yet) only the guess is searched, and the piece stays apart.
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
+    original_match, original_add = mapper.LocalMapper._match, loop_closer.LoopCloser.add_keyframe
+    count = {"scan": 0}
+
+    def failing(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        chosen, integrated = original_match(self, *args, **kwargs)
+        return chosen, integrated and count["scan"] != 25
+
+    def wrong_guess(self, scan, pose, piece, odometry, lost_from=None):  # type: ignore[no-untyped-def]
+        if lost_from is not None:
+            x, y, theta = lost_from.T_keyframe_piece
+            lost_from = lost_from._replace(
+                T_keyframe_piece=(x + 4.0, y, theta + np.radians(30.0)),
+                reach=lost_from.reach if reach_known else None,
+            )
+        return original_add(self, scan, pose, piece, odometry, lost_from)
+
+    monkeypatch.setattr(mapper.LocalMapper, "_match", failing)
+    monkeypatch.setattr(loop_closer.LoopCloser, "add_keyframe", wrong_guess)
+    local = LocalMapper()
+    for k, (t, s) in enumerate(zip(stamps, scans, strict=True)):
+        count["scan"] = k
+        _feed(local, float(t), s)
+    assert local.pieces_started == 1
+    joins = [c for c in local.closures if c.kind == "join"]
+    if reach_known:
+        assert len(joins) == 1
+        assert set(local.backend.map.pieces.tolist()) == {0}
+        times, poses = local.trajectory()
+        np.testing.assert_array_equal(times, stamps)
+        truth_at = {
+            float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
+        }
+        assert _ate(times, poses, truth_at) < 0.02
+    else:
+        assert joins == []
+        assert len(set(local.backend.map.pieces.tolist())) == 2
 
 
 @pytest.mark.usefixtures("as_matched")

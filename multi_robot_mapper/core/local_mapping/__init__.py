@@ -2,9 +2,10 @@
 
 Modules, in the order a scan meets them: ``config`` (LocalMapperConfig), ``mapper`` (the front
 end: match, confidence, integrate or start a new piece; LocalMapper), ``keyframe_map``
-(keyframes and the fused partial map they own), ``loop_closer`` (the back end: local edges,
-loop closures, joins between pieces); the keyframe graph itself is ``core.pose_graph`` (gtsam),
-shared with the merger.
+(keyframes and the fused partial map they own), the back end: ``windows`` (keyframe windows
+matched, what a closure records), ``joins`` (joins between pieces), ``loop_closer`` (local
+edges, loop closures, one keyframe's whole step), ``backend`` (where it runs); the keyframe
+graph itself is ``core.pose_graph`` (gtsam), shared with the merger.
 """
 
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig

@@ -26,8 +26,8 @@ For every new keyframe (:meth:`LoopCloser.add_keyframe`):
    the keyframes, and one wrong closure that got past the checks pulls with a bounded force;
 4. **joins**: a piece started when the robot was lost is joined to the piece it was lost
    from: its keyframes' windows are matched with the other piece's keyframes near where the
-   front end's guess puts them (:meth:`LoopCloser._joins`); the younger piece moves into the
-   older one's frame;
+   front end's guess puts them, and on the ring of keyframes the robot's motion allows
+   (``joins.py``); the younger piece moves into the older one's frame;
 5. the graph is optimised (ISAM2), the keyframes that moved are reported.
 """
 
@@ -37,58 +37,32 @@ import dataclasses
 import time
 import traceback
 from collections.abc import Callable
-from typing import NamedTuple, TypeVar
+from typing import TypeVar
 
 import numpy as np
-from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.joins import LostFrom, PieceJoins
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap, KeyframeScan
-from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
-from multi_robot_mapper.core.matching.beams import Viewpoint
-from multi_robot_mapper.core.matching.confidence import (
-    RIGHT_ANGLE,
-    RIGHT_DISTANCE,
-    TRACK_TURNS,
+from multi_robot_mapper.core.local_mapping.windows import (
+    Closure,
+    FloatArray,
+    Pose,
+    _close,
+    _pose,
 )
-from multi_robot_mapper.core.matching.refine import match_information
-from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
+from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
+from multi_robot_mapper.core.pose_graph import Edge
 
-FloatArray = NDArray[np.float64]
-Pose = tuple[float, float, float]
 T = TypeVar("T")
 
+__all__ = ["BackendUpdate", "Closure", "LoopCloser", "LostFrom"]
 
-class LostFrom(NamedTuple):
-    """Where a piece started: the front end's guess of its origin (the keyframe the best match
-    was against, and T_keyframe_piece by that match, right or not), and where the robot's last
-    placed scan was (its keyframe and T_keyframe_scan): the piece's first scan is the next
-    scan, so the robot was there one scan interval before."""
-
-    keyframe: int
-    T_keyframe_piece: Pose
-    last_keyframe: int
-    T_last_keyframe_scan: Pose
-
-
-# Pieces followed back along the chain of losses when joining (a piece lost from a piece
-# lost from a third ...).
-_CHAIN = 3
-# Keyframes per window matched for loop closures and joins: the keyframe and its nearest
-# neighbours in time (the confidence is calibrated on windows of three scans).
-_WINDOW = 3
 # The loop-closure gate (chi-square, 3 degrees of freedom, 99.9 %) on the graph's marginal
 # covariances inflated this many times (drift the graph does not model: biased matches).
 _CHI2_3DOF_999 = 16.27
 _GATE_INFLATION = 4.0
-# A robot turns less than a quarter turn between two consecutive scans (at most 79 deg on the
-# shared logs, whose scans are up to 1.5 m apart): a join that turns a piece's first scan more
-# than this from the robot's last placed scan is the half-turned look-alike of a symmetric
-# corridor, not the robot's motion.
-_TURN_BETWEEN_SCANS = np.pi / 2
-_ORIGIN: Pose = (0.0, 0.0, 0.0)
 # Two closures are neighbours (checked against each other) when both ends are within this many
 # keyframes; their cycle must close within the correctness tolerance, plus the drift of the
 # path the cycle runs along, in metres and in radians per metre as the local maps drift
@@ -96,19 +70,6 @@ _ORIGIN: Pose = (0.0, 0.0, 0.0)
 # intel 4, csail 4, aces 2 and 4, 0.022 m/m and 0.001 rad/m).
 _PAIR_SLACK = 0.02
 _PAIR_SLACK_ANGLE = 0.001
-
-
-@dataclasses.dataclass(frozen=True)
-class Closure:
-    """A match between keyframes far apart in time, accepted or refused."""
-
-    first: int  # the older keyframe
-    second: int  # the new keyframe
-    T_first_second: Pose
-    confidence: float
-    kind: str  # "loop" (same piece) or "join" (two pieces)
-    accepted: bool
-    reason: str  # why refused ("" when accepted)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -133,21 +94,12 @@ class BackendUpdate:
     errors: list[str]  # tracebacks of steps that failed (and were skipped)
 
 
-class LoopCloser:
+class LoopCloser(PieceJoins):
     """Local edges, loop closures and joins for each new keyframe; the pose graph."""
 
     def __init__(self, config: LocalMapperConfig, keyframes: KeyframeMap) -> None:
-        self.config = config
-        self.keyframes = keyframes
-        self.graph = PoseGraph()
-        self.accepted: dict[int, Closure] = {}  # graph edge id -> closure in the graph
-        self.refused: dict[str, int] = {}  # reason -> closures refused
+        super().__init__(config, keyframes)
         self._pending: list[_Candidate] = []  # loop closures waiting for a consistent partner
-        self._path_since_closure: dict[int, float] = {}  # piece -> metres since a closure
-        # piece -> (keyframe the robot was lost near, T_keyframe_piece as guessed)
-        self._lost_from: dict[int, LostFrom] = {}
-        # piece -> searched joins waiting for a partner: (keyframe, T_other_piece)
-        self._join_candidates: dict[int, list[tuple[int, Pose]]] = {}
         self.local_edges = 0
         self.errors = 0  # back-end steps that failed (and were skipped)
 
@@ -225,99 +177,6 @@ class LoopCloser:
             optimise_seconds,
             errors,
         )
-
-    # --- matching ---------------------------------------------------------------------------
-
-    def _match(self, first: int, second: int, predicted: Pose | None, search: bool) -> MatchResult:
-        """Keyframe ``second``'s scan placed in keyframe ``first``'s frame: from the prediction
-        alone (``search`` False) or with no guess (INTEGRATE, the prediction one more
-        hypothesis)."""
-        a, b = self.keyframes.scans[first], self.keyframes.scans[second]
-        extra = None if predicted is None else _hypothesis(predicted)
-        return integrate(
-            a.segments,
-            b.segments,
-            self.config.integrate,
-            heuristics=HEURISTICS if search else (),
-            extra_hypotheses=extra,
-            views=(a.view, b.view),
-        )
-
-    def _window(self, center: int) -> tuple[FloatArray, list[Viewpoint]]:
-        """Keyframe ``center`` and its nearest neighbours in time in its piece (``_WINDOW``
-        keyframes in all), their scans fused in its frame, and their viewpoints: a window
-        sees more of a place than one scan, and its matches are surer (README, "Match
-        confidence": window pairs)."""
-        piece = self.keyframes.piece(center)
-        pieces = self.keyframes.pieces
-        candidates = np.flatnonzero(pieces == piece)
-        members = candidates[np.argsort(np.abs(candidates - center), kind="stable")[:_WINDOW]]
-        T_center = se2.invert(se2.matrix_from_pose(*self.keyframes.pose(center)))
-        fused, owner = np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
-        viewpoints = []
-        for k in sorted(int(m) for m in members):
-            scan = self.keyframes.scans[k]
-            T = T_center @ se2.matrix_from_pose(*self.keyframes.pose(k))
-            placed = se2.transform_segments(T, scan.segments)
-            fused, owner = fuse(
-                fused,
-                owner,
-                placed,
-                np.full(len(placed), k, dtype=np.int64),
-                self.config.integrate,
-                self.config.fusion_tolerance,
-            )
-            viewpoints.append(Viewpoint(scan.view, T))
-        return fused, viewpoints
-
-    def _match_windows(
-        self, first: int, second: int, predicted: Pose | None, search: bool = True
-    ) -> MatchResult:
-        """The window of keyframe ``second`` placed in the window of ``first``: with no guess
-        (INTEGRATE, the prediction one more hypothesis), or refined from the prediction
-        alone (``search`` False: the prediction turned either way too, so that a wrong
-        minimum has rivals)."""
-        segments_a, views_a = self._window(first)
-        segments_b, views_b = self._window(second)
-        hypotheses = None
-        if predicted is not None:
-            turns = (0.0,) if search else (0.0, *TRACK_TURNS)
-            x, y, theta = predicted
-            hypotheses = np.array([[theta + d, x, y] for d in turns])
-        return integrate(
-            segments_a,
-            segments_b,
-            self.config.integrate,
-            heuristics=HEURISTICS if search else (),
-            extra_hypotheses=hypotheses,
-            views=(views_a, views_b),
-        )
-
-    def _scan_edge(self, first: int, second: int, T_first_second: Pose) -> Edge:
-        """The robust edge of a closure or join: the placement the two keyframes' windows
-        agreed on, with the information of the two keyframes' own scans at it. The windows'
-        placement is kept as it is: refined again on the two scans alone it got worse (against
-        the reference, over the accepted closures of intel, aces, fhw, csail and edmonton cut
-        into 4 robots and freiburg-079 into 2: p90 error 0.07-0.15 m / 0.9-1.5 deg for the
-        windows, 0.09-0.17 m / 1.3-2.1 deg refined; 10 of 1244 closures wrong by the
-        reference against 16); two scans hold fewer walls than two windows."""
-        return self._edge(first, second, _hypothesis(T_first_second)[0], robust=True)
-
-    def _edge(self, first: int, second: int, T_1_2: FloatArray, robust: bool) -> Edge:
-        """The edge of the placement ``T_1_2`` (theta, tx, ty) of keyframe ``second`` in
-        ``first``, with the information of the two keyframes' scans at it."""
-        a, b = self.keyframes.scans[first], self.keyframes.scans[second]
-        config = self.config
-        information = match_information(
-            a.segments,
-            b.segments,
-            T_1_2,
-            config.integrate,
-            config.wall_sigma,
-            (config.edge_sigma_floor, config.edge_angle_floor),
-            (10.0, 1.0),
-        )
-        return Edge(first, second, _pose(T_1_2), information, robust)
 
     def _local_edges(self, index: int, piece: int, odometry: Edge | None) -> int:
         """Edges to the nearest recent keyframes (not the front end's own reference)."""
@@ -413,9 +272,6 @@ class LoopCloser:
         sigma += np.diag([RIGHT_DISTANCE**2, RIGHT_DISTANCE**2, RIGHT_ANGLE**2])
         return float(delta @ np.linalg.solve(sigma, delta)) <= _CHI2_3DOF_999
 
-    def _refuse(self, reason: str) -> None:
-        self.refused[reason] = self.refused.get(reason, 0) + 1
-
     def _pairwise(self, closure: Closure, other: Closure) -> bool | None:
         """Are two closures consistent (None: not neighbours, both ends more than
         ``loop_window`` keyframes apart; or not independent, from the same new keyframe)?
@@ -442,157 +298,3 @@ class LoopCloser:
             RIGHT_DISTANCE + _PAIR_SLACK * path,
             RIGHT_ANGLE + _PAIR_SLACK_ANGLE * path,
         )
-
-    def _joins(self, index: int) -> list[tuple[int, int, FloatArray]]:
-        """Join the new keyframe's piece to the piece the robot was lost from.
-
-        The front end's best match of the piece's first scan (not confident enough to
-        integrate) is a guess of where the piece lies in the other piece's frame. While the
-        piece is young, the window of its first keyframe (growing with the keyframes after it)
-        is matched with the window of the keyframe the robot was lost near: the end of one
-        stretch against the start of the next, the most overlap there is. Then each new
-        keyframe's window is matched with the other piece's keyframes near where the guess
-        puts it. Matches are searched with no guess (the guess one more hypothesis), so a
-        guess that fits a symmetric corridor turned round as well as the right way has a
-        rival. A match is confident at ``loop_confidence``, as a loop closure, and must not
-        turn the robot round between its last placed scan and the piece's first (a
-        symmetric corridor's half-turned look-alike). One that **agrees with the guess**
-        joins (two matches of different scans found the same placement); one that does not
-        waits, within a region around the guess (the robot does not jump: its last placed
-        scan was near), for a second one from another keyframe that puts the piece at the
-        same place (any heading: a guess that was not confident may be turned round). The
-        younger piece then moves into the older one's frame."""
-        piece = self.keyframes.piece(index)
-        # The pieces the robot was lost from, one after the other (a piece of one scan, lost
-        # again at once, never grows to join by itself): each with the guess of this piece's
-        # frame in its frame, composed along the chain.
-        chain: list[tuple[int, Pose, int]] = []  # (lost-from keyframe, T_other_piece, depth)
-        T_piece_here: Pose = (0.0, 0.0, 0.0)
-        current = piece
-        while current in self._lost_from and len(chain) < _CHAIN:
-            keyframe, T_keyframe_current, _, _ = self._lost_from[current]
-            other = self.keyframes.piece(keyframe)
-            if other == piece:
-                break  # joined already (through another keyframe)
-            T_other_current = se2.compose(self.keyframes.pose(keyframe), T_keyframe_current)
-            T_piece_here = se2.compose(T_other_current, T_piece_here)
-            chain.append((keyframe, T_piece_here, len(chain)))
-            current = other
-        for keyframe, T_other_piece, depth in chain:
-            joined = self._join_through_guess(index, piece, keyframe, T_other_piece, depth)
-            if joined:
-                return joined
-        return []
-
-    def _join_through_guess(
-        self, index: int, piece: int, keyframe: int, T_other_piece: Pose, depth: int
-    ) -> list[tuple[int, int, FloatArray]]:
-        """One attempt of :meth:`_joins` against the piece of ``keyframe`` (the robot was lost
-        near it), where the guess puts this piece at ``T_other_piece``."""
-        config = self.config
-        other_piece = self.keyframes.piece(keyframe)
-        path = self._path_since_closure.get(piece, 0.0)
-        radius = config.loop_radius + 2.0 * config.keyframe_distance
-        radius += config.loop_radius_growth * path
-        pairs: list[tuple[int, int]] = []  # (keyframe of this piece, of the other)
-        young = len(self.keyframes.members(piece))
-        if 1 < young <= _WINDOW and depth == 0:
-            # Where the robot was lost: near the keyframe it was last placed by, whatever the
-            # guess's heading (a guess that is not confident may be turned round).
-            lost_at = self.keyframes.pose(keyframe)
-            around = self.keyframes.near(lost_at, other_piece, config.loop_radius)
-            pairs += [(piece, int(k)) for k in around[: config.loop_candidates]]
-        guess = se2.compose(T_other_piece, self.keyframes.pose(index))
-        near = self.keyframes.near(guess, other_piece, radius)
-        pairs += [(index, int(k)) for k in near[: config.loop_candidates] if index != piece]
-        for mine, first in pairs:
-            predicted = se2.between(
-                self.keyframes.pose(first),
-                se2.compose(T_other_piece, self.keyframes.pose(mine)),
-            )
-            result = self._match_windows(first, mine, predicted)
-            found = _pose(result.T_1_2)
-            if result.confidence < config.loop_confidence:
-                self._refuse("confidence (join)")
-                continue
-            if depth == 0 and not self._robot_did_not_turn_round(piece, first, mine, found):
-                self._refuse("turned round from the robot's last pose (join)")
-                continue
-            if mine != piece and _close(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE):
-                # The guess came from the piece's first scan: only another keyframe's match
-                # is a second opinion.
-                return [self._join(first, mine, found, result.confidence)]
-            # Any heading where the robot's last placed scan rules out a half turn (above);
-            # through a chain of pieces nothing does, and the chained guess must.
-            if not _close(found, predicted, radius, np.pi if depth == 0 else _TURN_BETWEEN_SCANS):
-                self._refuse("far from the guess (join)")
-                continue
-            T_found = se2.compose(
-                se2.compose(self.keyframes.pose(first), found),
-                se2.between(self.keyframes.pose(mine), _ORIGIN),
-            )
-            earlier = self._join_candidates.setdefault(piece, [])
-            if not any(
-                k != mine and _close(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE) for k, T in earlier
-            ):
-                earlier.append((mine, T_found))
-                continue
-            return [self._join(first, mine, found, result.confidence)]
-        return []
-
-    def _robot_did_not_turn_round(
-        self, piece: int, first: int, mine: int, T_first_mine: Pose
-    ) -> bool:
-        """Would joining ``piece`` by this match (keyframe ``mine`` of the piece placed in
-        keyframe ``first``'s frame) keep the robot's motion between its last placed scan and
-        the piece's first scan within ``_TURN_BETWEEN_SCANS``? True when the last placed scan
-        is not in ``first``'s piece (nothing to compare)."""
-        lost = self._lost_from.get(piece)
-        if lost is None or self.keyframes.piece(lost.last_keyframe) != self.keyframes.piece(first):
-            return True
-        last_scan = se2.compose(self.keyframes.pose(lost.last_keyframe), lost.T_last_keyframe_scan)
-        T_other_mine = se2.compose(self.keyframes.pose(first), T_first_mine)
-        # The piece's first scan is the origin of its frame.
-        T_other_piece = se2.compose(T_other_mine, se2.between(self.keyframes.pose(mine), _ORIGIN))
-        first_scan = se2.compose(T_other_piece, self.keyframes.pose(piece))
-        return abs(se2.between(last_scan, first_scan)[2]) <= _TURN_BETWEEN_SCANS
-
-    def _join(
-        self, first: int, second: int, T_first_second: Pose, confidence: float
-    ) -> tuple[int, int, FloatArray]:
-        """Join the pieces of keyframes ``first`` and ``second`` through their match: the
-        younger piece moves into the older one's frame. Returns (moved, kept, T_kept_moved)."""
-        own, other = self.keyframes.piece(second), self.keyframes.piece(first)
-        kept, moved = min(own, other), max(own, other)
-        # T_other_second = pose(first) . T_first_second, in the other piece's frame.
-        T_other_second = se2.matrix_from_pose(*self.keyframes.pose(first))
-        T_other_second = T_other_second @ se2.matrix_from_pose(*T_first_second)
-        T_own_second = se2.matrix_from_pose(*self.keyframes.pose(second))
-        T_other_own = T_other_second @ se2.invert(T_own_second)
-        T_kept_moved = T_other_own if kept == other else se2.invert(T_other_own)
-        moved_keys = [int(k) for k in self.keyframes.members(moved)]
-        self.keyframes.join(moved, kept, T_kept_moved)
-        self.graph.join(moved_keys, T_kept_moved, dropped_anchor=moved)
-        edge = self._scan_edge(first, second, T_first_second)
-        self.accepted[self.graph.add_edge(edge)] = Closure(
-            first, second, edge.T_first_second, confidence, "join", True, ""
-        )
-        self._lost_from.pop(moved, None)
-        self._path_since_closure[kept] = 0.0
-        return (moved, kept, T_kept_moved)
-
-
-def _pose(T_1_2: FloatArray) -> Pose:
-    """INTEGRATE's (theta, tx, ty) as an (x, y, theta) pose."""
-    return (float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0]))
-
-
-def _hypothesis(pose: Pose) -> FloatArray:
-    """An (x, y, theta) pose as an INTEGRATE hypothesis row (theta, tx, ty)."""
-    return np.array([[pose[2], pose[0], pose[1]]])
-
-
-def _close(a: Pose, b: Pose, distance: float, angle: float) -> bool:
-    """Are two relative poses within ``distance`` and ``angle`` of each other?"""
-    dx, dy, dtheta = se2.between(b, a)
-    return bool(np.hypot(dx, dy) <= distance and abs(dtheta) <= angle)

@@ -52,9 +52,11 @@ from multi_robot_mapper.core.local_mapping.attempts import (
 )
 from multi_robot_mapper.core.local_mapping.backend import Backend, HostedBackend, Runner
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.joins import LostFrom
 from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeScan
-from multi_robot_mapper.core.local_mapping.loop_closer import BackendUpdate, Closure, LostFrom
+from multi_robot_mapper.core.local_mapping.loop_closer import BackendUpdate, Closure
 from multi_robot_mapper.core.matching import MatchResult
+from multi_robot_mapper.core.matching.confidence import RIGHT_DISTANCE
 from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.scan import LaserScanData
@@ -200,8 +202,13 @@ class LocalMapper:
         if not integrated:
             # The best match, right or not, is the guess of where the new piece lies: the back
             # end joins the pieces when later keyframes confirm it (or find better).
+            top_speed = self._top_speed()
             lost_from = LostFrom(
-                anchor.keyframe, T_keyframe_new, last.anchor.keyframe, last.anchor.T_keyframe_scan
+                anchor.keyframe,
+                T_keyframe_new,
+                last.anchor.keyframe,
+                last.anchor.T_keyframe_scan,
+                None if top_speed is None else top_speed * dt + RIGHT_DISTANCE,
             )
             return self._start_piece(stamp, new, view, "lost: no confident match", lost_from)
         pose = chosen.pose

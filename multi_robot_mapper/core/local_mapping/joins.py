@@ -1,0 +1,280 @@
+"""Joins between pieces of one robot's map (:class:`PieceJoins`, the back end's step 4).
+
+A robot whose scans cannot be placed maps on in a new piece (its own frame); the front end's
+best match, right or not, is the guess of where the piece lies (:class:`LostFrom`). Each new
+keyframe of the piece is matched with the keyframes of the piece the robot was lost from:
+near where the guess puts it, and on the ring of keyframes the robot's motion allows whatever
+the guess (the piece is rigid, and its first scan lies within the robot's reach of its last
+placed scan). The younger piece then moves into the older one's frame.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
+from multi_robot_mapper.core.local_mapping.windows import (
+    _WINDOW,
+    Closure,
+    FloatArray,
+    Pose,
+    WindowMatcher,
+    _close,
+    _pose,
+)
+from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
+
+
+class LostFrom(NamedTuple):
+    """Where a piece started: the front end's guess of its origin (the keyframe the best match
+    was against, and T_keyframe_piece by that match, right or not), and where the robot's last
+    placed scan was (its keyframe and T_keyframe_scan): the piece's first scan is the next
+    scan, so the robot was there one scan interval before. ``reach``: how far it can have
+    driven in that interval (m: the front end's 95th-percentile speed times the interval, plus
+    the correctness tolerance; None before the front end knows a speed)."""
+
+    keyframe: int
+    T_keyframe_piece: Pose
+    last_keyframe: int
+    T_last_keyframe_scan: Pose
+    reach: float | None = None
+
+
+# Pieces followed back along the chain of losses when joining (a piece lost from a piece
+# lost from a third ...).
+_CHAIN = 3
+# A robot turns less than a quarter turn between two consecutive scans (at most 79 deg on the
+# shared logs, whose scans are up to 1.5 m apart): a join that turns a piece's first scan more
+# than this from the robot's last placed scan is the half-turned look-alike of a symmetric
+# corridor, not the robot's motion.
+_TURN_BETWEEN_SCANS = np.pi / 2
+_ORIGIN: Pose = (0.0, 0.0, 0.0)
+
+
+class PieceJoins(WindowMatcher):
+    """Joins of a robot's pieces of map: what each piece was lost from, and the searches
+    that join it back."""
+
+    def __init__(self, config: LocalMapperConfig, keyframes: KeyframeMap) -> None:
+        super().__init__(config, keyframes)
+        # piece -> (keyframe the robot was lost near, T_keyframe_piece as guessed)
+        self._lost_from: dict[int, LostFrom] = {}
+        # piece -> searched joins waiting for a partner: (keyframe, T_other_piece)
+        self._join_candidates: dict[int, list[tuple[int, Pose]]] = {}
+        # piece -> how far along the ring of reachable keyframes its joins have tried
+        self._ring_cursor: dict[int, int] = {}
+
+    def lost_from(self, piece: int) -> LostFrom | None:
+        """Where ``piece`` started, while it has not joined the piece it was lost from (None:
+        it has, or no loss started it)."""
+        return self._lost_from.get(piece)
+
+    def _joins(self, index: int) -> list[tuple[int, int, FloatArray]]:
+        """Join the new keyframe's piece to the piece the robot was lost from.
+
+        The front end's best match of the piece's first scan (not confident enough to
+        integrate) is a guess of where the piece lies in the other piece's frame. While the
+        piece is young, the window of its first keyframe (growing with the keyframes after it)
+        is matched with the window of the keyframe the robot was lost near: the end of one
+        stretch against the start of the next, the most overlap there is. Then each new
+        keyframe's window is matched with the other piece's keyframes near where the guess
+        puts it. Matches are searched with no guess (the guess one more hypothesis), so a
+        guess that fits a symmetric corridor turned round as well as the right way has a
+        rival. A match is confident at ``loop_confidence``, as a loop closure, and must not
+        turn the robot round between its last placed scan and the piece's first (a
+        symmetric corridor's half-turned look-alike). One that **agrees with the guess**
+        joins (two matches of different scans found the same placement); one that does not
+        waits, within a region around the guess (the robot does not jump: its last placed
+        scan was near), for a second one from another keyframe that puts the piece at the
+        same place (any heading: a guess that was not confident may be turned round). Where
+        the guess is wrong, the piece the robot was lost from is also searched on the ring
+        of keyframes its motion allows (:meth:`_reachable_candidates`): a match there must
+        put the piece's first scan within the robot's reach of its last placed scan, and
+        waits for a second one from a keyframe whose window shares no scan with its own.
+        The younger piece then moves into the older one's frame."""
+        piece = self.keyframes.piece(index)
+        # The pieces the robot was lost from, one after the other (a piece of one scan, lost
+        # again at once, never grows to join by itself): each with the guess of this piece's
+        # frame in its frame, composed along the chain.
+        chain: list[tuple[int, Pose, int]] = []  # (lost-from keyframe, T_other_piece, depth)
+        T_piece_here: Pose = (0.0, 0.0, 0.0)
+        current = piece
+        while current in self._lost_from and len(chain) < _CHAIN:
+            lost = self._lost_from[current]
+            keyframe, T_keyframe_current = lost.keyframe, lost.T_keyframe_piece
+            other = self.keyframes.piece(keyframe)
+            if other == piece:
+                break  # joined already (through another keyframe)
+            T_other_current = se2.compose(self.keyframes.pose(keyframe), T_keyframe_current)
+            T_piece_here = se2.compose(T_other_current, T_piece_here)
+            chain.append((keyframe, T_piece_here, len(chain)))
+            current = other
+        for keyframe, T_other_piece, depth in chain:
+            joined = self._join_through_guess(index, piece, keyframe, T_other_piece, depth)
+            if joined:
+                return joined
+        return []
+
+    def _join_through_guess(
+        self, index: int, piece: int, keyframe: int, T_other_piece: Pose, depth: int
+    ) -> list[tuple[int, int, FloatArray]]:
+        """One attempt of :meth:`_joins` against the piece of ``keyframe`` (the robot was lost
+        near it), where the guess puts this piece at ``T_other_piece``."""
+        config = self.config
+        other_piece = self.keyframes.piece(keyframe)
+        path = self._path_since_closure.get(piece, 0.0)
+        radius = config.loop_radius + 2.0 * config.keyframe_distance
+        radius += config.loop_radius_growth * path
+        pairs: list[tuple[int, int]] = []  # (keyframe of this piece, of the other)
+        young = len(self.keyframes.members(piece))
+        if 1 < young <= _WINDOW and depth == 0:
+            # Where the robot was lost: near the keyframe it was last placed by, whatever the
+            # guess's heading (a guess that is not confident may be turned round).
+            lost_at = self.keyframes.pose(keyframe)
+            around = self.keyframes.near(lost_at, other_piece, config.loop_radius)
+            pairs += [(piece, int(k)) for k in around[: config.loop_candidates]]
+        guess = se2.compose(T_other_piece, self.keyframes.pose(index))
+        near = self.keyframes.near(guess, other_piece, radius)
+        pairs += [(index, int(k)) for k in near[: config.loop_candidates] if index != piece]
+        # Where the guess is wrong, the robot's motion still bounds where the piece lies.
+        ring = self._reachable_candidates(index, piece, other_piece, radius) if depth == 0 else []
+        bounded = [(index, k) for k in ring if (index, k) not in pairs]
+        for mine, first in pairs + bounded:
+            predicted = se2.between(
+                self.keyframes.pose(first),
+                se2.compose(T_other_piece, self.keyframes.pose(mine)),
+            )
+            result = self._match_windows(first, mine, predicted)
+            found = _pose(result.T_1_2)
+            if result.confidence < config.loop_confidence:
+                self._refuse("confidence (join)")
+                continue
+            motion = self._motion_since_lost(piece, first, mine, found) if depth == 0 else None
+            if motion is not None and abs(motion[2]) > _TURN_BETWEEN_SCANS:
+                self._refuse("turned round from the robot's last pose (join)")
+                continue
+            if (mine, first) in bounded:
+                # Found away from the guess: the piece's first scan must lie where the robot
+                # can have driven since its last placed scan, and a second keyframe's match
+                # must put the piece at the same place (below).
+                reach = self._lost_from[piece].reach
+                if motion is None or reach is None or np.hypot(motion[0], motion[1]) > reach:
+                    self._refuse("beyond the robot's reach (join)")
+                    continue
+            elif mine != piece and _close(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE):
+                # The guess came from the piece's first scan: only another keyframe's match
+                # is a second opinion.
+                return [self._join(first, mine, found, result.confidence)]
+            # Any heading where the robot's last placed scan rules out a half turn (above);
+            # through a chain of pieces nothing does, and the chained guess must.
+            elif not _close(found, predicted, radius, np.pi if depth == 0 else _TURN_BETWEEN_SCANS):
+                self._refuse("far from the guess (join)")
+                continue
+            T_found = se2.compose(
+                se2.compose(self.keyframes.pose(first), found),
+                se2.between(self.keyframes.pose(mine), _ORIGIN),
+            )
+            earlier = self._join_candidates.setdefault(piece, [])
+            # Away from the guess, a second opinion shares no scan with the first: neighbouring
+            # keyframes' windows overlap, and see a corridor slid the same way (fhw: a join
+            # 0.96 m off at 0.96).
+            apart = (mine, first) in bounded
+            if not any(
+                self._second_opinion(mine, k, apart)
+                and _close(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE)
+                for k, T in earlier
+            ):
+                earlier.append((mine, T_found))
+                continue
+            return [self._join(first, mine, found, result.confidence)]
+        return []
+
+    def _second_opinion(self, mine: int, other: int, apart: bool) -> bool:
+        """Is keyframe ``other``'s match a second opinion on keyframe ``mine``'s: another
+        keyframe, and with ``apart`` one whose window shares no scan with ``mine``'s?"""
+        if not apart:
+            return other != mine
+        window = set(self._window_members(mine).tolist())
+        return window.isdisjoint(self._window_members(other).tolist())
+
+    def _last_placed_scan(self, piece: int) -> Pose | None:
+        """Where the robot's last placed scan before ``piece`` was, in its piece's frame (None:
+        ``piece`` was not started by a loss)."""
+        lost = self._lost_from.get(piece)
+        if lost is None:
+            return None
+        return se2.compose(self.keyframes.pose(lost.last_keyframe), lost.T_last_keyframe_scan)
+
+    def _motion_since_lost(
+        self, piece: int, first: int, mine: int, T_first_mine: Pose
+    ) -> Pose | None:
+        """The robot's motion from its last placed scan to the first scan of ``piece`` if this
+        match (keyframe ``mine`` of the piece placed in keyframe ``first``'s frame) joined the
+        pieces; None when the last placed scan is not in ``first``'s piece (nothing to
+        compare)."""
+        last_scan = self._last_placed_scan(piece)
+        lost = self._lost_from.get(piece)
+        if last_scan is None or lost is None:
+            return None
+        if self.keyframes.piece(lost.last_keyframe) != self.keyframes.piece(first):
+            return None
+        T_other_mine = se2.compose(self.keyframes.pose(first), T_first_mine)
+        # The piece's first scan is the origin of its frame.
+        T_other_piece = se2.compose(T_other_mine, se2.between(self.keyframes.pose(mine), _ORIGIN))
+        first_scan = se2.compose(T_other_piece, self.keyframes.pose(piece))
+        return se2.between(last_scan, first_scan)
+
+    def _reachable_candidates(self, index: int, piece: int, other: int, radius: float) -> list[int]:
+        """Keyframes of ``other`` (the piece the robot was last placed in) that keyframe
+        ``index`` of ``piece`` can lie near, whatever the guess, up to ``loop_candidates``.
+        The piece is rigid and its first scan lies within the robot's reach of its last
+        placed scan, so the new keyframe lies at its own distance from the piece's first scan
+        from there, give or take that reach; a window matches within ``radius``. The ring is
+        walked a few keyframes per new keyframe (a window holds ``_WINDOW``), so a piece that
+        grows tries the whole ring over time."""
+        lost = self._lost_from.get(piece)
+        last_scan = self._last_placed_scan(piece)
+        if lost is None or lost.reach is None or last_scan is None or index == piece:
+            return []
+        if self.keyframes.piece(lost.last_keyframe) != other:
+            return []
+        here, origin = self.keyframes.pose(index), self.keyframes.pose(piece)
+        offset = float(np.hypot(here[0] - origin[0], here[1] - origin[1]))
+        members = self.keyframes.members(other)
+        poses = self.keyframes.poses[members]
+        distance = np.hypot(poses[:, 0] - last_scan[0], poses[:, 1] - last_scan[1])
+        ring = members[np.abs(distance - offset) <= lost.reach + radius]
+        if len(ring) == 0:
+            return []
+        start = self._ring_cursor.get(piece, 0)
+        steps = start + _WINDOW * np.arange(self.config.loop_candidates)
+        self._ring_cursor[piece] = start + _WINDOW * self.config.loop_candidates
+        return sorted({int(ring[k % len(ring)]) for k in steps})
+
+    def _join(
+        self, first: int, second: int, T_first_second: Pose, confidence: float
+    ) -> tuple[int, int, FloatArray]:
+        """Join the pieces of keyframes ``first`` and ``second`` through their match: the
+        younger piece moves into the older one's frame. Returns (moved, kept, T_kept_moved)."""
+        own, other = self.keyframes.piece(second), self.keyframes.piece(first)
+        kept, moved = min(own, other), max(own, other)
+        # T_other_second = pose(first) . T_first_second, in the other piece's frame.
+        T_other_second = se2.matrix_from_pose(*self.keyframes.pose(first))
+        T_other_second = T_other_second @ se2.matrix_from_pose(*T_first_second)
+        T_own_second = se2.matrix_from_pose(*self.keyframes.pose(second))
+        T_other_own = T_other_second @ se2.invert(T_own_second)
+        T_kept_moved = T_other_own if kept == other else se2.invert(T_other_own)
+        moved_keys = [int(k) for k in self.keyframes.members(moved)]
+        self.keyframes.join(moved, kept, T_kept_moved)
+        self.graph.join(moved_keys, T_kept_moved, dropped_anchor=moved)
+        edge = self._scan_edge(first, second, T_first_second)
+        self.accepted[self.graph.add_edge(edge)] = Closure(
+            first, second, edge.T_first_second, confidence, "join", True, ""
+        )
+        self._lost_from.pop(moved, None)
+        self._path_since_closure[kept] = 0.0
+        return (moved, kept, T_kept_moved)
