@@ -296,12 +296,11 @@ def test_a_person_blocking_the_laser_does_not_break_the_map() -> None:
     assert _ate(times, poses, truth_at) < 0.02
 
 
-def test_a_lost_robot_maps_on_in_a_piece_that_joins_the_map_again(monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    # The front end fails on two scans (a match not confident enough): each starts a new
-    # piece from its best match's guess. The next keyframes of the piece confirm the guess and
-    # the back end joins the piece to the map; in the end every scan is in one map.
-    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
-    lost_at = {25, 60}
+def _mapped_losing_the_robot_at(
+    monkeypatch: pytest.MonkeyPatch, stamps: np.ndarray, scans: list, lost_at: set[int]
+) -> tuple[LocalMapper, list[LocalUpdate]]:
+    """The scans mapped by a LocalMapper whose front end fails on the scans ``lost_at`` (a
+    match not confident enough: each starts a new piece from its best match's guess)."""
     original = mapper.LocalMapper._match
     count = {"scan": 0}
 
@@ -311,19 +310,35 @@ def test_a_lost_robot_maps_on_in_a_piece_that_joins_the_map_again(monkeypatch) -
 
     monkeypatch.setattr(mapper.LocalMapper, "_match", failing)
     local = LocalMapper()
+    updates = []
     for k, (t, s) in enumerate(zip(stamps, scans, strict=True)):
         count["scan"] = k
-        update = _feed(local, float(t), s)
-        assert update.new_piece == (k in lost_at)
-    assert local.pieces_started == 2
-    assert [c.kind for c in local.closures].count("join") == 2
+        updates.append(_feed(local, float(t), s))
+    return local, updates
+
+
+def _ate_of_one_map(local: LocalMapper, stamps: np.ndarray, truth: np.ndarray) -> float:
+    """Every scan in the map's one piece: its ATE against the truth (m)."""
     assert set(local.backend.map.pieces.tolist()) == {0}
     times, poses = local.trajectory()
     np.testing.assert_array_equal(times, stamps)
     truth_at = {
         float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
     }
-    assert _ate(times, poses, truth_at) < 0.02
+    return _ate(times, poses, truth_at)
+
+
+def test_a_lost_robot_maps_on_in_a_piece_that_joins_the_map_again(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # The front end fails on two scans (a match not confident enough): each starts a new
+    # piece from its best match's guess. The next keyframes of the piece confirm the guess and
+    # the back end joins the piece to the map; in the end every scan is in one map.
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
+    lost_at = {25, 60}
+    local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, lost_at)
+    assert [u.new_piece for u in updates] == [k in lost_at for k in range(len(stamps))]
+    assert local.pieces_started == 2
+    assert [c.kind for c in local.closures].count("join") == 2
+    assert _ate_of_one_map(local, stamps, truth) < 0.02
 
 
 @pytest.mark.parametrize("turn_limit", [piece_joins._TURN_BETWEEN_SCANS, 2.0 * np.pi])
@@ -334,15 +349,7 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
     # quarter turn between its last placed scan and the piece's first, so the joins are refused
     # and the piece stays apart; without the limit (2 pi) the look-alike joins the map.
     stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
-    original_match, original_windows = (
-        mapper.LocalMapper._match,
-        loop_closer.LoopCloser._match_windows,
-    )
-    count = {"scan": 0}
-
-    def failing(self, *args, **kwargs):  # type: ignore[no-untyped-def]
-        chosen, integrated = original_match(self, *args, **kwargs)
-        return chosen, integrated and count["scan"] != 25
+    original_windows = loop_closer.LoopCloser._match_windows
 
     def turned_round(self, first, second, predicted, search=True):  # type: ignore[no-untyped-def]
         result = original_windows(self, first, second, predicted, search)
@@ -356,13 +363,9 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
         dx, dy, dtheta = se2.between(keyframes.pose(first), wrong)
         return dataclasses.replace(result, T_1_2=np.array([dtheta, dx, dy]), confidence=0.99)
 
-    monkeypatch.setattr(mapper.LocalMapper, "_match", failing)
     monkeypatch.setattr(loop_closer.LoopCloser, "_match_windows", turned_round)
     monkeypatch.setattr(piece_joins, "_TURN_BETWEEN_SCANS", turn_limit)
-    local = LocalMapper()
-    for k, (t, s) in enumerate(zip(stamps, scans, strict=True)):
-        count["scan"] = k
-        _feed(local, float(t), s)
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
     assert local.pieces_started == 1
     joins = [c for c in local.closures if c.kind == "join"]
     if turn_limit < np.pi:
@@ -373,12 +376,7 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
         # The look-alike joined: the map is decimetres off (the right join: under 2 cm, the
         # test above).
         assert len(joins) == 1
-        assert set(local.backend.map.pieces.tolist()) == {0}
-        times, poses = local.trajectory()
-        truth_at = {
-            float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
-        }
-        assert _ate(times, poses, truth_at) > 0.1
+        assert _ate_of_one_map(local, stamps, truth) > 0.1
 
 
 @pytest.mark.parametrize("reach_known", [True, False])
@@ -392,12 +390,7 @@ def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
     # placement and the piece joins the map where it belongs. Without a known reach (no
     # speed yet) only the guess is searched, and the piece stays apart.
     stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
-    original_match, original_add = mapper.LocalMapper._match, loop_closer.LoopCloser.add_keyframe
-    count = {"scan": 0}
-
-    def failing(self, *args, **kwargs):  # type: ignore[no-untyped-def]
-        chosen, integrated = original_match(self, *args, **kwargs)
-        return chosen, integrated and count["scan"] != 25
+    original_add = loop_closer.LoopCloser.add_keyframe
 
     def wrong_guess(self, scan, pose, piece, odometry, lost_from=None):  # type: ignore[no-untyped-def]
         if lost_from is not None:
@@ -408,23 +401,13 @@ def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
             )
         return original_add(self, scan, pose, piece, odometry, lost_from)
 
-    monkeypatch.setattr(mapper.LocalMapper, "_match", failing)
     monkeypatch.setattr(loop_closer.LoopCloser, "add_keyframe", wrong_guess)
-    local = LocalMapper()
-    for k, (t, s) in enumerate(zip(stamps, scans, strict=True)):
-        count["scan"] = k
-        _feed(local, float(t), s)
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
     assert local.pieces_started == 1
     joins = [c for c in local.closures if c.kind == "join"]
     if reach_known:
         assert len(joins) == 1
-        assert set(local.backend.map.pieces.tolist()) == {0}
-        times, poses = local.trajectory()
-        np.testing.assert_array_equal(times, stamps)
-        truth_at = {
-            float(t): np.asarray(_relative(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
-        }
-        assert _ate(times, poses, truth_at) < 0.02
+        assert _ate_of_one_map(local, stamps, truth) < 0.02
     else:
         assert joins == []
         assert len(set(local.backend.map.pieces.tolist())) == 2
