@@ -413,35 +413,6 @@ def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
         assert len(set(local.backend.map.pieces.tolist())) == 2
 
 
-def test_a_piece_lost_through_a_chain_of_pieces_joins_where_the_robot_can_have_driven(
-    monkeypatch,
-) -> None:  # type: ignore[no-untyped-def]
-    # A person blocks the laser for one scan (a piece of its own that matches nothing), and
-    # the robot is lost again on the next, with a guess 4 m and 30 degrees off. The last
-    # piece still lies within the two losses' reach of where the robot was last placed in
-    # the office, and joins it there; the blocked scan stays apart.
-    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
-    scans = list(scans)
-    scans[25] = _stranger(25)
-    original_add = loop_closer.LoopCloser.add_keyframe
-
-    def wrong_guess(self, scan, pose, piece, odometry, lost_from=None):  # type: ignore[no-untyped-def]
-        if lost_from is not None:
-            x, y, theta = lost_from.T_keyframe_piece
-            lost_from = lost_from._replace(T_keyframe_piece=(x + 4.0, y, theta + 0.5))
-        return original_add(self, scan, pose, piece, odometry, lost_from)
-
-    monkeypatch.setattr(loop_closer.LoopCloser, "add_keyframe", wrong_guess)
-    local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {26})
-    assert [k for k, u in enumerate(updates) if u.new_piece] == [25, 26]
-    assert [c.kind for c in local.closures].count("join") == 1
-    times, poses = local.trajectory()
-    kept = [k for k in range(len(stamps)) if k != 25]
-    np.testing.assert_array_equal(times, stamps[kept])
-    truth_at = {float(stamps[k]): np.asarray(_relative(truth[0], truth[k])) for k in kept}
-    assert _ate(times, poses, truth_at) < 0.02
-
-
 @pytest.mark.usefixtures("as_matched")
 @pytest.mark.parametrize(
     ("search_finds", "integrated"),

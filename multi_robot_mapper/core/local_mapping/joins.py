@@ -26,7 +26,6 @@ from multi_robot_mapper.core.local_mapping.windows import (
     _close,
     _pose,
 )
-from multi_robot_mapper.core.matching import MatchResult
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 
 
@@ -56,16 +55,6 @@ _TURN_BETWEEN_SCANS = np.pi / 2
 _ORIGIN: Pose = (0.0, 0.0, 0.0)
 
 
-class _Bound(NamedTuple):
-    """What the robot's motion says of a piece: the first scan of the piece lies within
-    ``reach`` (m) of ``last_scan``, where the robot was last placed in ``piece`` (in its
-    frame)."""
-
-    piece: int
-    last_scan: Pose
-    reach: float
-
-
 class PieceJoins(WindowMatcher):
     """Joins of a robot's pieces of map: what each piece was lost from, and the searches
     that join it back."""
@@ -74,11 +63,10 @@ class PieceJoins(WindowMatcher):
         super().__init__(config, keyframes)
         # piece -> (keyframe the robot was lost near, T_keyframe_piece as guessed)
         self._lost_from: dict[int, LostFrom] = {}
-        # piece -> searched joins waiting for a partner: (keyframe, other piece, T_other_piece)
-        self._join_candidates: dict[int, list[tuple[int, int, Pose]]] = {}
-        # (piece, piece lost from) -> how far along the ring of reachable keyframes its joins
-        # have tried
-        self._ring_cursor: dict[tuple[int, int], int] = {}
+        # piece -> searched joins waiting for a partner: (keyframe, T_other_piece)
+        self._join_candidates: dict[int, list[tuple[int, Pose]]] = {}
+        # piece -> how far along the ring of reachable keyframes its joins have tried
+        self._ring_cursor: dict[int, int] = {}
 
     def lost_from(self, piece: int) -> LostFrom | None:
         """Where ``piece`` started, while it has not joined the piece it was lost from (None:
@@ -109,24 +97,10 @@ class PieceJoins(WindowMatcher):
         waits for a second one from a keyframe whose window shares no scan with its own.
         The younger piece then moves into the older one's frame."""
         piece = self.keyframes.piece(index)
-        bounds = {bound.piece: bound for bound in self._motion_chain(piece)}
-        for keyframe, T_other_piece, depth in self._guess_chain(piece):
-            bound = bounds.pop(self.keyframes.piece(keyframe), None)
-            joined = self._join_through_guess(index, piece, keyframe, T_other_piece, depth, bound)
-            if joined:
-                return joined
-        for bound in bounds.values():  # pieces the robot's motion reaches and no guess names
-            joined = self._join_within_reach(index, piece, bound)
-            if joined:
-                return joined
-        return []
-
-    def _guess_chain(self, piece: int) -> list[tuple[int, Pose, int]]:
-        """The pieces the robot was lost from by the front end's guesses, one after the other
-        (a piece of one scan, lost again at once, never grows to join by itself): each as
-        (the keyframe of the guess, T_other_piece: this piece's frame in that keyframe's
-        piece by the guesses composed along the chain, depth)."""
-        chain: list[tuple[int, Pose, int]] = []
+        # The pieces the robot was lost from, one after the other (a piece of one scan, lost
+        # again at once, never grows to join by itself): each with the guess of this piece's
+        # frame in its frame, composed along the chain.
+        chain: list[tuple[int, Pose, int]] = []  # (lost-from keyframe, T_other_piece, depth)
         T_piece_here: Pose = (0.0, 0.0, 0.0)
         current = piece
         while current in self._lost_from and len(chain) < _CHAIN:
@@ -139,43 +113,17 @@ class PieceJoins(WindowMatcher):
             T_piece_here = se2.compose(T_other_current, T_piece_here)
             chain.append((keyframe, T_piece_here, len(chain)))
             current = other
-        return chain
-
-    def _motion_chain(self, piece: int) -> list[_Bound]:
-        """The pieces the robot was last placed in before each loss, one after the other, with
-        what its motion says, whatever the guesses: this piece's first scan lies within the
-        reach of each loss, plus the way across each piece in between (from its first scan
-        to where the robot was lost from it), of the robot's last placed scan there."""
-        bounds: list[_Bound] = []
-        current, carried = piece, 0.0
-        while current in self._lost_from and len(bounds) < _CHAIN:
-            lost = self._lost_from[current]
-            other = self.keyframes.piece(lost.last_keyframe)
-            if lost.reach is None or other == piece:
-                break
-            last_scan = se2.compose(
-                self.keyframes.pose(lost.last_keyframe), lost.T_last_keyframe_scan
-            )
-            bounds.append(_Bound(other, last_scan, carried + lost.reach))
-            origin = self.keyframes.pose(other)  # the first scan after its own loss
-            carried = bounds[-1].reach + float(
-                np.hypot(last_scan[0] - origin[0], last_scan[1] - origin[1])
-            )
-            current = other
-        return bounds
+        for keyframe, T_other_piece, depth in chain:
+            joined = self._join_through_guess(index, piece, keyframe, T_other_piece, depth)
+            if joined:
+                return joined
+        return []
 
     def _join_through_guess(
-        self,
-        index: int,
-        piece: int,
-        keyframe: int,
-        T_other_piece: Pose,
-        depth: int,
-        bound: _Bound | None,
+        self, index: int, piece: int, keyframe: int, T_other_piece: Pose, depth: int
     ) -> list[tuple[int, int, FloatArray]]:
         """One attempt of :meth:`_joins` against the piece of ``keyframe`` (the robot was lost
-        near it), where the guess puts this piece at ``T_other_piece`` and the robot's motion
-        within ``bound`` (None: not known)."""
+        near it), where the guess puts this piece at ``T_other_piece``."""
         config = self.config
         other_piece = self.keyframes.piece(keyframe)
         path = self._path_since_closure.get(piece, 0.0)
@@ -193,7 +141,7 @@ class PieceJoins(WindowMatcher):
         near = self.keyframes.near(guess, other_piece, radius)
         pairs += [(index, int(k)) for k in near[: config.loop_candidates] if index != piece]
         # Where the guess is wrong, the robot's motion still bounds where the piece lies.
-        ring = [] if bound is None else self._reachable_candidates(index, piece, radius, bound)
+        ring = self._reachable_candidates(index, piece, other_piece, radius) if depth == 0 else []
         bounded = [(index, k) for k in ring if (index, k) not in pairs]
         for mine, first in pairs + bounded:
             predicted = se2.between(
@@ -209,12 +157,15 @@ class PieceJoins(WindowMatcher):
             if motion is not None and abs(motion[2]) > _TURN_BETWEEN_SCANS:
                 self._refuse("turned round from the robot's last pose (join)")
                 continue
-            if bound is not None and (mine, first) in bounded:
-                joined = self._confirm_within_reach(piece, mine, first, found, result, bound)
-                if joined is not None:
-                    return [joined]
-                continue
-            if mine != piece and _close(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE):
+            if (mine, first) in bounded:
+                # Found away from the guess: the piece's first scan must lie where the robot
+                # can have driven since its last placed scan, and a second keyframe's match
+                # must put the piece at the same place (below).
+                reach = self._lost_from[piece].reach
+                if motion is None or reach is None or np.hypot(motion[0], motion[1]) > reach:
+                    self._refuse("beyond the robot's reach (join)")
+                    continue
+            elif mine != piece and _close(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE):
                 # The guess came from the piece's first scan: only another keyframe's match
                 # is a second opinion.
                 return [self._join(first, mine, found, result.confidence)]
@@ -223,72 +174,24 @@ class PieceJoins(WindowMatcher):
             elif not _close(found, predicted, radius, np.pi if depth == 0 else _TURN_BETWEEN_SCANS):
                 self._refuse("far from the guess (join)")
                 continue
-            if self._second_opinion_agrees(piece, mine, first, found, apart=False):
-                return [self._join(first, mine, found, result.confidence)]
-        return []
-
-    def _join_within_reach(
-        self, index: int, piece: int, bound: _Bound
-    ) -> list[tuple[int, int, FloatArray]]:
-        """Keyframe ``index`` of ``piece`` matched on the ring of ``bound.piece``'s keyframes
-        that the robot's motion allows, where no guess says where to look."""
-        config = self.config
-        radius = config.loop_radius + 2.0 * config.keyframe_distance
-        radius += config.loop_radius_growth * self._path_since_closure.get(piece, 0.0)
-        for first in self._reachable_candidates(index, piece, radius, bound):
-            result = self._match_windows(first, index, None)
-            if result.confidence < config.loop_confidence:
-                self._refuse("confidence (join)")
+            T_found = se2.compose(
+                se2.compose(self.keyframes.pose(first), found),
+                se2.between(self.keyframes.pose(mine), _ORIGIN),
+            )
+            earlier = self._join_candidates.setdefault(piece, [])
+            # Away from the guess, a second opinion shares no scan with the first: neighbouring
+            # keyframes' windows overlap, and see a corridor slid the same way (fhw: a join
+            # 0.96 m off at 0.96).
+            apart = (mine, first) in bounded
+            if not any(
+                self._second_opinion(mine, k, apart)
+                and _close(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE)
+                for k, T in earlier
+            ):
+                earlier.append((mine, T_found))
                 continue
-            found = _pose(result.T_1_2)
-            motion = self._motion_since_lost(piece, first, index, found)
-            if motion is not None and abs(motion[2]) > _TURN_BETWEEN_SCANS:
-                self._refuse("turned round from the robot's last pose (join)")
-                continue
-            joined = self._confirm_within_reach(piece, index, first, found, result, bound)
-            if joined is not None:
-                return [joined]
+            return [self._join(first, mine, found, result.confidence)]
         return []
-
-    def _confirm_within_reach(
-        self, piece: int, mine: int, first: int, found: Pose, result: MatchResult, bound: _Bound
-    ) -> tuple[int, int, FloatArray] | None:
-        """A confident match found away from any guess: it joins when it puts the piece's
-        first scan within ``bound`` and a second keyframe, whose window shares no scan with
-        ``mine``'s, found the same placement (neighbouring keyframes' windows overlap, and
-        see a corridor slid the same way: fhw, a join 0.96 m off at 0.96)."""
-        T_other_mine = se2.compose(self.keyframes.pose(first), found)
-        T_other_here = se2.compose(T_other_mine, se2.between(self.keyframes.pose(mine), _ORIGIN))
-        first_scan = se2.compose(T_other_here, self.keyframes.pose(piece))
-        shift = np.hypot(first_scan[0] - bound.last_scan[0], first_scan[1] - bound.last_scan[1])
-        if shift > bound.reach:
-            self._refuse("beyond the robot's reach (join)")
-            return None
-        if self._second_opinion_agrees(piece, mine, first, found, apart=True):
-            return self._join(first, mine, found, result.confidence)
-        return None
-
-    def _second_opinion_agrees(
-        self, piece: int, mine: int, first: int, found: Pose, apart: bool
-    ) -> bool:
-        """Has another keyframe of ``piece`` (with ``apart``, one whose window shares no scan
-        with ``mine``'s) placed the piece in ``first``'s piece where this match does? If not,
-        this match waits for one."""
-        other = self.keyframes.piece(first)
-        T_found = se2.compose(
-            se2.compose(self.keyframes.pose(first), found),
-            se2.between(self.keyframes.pose(mine), _ORIGIN),
-        )
-        earlier = self._join_candidates.setdefault(piece, [])
-        if any(
-            of == other
-            and self._second_opinion(mine, k, apart)
-            and _close(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE)
-            for k, of, T in earlier
-        ):
-            return True
-        earlier.append((mine, other, T_found))
-        return False
 
     def _second_opinion(self, mine: int, other: int, apart: bool) -> bool:
         """Is keyframe ``other``'s match a second opinion on keyframe ``mine``'s: another
@@ -325,29 +228,31 @@ class PieceJoins(WindowMatcher):
         first_scan = se2.compose(T_other_piece, self.keyframes.pose(piece))
         return se2.between(last_scan, first_scan)
 
-    def _reachable_candidates(
-        self, index: int, piece: int, radius: float, bound: _Bound
-    ) -> list[int]:
-        """Keyframes of the piece the robot was last placed in (``bound.last_scan``'s) that
-        keyframe ``index`` of ``piece`` can lie near, whatever the guess, up to
-        ``loop_candidates``. The piece is rigid and its first scan lies within
-        ``bound.reach`` of that last placed scan, so the new keyframe lies at its own distance
-        from the piece's first scan from there, give or take that reach; a window matches
-        within ``radius``. The ring is walked a few keyframes per new keyframe (a window holds
-        ``_WINDOW``), so a piece that grows tries the whole ring over time."""
-        if index == piece:
+    def _reachable_candidates(self, index: int, piece: int, other: int, radius: float) -> list[int]:
+        """Keyframes of ``other`` (the piece the robot was last placed in) that keyframe
+        ``index`` of ``piece`` can lie near, whatever the guess, up to ``loop_candidates``.
+        The piece is rigid and its first scan lies within the robot's reach of its last
+        placed scan, so the new keyframe lies at its own distance from the piece's first scan
+        from there, give or take that reach; a window matches within ``radius``. The ring is
+        walked a few keyframes per new keyframe (a window holds ``_WINDOW``), so a piece that
+        grows tries the whole ring over time."""
+        lost = self._lost_from.get(piece)
+        last_scan = self._last_placed_scan(piece)
+        if lost is None or lost.reach is None or last_scan is None or index == piece:
+            return []
+        if self.keyframes.piece(lost.last_keyframe) != other:
             return []
         here, origin = self.keyframes.pose(index), self.keyframes.pose(piece)
         offset = float(np.hypot(here[0] - origin[0], here[1] - origin[1]))
-        members = self.keyframes.members(bound.piece)
+        members = self.keyframes.members(other)
         poses = self.keyframes.poses[members]
-        distance = np.hypot(poses[:, 0] - bound.last_scan[0], poses[:, 1] - bound.last_scan[1])
-        ring = members[np.abs(distance - offset) <= bound.reach + radius]
+        distance = np.hypot(poses[:, 0] - last_scan[0], poses[:, 1] - last_scan[1])
+        ring = members[np.abs(distance - offset) <= lost.reach + radius]
         if len(ring) == 0:
             return []
-        start = self._ring_cursor.get((piece, bound.piece), 0)
+        start = self._ring_cursor.get(piece, 0)
         steps = start + _WINDOW * np.arange(self.config.loop_candidates)
-        self._ring_cursor[(piece, bound.piece)] = start + _WINDOW * self.config.loop_candidates
+        self._ring_cursor[piece] = start + _WINDOW * self.config.loop_candidates
         return sorted({int(ring[k % len(ring)]) for k in steps})
 
     def _join(
