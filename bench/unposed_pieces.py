@@ -70,12 +70,6 @@ def returns_at_reference(scan: CarmenScan) -> np.ndarray:
     return se2.transform_points(se2.matrix_from_pose(*scan.reference_pose), points)
 
 
-def relative(a: Any, b: Any) -> np.ndarray:
-    """The motion T_a_b of two (x, y, theta) poses."""
-    T = se2.invert(se2.matrix_from_pose(*a)) @ se2.matrix_from_pose(*b)
-    return np.asarray(se2.pose_from_matrix(T))
-
-
 def judge_run(
     name: str, robots: int, robot: int, overrides: dict[str, Any]
 ) -> list[dict[str, Any]]:
@@ -123,15 +117,13 @@ def judge_run(
                 last = before[-1]
                 T_true = se2.compose(
                     tuple(earlier_poses[last]),
-                    tuple(
-                        relative(
-                            scans[earlier_members[last]].reference_pose,
-                            scans[min(members)].reference_pose,
-                        )
+                    se2.between(
+                        scans[earlier_members[last]].reference_pose,
+                        scans[min(members)].reference_pose,
                     ),
                 )
                 guess = se2.compose(keyframes.pose(lost.keyframe), lost.T_keyframe_piece)
-                error = relative(T_true, guess)
+                error = se2.between(T_true, guess)
                 guess_right = bool(
                     np.hypot(error[0], error[1]) <= PAIR_TRANSLATION_M
                     and abs(error[2]) <= PAIR_ROTATION_RAD

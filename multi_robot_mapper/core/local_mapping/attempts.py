@@ -52,6 +52,12 @@ NEAR_ANGLE = RIGHT_ANGLE / 3.0
 SURE = 0.999
 
 
+def reach_in(top_speed: float, seconds: float) -> float:
+    """How far the robot can have driven in ``seconds`` (m): at its ``top_speed`` (m/s, the
+    95th percentile of its placed motions), plus the correctness tolerance."""
+    return top_speed * seconds + RIGHT_DISTANCE
+
+
 def close_to(a: Pose, b: Pose, distance: float, angle: float) -> bool:
     dx, dy, dtheta = se2.between(b, a)
     return bool(np.hypot(dx, dy) <= distance and abs(dtheta) <= angle)
@@ -281,7 +287,7 @@ def match_scan(
         if a.piece == current or references.top_speed is None or a.piece not in references.left:
             return True
         pose, elapsed = references.left[a.piece]
-        reach = references.top_speed * elapsed + RIGHT_DISTANCE
+        reach = reach_in(references.top_speed, elapsed)
         return bool(np.hypot(a.pose[0] - pose[0], a.pose[1] - pose[1]) <= reach)
 
     rivals_disagree = False

@@ -10,11 +10,13 @@ placed scan). The younger piece then moves into the older one's frame.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.local_mapping.attempts import close_to, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
 from multi_robot_mapper.core.local_mapping.windows import (
@@ -23,8 +25,6 @@ from multi_robot_mapper.core.local_mapping.windows import (
     FloatArray,
     Pose,
     WindowMatcher,
-    _close,
-    _pose,
 )
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 
@@ -149,7 +149,7 @@ class PieceJoins(WindowMatcher):
                 se2.compose(T_other_piece, self.keyframes.pose(mine)),
             )
             result = self._match_windows(first, mine, predicted)
-            found = _pose(result.T_1_2)
+            found = pose_of_match(result.T_1_2)
             if result.confidence < config.loop_confidence:
                 self._refuse("confidence (join)")
                 continue
@@ -165,27 +165,25 @@ class PieceJoins(WindowMatcher):
                 if motion is None or reach is None or np.hypot(motion[0], motion[1]) > reach:
                     self._refuse("beyond the robot's reach (join)")
                     continue
-            elif mine != piece and _close(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE):
+            elif mine != piece and close_to(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE):
                 # The guess came from the piece's first scan: only another keyframe's match
                 # is a second opinion.
                 return [self._join(first, mine, found, result.confidence)]
             # Any heading where the robot's last placed scan rules out a half turn (above);
             # through a chain of pieces nothing does, and the chained guess must.
-            elif not _close(found, predicted, radius, np.pi if depth == 0 else _TURN_BETWEEN_SCANS):
+            elif not close_to(
+                found, predicted, radius, np.pi if depth == 0 else _TURN_BETWEEN_SCANS
+            ):
                 self._refuse("far from the guess (join)")
                 continue
-            T_found = se2.compose(
-                se2.compose(self.keyframes.pose(first), found),
-                se2.between(self.keyframes.pose(mine), _ORIGIN),
-            )
+            T_found = self._piece_frame(first, mine, found)
             earlier = self._join_candidates.setdefault(piece, [])
             # Away from the guess, a second opinion shares no scan with the first: neighbouring
             # keyframes' windows overlap, and see a corridor slid the same way (fhw: a join
             # 0.96 m off at 0.96).
-            apart = (mine, first) in bounded
+            second_opinion = self._second_opinion(mine, apart=(mine, first) in bounded)
             if not any(
-                self._second_opinion(mine, k, apart)
-                and _close(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE)
+                second_opinion(k) and close_to(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE)
                 for k, T in earlier
             ):
                 earlier.append((mine, T_found))
@@ -193,21 +191,28 @@ class PieceJoins(WindowMatcher):
             return [self._join(first, mine, found, result.confidence)]
         return []
 
-    def _second_opinion(self, mine: int, other: int, apart: bool) -> bool:
-        """Is keyframe ``other``'s match a second opinion on keyframe ``mine``'s: another
-        keyframe, and with ``apart`` one whose window shares no scan with ``mine``'s?"""
+    def _second_opinion(self, mine: int, apart: bool) -> Callable[[int], bool]:
+        """Which keyframes' matches are a second opinion on keyframe ``mine``'s: any other
+        keyframe, or with ``apart`` one whose window shares no scan with ``mine``'s."""
         if not apart:
-            return other != mine
+            return lambda other: other != mine
         window = set(self._window_members(mine).tolist())
-        return window.isdisjoint(self._window_members(other).tolist())
+        return lambda other: window.isdisjoint(self._window_members(other).tolist())
 
-    def _last_placed_scan(self, piece: int) -> Pose | None:
-        """Where the robot's last placed scan before ``piece`` was, in its piece's frame (None:
-        ``piece`` was not started by a loss)."""
+    def _piece_frame(self, first: int, mine: int, T_first_mine: Pose) -> Pose:
+        """The frame of keyframe ``mine``'s piece in keyframe ``first``'s piece, by a match
+        that places ``mine`` at ``T_first_mine`` in ``first``'s frame."""
+        T_other_mine = se2.compose(self.keyframes.pose(first), T_first_mine)
+        return se2.compose(T_other_mine, se2.between(self.keyframes.pose(mine), _ORIGIN))
+
+    def _last_placed_scan(self, piece: int) -> tuple[int, Pose] | None:
+        """The piece that held the robot's last placed scan before ``piece``, and where that
+        scan was in its frame (None: ``piece`` was not started by a loss)."""
         lost = self._lost_from.get(piece)
         if lost is None:
             return None
-        return se2.compose(self.keyframes.pose(lost.last_keyframe), lost.T_last_keyframe_scan)
+        pose = se2.compose(self.keyframes.pose(lost.last_keyframe), lost.T_last_keyframe_scan)
+        return self.keyframes.piece(lost.last_keyframe), pose
 
     def _motion_since_lost(
         self, piece: int, first: int, mine: int, T_first_mine: Pose
@@ -216,17 +221,13 @@ class PieceJoins(WindowMatcher):
         match (keyframe ``mine`` of the piece placed in keyframe ``first``'s frame) joined the
         pieces; None when the last placed scan is not in ``first``'s piece (nothing to
         compare)."""
-        last_scan = self._last_placed_scan(piece)
-        lost = self._lost_from.get(piece)
-        if last_scan is None or lost is None:
+        last = self._last_placed_scan(piece)
+        if last is None or last[0] != self.keyframes.piece(first):
             return None
-        if self.keyframes.piece(lost.last_keyframe) != self.keyframes.piece(first):
-            return None
-        T_other_mine = se2.compose(self.keyframes.pose(first), T_first_mine)
         # The piece's first scan is the origin of its frame.
-        T_other_piece = se2.compose(T_other_mine, se2.between(self.keyframes.pose(mine), _ORIGIN))
+        T_other_piece = self._piece_frame(first, mine, T_first_mine)
         first_scan = se2.compose(T_other_piece, self.keyframes.pose(piece))
-        return se2.between(last_scan, first_scan)
+        return se2.between(last[1], first_scan)
 
     def _reachable_candidates(self, index: int, piece: int, other: int, radius: float) -> list[int]:
         """Keyframes of ``other`` (the piece the robot was last placed in) that keyframe
@@ -236,18 +237,17 @@ class PieceJoins(WindowMatcher):
         from there, give or take that reach; a window matches within ``radius``. The ring is
         walked a few keyframes per new keyframe (a window holds ``_WINDOW``), so a piece that
         grows tries the whole ring over time."""
-        lost = self._lost_from.get(piece)
-        last_scan = self._last_placed_scan(piece)
-        if lost is None or lost.reach is None or last_scan is None or index == piece:
+        last = self._last_placed_scan(piece)
+        reach = self._lost_from[piece].reach if last is not None else None
+        if last is None or reach is None or last[0] != other or index == piece:
             return []
-        if self.keyframes.piece(lost.last_keyframe) != other:
-            return []
+        last_scan = last[1]
         here, origin = self.keyframes.pose(index), self.keyframes.pose(piece)
         offset = float(np.hypot(here[0] - origin[0], here[1] - origin[1]))
         members = self.keyframes.members(other)
         poses = self.keyframes.poses[members]
         distance = np.hypot(poses[:, 0] - last_scan[0], poses[:, 1] - last_scan[1])
-        ring = members[np.abs(distance - offset) <= lost.reach + radius]
+        ring = members[np.abs(distance - offset) <= reach + radius]
         if len(ring) == 0:
             return []
         start = self._ring_cursor.get(piece, 0)

@@ -42,6 +42,7 @@ from typing import TypeVar
 import numpy as np
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.local_mapping.attempts import close_to, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.joins import LostFrom, PieceJoins
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap, KeyframeScan
@@ -49,8 +50,6 @@ from multi_robot_mapper.core.local_mapping.windows import (
     Closure,
     FloatArray,
     Pose,
-    _close,
-    _pose,
 )
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.pose_graph import Edge
@@ -192,8 +191,8 @@ class LoopCloser(PieceJoins):
         for other in window[: config.local_edges]:
             predicted = se2.between(self.keyframes.pose(int(other)), pose)
             result = self._match(int(other), index, predicted, search=False)
-            if result.confidence < config.integrate_confidence or not _close(
-                _pose(result.T_1_2), predicted, RIGHT_DISTANCE, RIGHT_ANGLE
+            if result.confidence < config.integrate_confidence or not close_to(
+                pose_of_match(result.T_1_2), predicted, RIGHT_DISTANCE, RIGHT_ANGLE
             ):
                 continue
             self.graph.add_edge(self._edge(int(other), index, result.T_1_2, robust=False))
@@ -213,7 +212,7 @@ class LoopCloser(PieceJoins):
             first = int(other)
             predicted = se2.between(self.keyframes.pose(first), pose)
             result = self._match_windows(first, index, predicted)
-            found = _pose(result.T_1_2)
+            found = pose_of_match(result.T_1_2)
             if result.confidence < config.loop_confidence:
                 self._refuse("confidence")
                 continue
@@ -292,7 +291,7 @@ class LoopCloser(PieceJoins):
         T_b_second = se2.between(self.keyframes.pose(other.second), self.keyframes.pose(second))
         predicted = se2.compose(se2.compose(T_first_a, other.T_first_second), T_b_second)
         path = float(np.hypot(*T_first_a[:2]) + np.hypot(*T_b_second[:2]))
-        return _close(
+        return close_to(
             closure.T_first_second,
             predicted,
             RIGHT_DISTANCE + _PAIR_SLACK * path,

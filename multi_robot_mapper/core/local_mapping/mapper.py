@@ -49,6 +49,7 @@ from multi_robot_mapper.core.local_mapping.attempts import (
     Shapes,
     match_scan,
     pose_of_match,
+    reach_in,
 )
 from multi_robot_mapper.core.local_mapping.backend import Backend, HostedBackend, Runner
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
@@ -56,7 +57,6 @@ from multi_robot_mapper.core.local_mapping.joins import LostFrom
 from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeScan
 from multi_robot_mapper.core.local_mapping.loop_closer import BackendUpdate, Closure
 from multi_robot_mapper.core.matching import MatchResult
-from multi_robot_mapper.core.matching.confidence import RIGHT_DISTANCE
 from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.scan import LaserScanData
@@ -208,7 +208,7 @@ class LocalMapper:
                 T_keyframe_new,
                 last.anchor.keyframe,
                 last.anchor.T_keyframe_scan,
-                None if top_speed is None else top_speed * dt + RIGHT_DISTANCE,
+                None if top_speed is None else reach_in(top_speed, dt),
             )
             return self._start_piece(stamp, new, view, "lost: no confident match", lost_from)
         pose = chosen.pose

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.fusion import fuse
+from multi_robot_mapper.core.local_mapping.attempts import hypotheses_of, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
@@ -62,7 +63,7 @@ class WindowMatcher:
         alone (``search`` False) or with no guess (INTEGRATE, the prediction one more
         hypothesis)."""
         a, b = self.keyframes.scans[first], self.keyframes.scans[second]
-        extra = None if predicted is None else _hypothesis(predicted)
+        extra = None if predicted is None else hypotheses_of([predicted])
         return integrate(
             a.segments,
             b.segments,
@@ -133,7 +134,7 @@ class WindowMatcher:
         into 4 robots and freiburg-079 into 2: p90 error 0.07-0.15 m / 0.9-1.5 deg for the
         windows, 0.09-0.17 m / 1.3-2.1 deg refined; 10 of 1244 closures wrong by the
         reference against 16); two scans hold fewer walls than two windows."""
-        return self._edge(first, second, _hypothesis(T_first_second)[0], robust=True)
+        return self._edge(first, second, hypotheses_of([T_first_second])[0], robust=True)
 
     def _edge(self, first: int, second: int, T_1_2: FloatArray, robust: bool) -> Edge:
         """The edge of the placement ``T_1_2`` (theta, tx, ty) of keyframe ``second`` in
@@ -149,23 +150,7 @@ class WindowMatcher:
             (config.edge_sigma_floor, config.edge_angle_floor),
             (10.0, 1.0),
         )
-        return Edge(first, second, _pose(T_1_2), information, robust)
+        return Edge(first, second, pose_of_match(T_1_2), information, robust)
 
     def _refuse(self, reason: str) -> None:
         self.refused[reason] = self.refused.get(reason, 0) + 1
-
-
-def _pose(T_1_2: FloatArray) -> Pose:
-    """INTEGRATE's (theta, tx, ty) as an (x, y, theta) pose."""
-    return (float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0]))
-
-
-def _hypothesis(pose: Pose) -> FloatArray:
-    """An (x, y, theta) pose as an INTEGRATE hypothesis row (theta, tx, ty)."""
-    return np.array([[pose[2], pose[0], pose[1]]])
-
-
-def _close(a: Pose, b: Pose, distance: float, angle: float) -> bool:
-    """Are two relative poses within ``distance`` and ``angle`` of each other?"""
-    dx, dy, dtheta = se2.between(b, a)
-    return bool(np.hypot(dx, dy) <= distance and abs(dtheta) <= angle)
