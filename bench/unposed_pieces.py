@@ -29,6 +29,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import dataclasses  # noqa: E402
 from collections import Counter  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -70,11 +71,20 @@ def returns_at_reference(scan: CarmenScan) -> np.ndarray:
     return se2.transform_points(se2.matrix_from_pose(*scan.reference_pose), points)
 
 
-def judge_run(
-    name: str, robots: int, robot: int, overrides: dict[str, Any]
-) -> list[dict[str, Any]]:
-    """Map robot ``robot`` (0-based) of ``name`` cut into ``robots``; one row per piece left
-    outside the main piece, and a last row with the run's totals."""
+@dataclasses.dataclass
+class MappedRun:
+    """One robot's run of a CARMEN log, mapped by one LocalMapper (back end in line)."""
+
+    scans: list[CarmenScan]  # the whole log's scans (with their reference poses)
+    start: int  # the run's scans are scans[start:stop]
+    stop: int
+    mapper: LocalMapper
+    index_of: dict[float, int]  # a scan's stamp -> its index in ``scans``
+
+
+def map_run(name: str, robots: int, robot: int, overrides: dict[str, Any]) -> MappedRun:
+    """Map robot ``robot`` (0-based) of log ``name`` cut into ``robots`` consecutive runs
+    (as ``mrm import-carmen`` cuts it)."""
     path = DATA / f"{name}.log.gz"
     scans = read_carmen(path)
     stamps, _ = monotonic_stamps(np.array([s.timestamp for s in scans]), path.name)
@@ -86,6 +96,16 @@ def judge_run(
         segments, _ = extract_scan(data, extraction)
         mapper.add_scan(float(stamps[index]), segments, data)
     index_of = {float(stamps[i]): i for i in range(start, stop)}
+    return MappedRun(scans, start, stop, mapper, index_of)
+
+
+def judge_run(
+    name: str, robots: int, robot: int, overrides: dict[str, Any]
+) -> list[dict[str, Any]]:
+    """Map robot ``robot`` (0-based) of ``name`` cut into ``robots``; one row per piece left
+    outside the main piece, and a last row with the run's totals."""
+    run = map_run(name, robots, robot, overrides)
+    scans, start, stop, mapper, index_of = run.scans, run.start, run.stop, run.mapper, run.index_of
     closer = mapper.backend.closer
     keyframes = closer.keyframes
 

@@ -647,7 +647,7 @@ def test_closures_of_one_new_keyframe_are_not_each_others_partner() -> None:
     # two neighbouring old keyframes is one scan's evidence twice (a look-alike place fools
     # both alike), so neither is the other's partner, however well they agree.
     local = LocalMapper()
-    closure = loop_closer.Closure(10, 50, (1.0, 0.0, 0.0), 0.99, "loop", True, "")
+    closure = loop_closer.Closure(10, 50, (1.0, 0.0, 0.0), 0.99, "loop", True, "", found_by=50)
     neighbour = dataclasses.replace(closure, first=11, T_first_second=(0.5, 0.0, 0.0))
     assert local.backend.closer._pairwise(closure, neighbour) is None
     assert local.backend.closer._pairwise(neighbour, closure) is None
@@ -668,7 +668,9 @@ def test_two_closures_agree_in_heading_within_the_drift_of_their_cycle(
 
     def closure(first: int, second: int, turn: float) -> loop_closer.Closure:
         x, y, theta = se2.between(keyframes.pose(first), keyframes.pose(second))
-        return loop_closer.Closure(first, second, (x, y, theta + turn), 0.99, "loop", True, "")
+        return loop_closer.Closure(
+            first, second, (x, y, theta + turn), 0.99, "loop", True, "", found_by=second
+        )
 
     other = closure(1, last - 1, 0.0)
     path = float(
@@ -835,30 +837,45 @@ def test_the_front_end_decides_on_the_confidence_in_context(
     assert chosen in record
 
 
-def test_a_closure_edge_is_the_windows_placement_with_the_scans_information(
+def test_a_closure_edge_is_the_windows_placement_between_the_members_that_see_most(
     office_drive,  # type: ignore[no-untyped-def]
     monkeypatch,  # type: ignore[no-untyped-def]
 ) -> None:
     # Two keyframes' windows agree on a placement; the closure's edge keeps it as it is (the
-    # two scans alone refined it to worse placements on the shared logs) and takes its
-    # information from the two scans' walls at that placement.
+    # two scans alone refined it to worse placements on the shared logs), expressed between
+    # one member of each window through their poses in the windows: the pair whose own scans
+    # constrain it most, with the information of their walls.
     stamps, scans, _ = office_drive
     local = _mapped(stamps, scans)
-    assert len(local.keyframes()) >= 2
     closer = local.backend.closer
+    pose = closer.keyframes.pose
+    last = len(closer.keyframes.scans) - 1
+    first_window, last_window = closer._window_members(0), closer._window_members(last)
+    assert not set(first_window.tolist()) & set(last_window.tolist())
 
     def no_match(*args: object, **kwargs: object) -> None:
         raise AssertionError("the closure edge must not match the scans again")
 
     monkeypatch.setattr(closer, "_match", no_match)
-    placement = se2.between(closer.keyframes.pose(0), closer.keyframes.pose(1))
-    edge = closer._scan_edge(0, 1, placement)
-    np.testing.assert_allclose(edge.T_first_second, placement)
+    # The windows' placement as the graph has it: every member pair's edge is then the graph's
+    # own relative pose of the two members.
+    placement = se2.between(pose(0), pose(last))
+    edge = closer._scan_edge(0, last, placement)
+    assert edge.first in first_window and edge.second in last_window
+    np.testing.assert_allclose(
+        edge.T_first_second, se2.between(pose(edge.first), pose(edge.second)), atol=1e-9
+    )
     assert edge.robust
+    volume = np.linalg.slogdet(edge.information)[1]
+    for i in first_window.tolist():
+        for j in last_window.tolist():
+            T_i_j = attempts.hypotheses_of([se2.between(pose(i), pose(j))])[0]
+            other = closer._edge(i, j, T_i_j, robust=True)
+            assert np.linalg.slogdet(other.information)[1] <= volume + 1e-9
     # Walls of both scans overlap there: tighter than the ceiling of an unconstrained edge
-    # (10 m, 1 rad), in every direction.
+    # (10 m, 1 rad), in every direction; 40 m away nothing overlaps.
     assert np.all(np.linalg.eigvalsh(edge.information) > 1.0)
-    apart = closer._scan_edge(0, 1, (placement[0] + 40.0, placement[1], placement[2]))
+    apart = closer._scan_edge(0, last, (placement[0] + 40.0, placement[1], placement[2]))
     assert np.linalg.eigvalsh(apart.information).min() < np.linalg.eigvalsh(edge.information).min()
 
 

@@ -269,11 +269,20 @@ class PieceJoins(WindowMatcher):
         T_other_own = T_other_second @ se2.invert(T_own_second)
         T_kept_moved = T_other_own if kept == other else se2.invert(T_other_own)
         moved_keys = [int(k) for k in self.keyframes.members(moved)]
+        # The edge from the two pieces' windows, each still its own piece's (relative poses
+        # within a piece do not change with the join).
+        edge = self._scan_edge(first, second, T_first_second)
         self.keyframes.join(moved, kept, T_kept_moved)
         self.graph.join(moved_keys, T_kept_moved, dropped_anchor=moved)
-        edge = self._scan_edge(first, second, T_first_second)
         self.accepted[self.graph.add_edge(edge)] = Closure(
-            first, second, edge.T_first_second, confidence, "join", True, ""
+            edge.first,
+            edge.second,
+            edge.T_first_second,
+            confidence,
+            "join",
+            True,
+            "",
+            found_by=second,
         )
         self._lost_from.pop(moved, None)
         self._path_since_closure[kept] = 0.0

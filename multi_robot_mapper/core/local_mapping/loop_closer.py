@@ -20,10 +20,11 @@ For every new keyframe (:meth:`LoopCloser.add_keyframe`):
    the manner of PCM: the cycle closure - path - closure - path must close within the
    correctness tolerance), and has a consistent partner: an accepted closure nearby or another
    candidate found within ``loop_window`` keyframes (one closure alone may be a look-alike
-   place; wrong closures rarely agree with each other). Its edge is the two keyframes' own
-   scans refined from the window match. It enters the graph with a robust (Huber) kernel:
-   convex, so a closure that corrects metres of drift still pulls from where the drift left
-   the keyframes, and one wrong closure that got past the checks pulls with a bounded force;
+   place; wrong closures rarely agree with each other). Its edge is the windows' placement,
+   put between the member of each window whose scans see the same walls best. It enters the
+   graph with a robust (Huber) kernel: convex, so a closure that corrects metres of drift
+   still pulls from where the drift left the keyframes, and one wrong closure that got past
+   the checks pulls with a bounded force;
 4. **joins**: a piece started when the robot was lost is joined to the piece it was lost
    from: its keyframes' windows are matched with the other piece's keyframes near where the
    front end's guess puts them, and on the ring of keyframes the robot's motion allows
@@ -221,7 +222,14 @@ class LoopCloser(PieceJoins):
                 continue
             edge = self._scan_edge(first, index, found)
             closure = Closure(
-                first, index, edge.T_first_second, result.confidence, "loop", True, ""
+                edge.first,
+                edge.second,
+                edge.T_first_second,
+                result.confidence,
+                "loop",
+                True,
+                "",
+                found_by=index,
             )
             accepted += self._corroborate(_Candidate(closure, edge, index), piece)
         # Candidates no consistent partner came for within a window of keyframes are refused.
@@ -280,7 +288,7 @@ class LoopCloser(PieceJoins):
         window = self.config.loop_window
         if abs(other.first - closure.first) > window or abs(other.second - closure.second) > window:
             return None
-        if other.second == closure.second:
+        if other.found_by == closure.found_by:
             # The same new keyframe's window matched to neighbouring old ones: one scan's
             # evidence twice, which a look-alike place fools as consistently (intel: three
             # such closures 7.2 m off, at 0.98-0.99). Only a later keyframe is a partner.
