@@ -30,16 +30,13 @@ import os
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
-import argparse  # noqa: E402
-from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 from reference_check import ReferenceJudge  # noqa: E402
-from unposed_pieces import DATA, map_run  # noqa: E402
+from unposed_pieces import judge_every_run, map_run  # noqa: E402
 
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.config import parse_override  # noqa: E402
 from multi_robot_mapper.core.local_mapping.attempts import pose_of_match  # noqa: E402
 from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data  # noqa: E402
@@ -121,24 +118,7 @@ RULES = {
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
-    parser.add_argument("--logs", nargs="+", default=["intel", "aces", "fhw", "csail", "edmonton"])
-    parser.add_argument("--robots", nargs="+", type=int, default=[4, 2])
-    parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--set", dest="overrides", action="append", default=[])
-    args = parser.parse_args()
-    overrides = dict(parse_override(o) for o in args.overrides)
-    cases = [
-        (name, robots, robot)
-        for name in args.logs
-        if (DATA / f"{name}.log.gz").is_file()
-        for robots in args.robots
-        for robot in range(robots)
-    ]
-    with ProcessPoolExecutor(args.jobs) as pool:
-        names, counts, robots_ = (list(column) for column in zip(*cases, strict=True))
-        results = pool.map(closures_of_run, names, counts, robots_, [overrides] * len(cases))
-        rows = [row for result in results for row in result]
+    rows = [row for result in judge_every_run(closures_of_run, __doc__ or "") for row in result]
     wrong = [r for r in rows if r["verdict"] == "wrong"]
     right = [r for r in rows if r["verdict"] == "right"]
     print(

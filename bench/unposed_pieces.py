@@ -31,6 +31,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 from collections import Counter  # noqa: E402
+from collections.abc import Callable  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
@@ -164,8 +165,14 @@ def judge_run(
     return rows
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+Rows = list[dict[str, Any]]
+
+
+def judge_every_run(judge: Callable[[str, int, int, dict[str, Any]], Rows], doc: str) -> list[Rows]:
+    """The command line these benches share (``--logs``, ``--robots``, ``--jobs``, ``--set``),
+    and ``judge(log, robots, robot, overrides)`` called for every robot's run of every log
+    cut into each robot count, in ``--jobs`` processes; the results in that order."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("--logs", nargs="+", default=["intel", "aces", "fhw", "csail", "edmonton"])
     parser.add_argument("--robots", nargs="+", type=int, default=[4, 2])
     parser.add_argument("--jobs", type=int, default=2)
@@ -181,38 +188,43 @@ def main() -> None:
     ]
     with ProcessPoolExecutor(args.jobs) as pool:
         names, counts, robots_ = (list(column) for column in zip(*cases, strict=True))
-        results = list(pool.map(judge_run, names, counts, robots_, [overrides] * len(cases)))
+        return list(pool.map(judge, names, counts, robots_, [overrides] * len(cases)))
+
+
+def main() -> None:
+    results = judge_every_run(judge_run, __doc__)
     print(
         "| log | robots | unposed | pieces | in pieces that overlap the main piece | "
         "that do not: right guess | wrong guess | no guess (the run's first piece) |"
     )
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     totals: Counter[str] = Counter()
-    for name in args.logs:
-        for robots in args.robots:
-            rows = [
-                r for result in results for r in result if (r["log"], r["robots"]) == (name, robots)
-            ]
-            if not rows:
-                continue
-            pieces = [r for r in rows if "piece" in r]
-            scans = sum(r["total"] for r in rows if "total" in r)
-            count = Counter()
-            for r in pieces:
-                if r["overlap"] >= OVERLAPS:
-                    kind = "overlap"
-                else:
-                    kind = {True: "right", False: "wrong", None: "none"}[r["guess_right"]]
-                count[kind] += r["scans"]
-            unposed = sum(r["scans"] for r in pieces)
-            totals.update(count)
-            totals["unposed"] += unposed
-            totals["scans"] += scans
-            print(
-                f"| {name} | {robots} | {unposed} of {scans} ({100.0 * unposed / scans:.1f} %) | "
-                f"{len(pieces)} | {count['overlap']} | {count['right']} | {count['wrong']} | "
-                f"{count['none']} |"
-            )
+    # Each log and robot count, in the order they were run.
+    cases = dict.fromkeys((r["log"], r["robots"]) for result in results for r in result)
+    for name, robots in cases:
+        rows = [
+            r for result in results for r in result if (r["log"], r["robots"]) == (name, robots)
+        ]
+        if not rows:
+            continue
+        pieces = [r for r in rows if "piece" in r]
+        scans = sum(r["total"] for r in rows if "total" in r)
+        count = Counter()
+        for r in pieces:
+            if r["overlap"] >= OVERLAPS:
+                kind = "overlap"
+            else:
+                kind = {True: "right", False: "wrong", None: "none"}[r["guess_right"]]
+            count[kind] += r["scans"]
+        unposed = sum(r["scans"] for r in pieces)
+        totals.update(count)
+        totals["unposed"] += unposed
+        totals["scans"] += scans
+        print(
+            f"| {name} | {robots} | {unposed} of {scans} ({100.0 * unposed / scans:.1f} %) | "
+            f"{len(pieces)} | {count['overlap']} | {count['right']} | {count['wrong']} | "
+            f"{count['none']} |"
+        )
     print(
         f"all: {totals['unposed']} of {totals['scans']} scans unposed; {totals['overlap']} in "
         f"pieces that overlap the main piece, {totals['right']} / {totals['wrong']} / "
