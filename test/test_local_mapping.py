@@ -25,7 +25,8 @@ from multi_robot_mapper.core.local_mapping import (
 )
 from multi_robot_mapper.core.local_mapping import joins as piece_joins
 from multi_robot_mapper.core.matching import MatchResult, integrate
-from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE
+from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
+from multi_robot_mapper.core.pose_graph import ReachBound
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import (
     LaserModel,
@@ -338,6 +339,35 @@ def test_a_lost_robot_maps_on_in_a_piece_that_joins_the_map_again(monkeypatch) -
     assert [u.new_piece for u in updates] == [k in lost_at for k in range(len(stamps))]
     assert local.pieces_started == 2
     assert [c.kind for c in local.closures].count("join") == 2
+    assert _ate_of_one_map(local, stamps, truth) < 0.02
+
+
+def test_a_join_bounds_the_robots_motion_across_the_loss(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # The robot is lost once. When its piece joins the map, the loss becomes a bound in the
+    # graph: the piece's first keyframe lies within the robot's reach of its last placed
+    # scan (it does not jump). The truth keeps it.
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
+    lost_at = 25
+    seen: list[piece_joins.LostFrom] = []
+    original_add = loop_closer.LoopCloser.add_keyframe
+
+    def recorded(self, scan, pose, piece, odometry, lost_from=None):  # type: ignore[no-untyped-def]
+        if lost_from is not None:
+            seen.append(lost_from)
+        return original_add(self, scan, pose, piece, odometry, lost_from)
+
+    monkeypatch.setattr(loop_closer.LoopCloser, "add_keyframe", recorded)
+    local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {lost_at})
+    closer = local.backend.closer
+    assert len(seen) == 1 and seen[0].reach is not None
+    lost = seen[0]
+    assert closer.motion_bounds == 1
+    (bound,) = closer.graph.bounds.values()
+    x, y, _ = lost.T_last_keyframe_scan
+    assert bound == ReachBound(
+        lost.last_keyframe, updates[lost_at].piece, (x, y), lost.reach, RIGHT_DISTANCE
+    )
+    assert np.hypot(*_relative(truth[lost_at - 1], truth[lost_at])[:2]) < lost.reach
     assert _ate_of_one_map(local, stamps, truth) < 0.02
 
 

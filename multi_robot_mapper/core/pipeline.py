@@ -246,6 +246,7 @@ def _run_local(
             "keyframes_all_pieces": len(scans),
             "map_segments": len(map_segments),
             "local_edges": backend.closer.local_edges,
+            "motion_bounds": backend.closer.motion_bounds,
             "closures_accepted": len(mapper.closures),
             "closures_refused": dict(backend.closer.refused),
             "closures": [

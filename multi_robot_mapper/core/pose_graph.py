@@ -51,6 +51,42 @@ class Edge:
     robust: bool  # loop closures and joins: Huber kernel
 
 
+@dataclasses.dataclass(frozen=True)
+class ReachBound:
+    """A bound, not a measurement: keyframe ``second`` lies within ``reach`` (m) of the point
+    ``point`` (x, y in keyframe ``first``'s frame). Free inside; outside, a quadratic wall
+    whose cost is 1 at ``sigma`` (m) beyond the reach. What the robot's motion across a loss
+    says: it does not jump, but its motion while the front end could not follow is unknown
+    within its reach (a mean and a Gaussian would pull every such loss towards a guess)."""
+
+    first: int
+    second: int
+    point: tuple[float, float]
+    reach: float
+    sigma: float
+
+    def error(self, first: Pose, second: Pose) -> tuple[float, FloatArray, FloatArray]:
+        """How far ``second`` lies beyond the reach (m, 0 inside) with ``first`` and
+        ``second`` at these poses, and its Jacobians (1x3) in each pose's body tangent (x, y,
+        theta), gtsam's Pose2 retraction. The distance does not depend on the frame:
+        u = t_second - t_first - R(theta_first) point."""
+        R_first = se2.matrix_from_pose(0.0, 0.0, first[2])[:2, :2]
+        offset = R_first @ np.asarray(self.point)
+        u = np.array([second[0] - first[0], second[1] - first[1]]) - offset
+        distance = float(np.hypot(*u))
+        if distance <= self.reach or distance == 0.0:
+            return 0.0, np.zeros((1, 3)), np.zeros((1, 3))
+        n = u / distance
+        # d t = R(theta) dv for either pose; R(theta + w) point = offset + w J offset.
+        J_first = np.array([[*(-n @ R_first), -float(n @ (_QUARTER_TURN @ offset))]])
+        J_second = np.array([[*(n @ se2.matrix_from_pose(0.0, 0.0, second[2])[:2, :2]), 0.0]])
+        return distance - self.reach, J_first, J_second
+
+
+# Rotates a 2-vector by a quarter turn (the derivative of a rotation).
+_QUARTER_TURN = np.array([[0.0, -1.0], [1.0, 0.0]])
+
+
 class PoseGraph:
     """Keyframe poses optimised with gtsam's ISAM2."""
 
@@ -64,6 +100,7 @@ class PoseGraph:
         self.robust_scale = robust_scale
         self.kernel = kernel
         self.edges: dict[int, Edge] = {}  # edge id -> edge
+        self.bounds: dict[int, ReachBound] = {}  # edge id -> bound (ids shared with edges)
         self._anchors: dict[int, Pose] = {}  # key -> prior pose (each piece's first keyframe)
         self._estimate: dict[int, Pose] = {}
         self._factor_index: dict[int, int] = {}  # edge id -> ISAM2 factor index
@@ -104,12 +141,23 @@ class PoseGraph:
 
     def add_edge(self, edge: Edge) -> int:
         """Add a measured relative pose; returns its id (for :meth:`remove_edge`)."""
-        for key in (edge.first, edge.second):
+        edge_id = self._new_edge_id(edge.first, edge.second)
+        self.edges[edge_id] = edge
+        return edge_id
+
+    def add_bound(self, bound: ReachBound) -> int:
+        """Add a bound on where a keyframe lies (:class:`ReachBound`); returns its id."""
+        edge_id = self._new_edge_id(bound.first, bound.second)
+        self.bounds[edge_id] = bound
+        return edge_id
+
+    def _new_edge_id(self, first: int, second: int) -> int:
+        """The id of a new edge or bound between two keyframes, pending for the solver."""
+        for key in (first, second):
             if key not in self._estimate:
                 raise ValueError(f"edge to keyframe {key}, which is not in the graph")
         edge_id = self._next_edge
         self._next_edge += 1
-        self.edges[edge_id] = edge
         self._pending_edges.append(edge_id)
         return edge_id
 
@@ -129,8 +177,28 @@ class PoseGraph:
         for key in self._pending_anchors:
             factors.push_back(self._anchor_factor(key, self._anchors[key]))
         for edge_id in self._pending_edges:
-            factors.push_back(self._factor(self.edges[edge_id]))
+            factors.push_back(self._factor_of(edge_id))
         return factors
+
+    def _factor_of(self, edge_id: int) -> gtsam.NonlinearFactor:
+        bound = self.bounds.get(edge_id)
+        return self._factor(self.edges[edge_id]) if bound is None else self._bound_factor(bound)
+
+    @staticmethod
+    def _bound_factor(bound: ReachBound) -> gtsam.CustomFactor:
+        def error(
+            factor: gtsam.CustomFactor, values: gtsam.Values, jacobians: list[FloatArray] | None
+        ) -> FloatArray:
+            first, second = (values.atPose2(key) for key in (bound.first, bound.second))
+            beyond, J_first, J_second = bound.error(
+                (first.x(), first.y(), first.theta()), (second.x(), second.y(), second.theta())
+            )
+            if jacobians is not None:
+                jacobians[0], jacobians[1] = J_first, J_second
+            return np.array([beyond])
+
+        noise = gtsam.noiseModel.Isotropic.Sigma(1, bound.sigma)
+        return gtsam.CustomFactor(noise, [bound.first, bound.second], error)
 
     def _anchor_factor(self, key: int, pose: Pose) -> gtsam.PriorFactorPose2:
         return gtsam.PriorFactorPose2(
@@ -174,8 +242,8 @@ class PoseGraph:
         graph = gtsam.NonlinearFactorGraph()
         for key, pose in self._anchors.items():
             graph.push_back(self._anchor_factor(key, pose))
-        for edge in self.edges.values():
-            graph.push_back(self._factor(edge))
+        for edge_id in (*self.edges, *self.bounds):
+            graph.push_back(self._factor_of(edge_id))
         initial = gtsam.Values()
         for key, pose in self._estimate.items():
             initial.insert(key, gtsam.Pose2(*pose))
@@ -232,7 +300,7 @@ class PoseGraph:
         for key, pose in self._estimate.items():
             self._new_values.insert(key, gtsam.Pose2(*pose))
         self._pending_anchors = list(self._anchors)
-        self._pending_edges = list(self.edges)
+        self._pending_edges = [*self.edges, *self.bounds]
 
     # --- pieces -----------------------------------------------------------------------------
 

@@ -132,7 +132,7 @@ class LoopCloser(PieceJoins):
         else:
             self._path_since_closure[piece] = 0.0
             if lost_from is not None:
-                self._lost_from[piece] = lost_from
+                self._lost(piece, lost_from)
         # The keyframe and its edge are in; every later step only improves the map. One that
         # fails (a bug) is reported and skipped, so the next keyframe finds the graph whole.
         errors: list[str] = []
