@@ -371,6 +371,44 @@ def test_a_join_bounds_the_robots_motion_across_the_loss(monkeypatch) -> None:  
     assert _ate_of_one_map(local, stamps, truth) < 0.02
 
 
+@pytest.mark.parametrize("search_back", [True, False])
+def test_a_piece_the_robot_left_joins_when_the_robot_comes_back_to_it(
+    monkeypatch, search_back: bool
+) -> None:  # type: ignore[no-untyped-def]
+    # The robot is lost at scan 25 (the second piece starts) and again at scan 200, near the
+    # end of its lap (the third piece); the second piece's own searches never join (made to
+    # fail). The third joins the first through the chain of losses, and the robot drives on
+    # into the second piece's ground: the first piece's new keyframes find it, and the map is
+    # one piece again. Without that search the second piece stays apart.
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=1.3, seed=4)
+    second_piece: list[int] = []
+    original_lost = piece_joins.PieceJoins._lost
+    original_join = piece_joins.PieceJoins._join_through_guess
+
+    def lost(self, piece, lost_from):  # type: ignore[no-untyped-def]
+        second_piece.append(piece)
+        return original_lost(self, piece, lost_from)
+
+    def not_the_second(self, index, piece, keyframe, T_other_piece, depth):  # type: ignore[no-untyped-def]
+        if second_piece[0] in (piece, self.keyframes.piece(keyframe)):
+            return []
+        return original_join(self, index, piece, keyframe, T_other_piece, depth)
+
+    monkeypatch.setattr(piece_joins.PieceJoins, "_lost", lost)
+    monkeypatch.setattr(piece_joins.PieceJoins, "_join_through_guess", not_the_second)
+    if not search_back:
+        monkeypatch.setattr(
+            piece_joins.PieceJoins, "_join_pieces_lost_here", lambda self, index, piece: []
+        )
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25, 200})
+    if search_back:
+        assert [c.kind for c in local.closures].count("join") == 2
+        assert local.backend.closer.motion_bounds == 2
+        assert _ate_of_one_map(local, stamps, truth) < 0.03
+    else:
+        assert set(local.backend.map.pieces.tolist()) == {0, second_piece[0]}
+
+
 @pytest.mark.parametrize("turn_limit", [piece_joins._TURN_BETWEEN_SCANS, 2.0 * np.pi])
 def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -> None:  # type: ignore[no-untyped-def]
     # The robot is lost once; every match between the two pieces is then made the half-turned

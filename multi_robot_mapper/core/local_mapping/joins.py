@@ -69,6 +69,8 @@ class PieceJoins(WindowMatcher):
         self.motion_bounds = 0  # bounds across a loss added (:meth:`_bound_motions`)
         # piece -> searched joins waiting for a partner: (keyframe, T_other_piece)
         self._join_candidates: dict[int, list[tuple[int, Pose]]] = {}
+        # piece -> matches of the piece it was lost from, come back: (keyframe, T_piece_other)
+        self._return_candidates: dict[int, list[tuple[int, Pose]]] = {}
         # piece -> how far along the ring of reachable keyframes its joins have tried
         self._ring_cursor: dict[int, int] = {}
 
@@ -127,6 +129,53 @@ class PieceJoins(WindowMatcher):
             joined = self._join_through_guess(index, piece, keyframe, T_other_piece, depth)
             if joined:
                 return joined
+        return self._join_pieces_lost_here(index, piece)
+
+    def _join_pieces_lost_here(self, index: int, piece: int) -> list[tuple[int, int, FloatArray]]:
+        """Join a piece that the robot was lost from this piece into, when the robot comes
+        back where that piece mapped. The robot maps in this piece now, so that piece grows no
+        keyframes to search from (fhw 2 robot2: lost at its scan 5, the robot mapped 150 scans
+        in a second piece, was lost again, and came back to its start in a third that joined
+        the first). The new keyframe's window is matched with that piece's keyframes near
+        where its guess puts the keyframe. A match must keep the robot's motion across the
+        loss possible (within its reach, plus the search radius for the drift since, and less
+        than a quarter turn), and a second keyframe whose window shares no scan with the
+        first's must put the piece at the same place."""
+        config = self.config
+        path = self._path_since_closure.get(piece, 0.0)
+        radius = config.loop_radius + 2.0 * config.keyframe_distance
+        radius += config.loop_radius_growth * path
+        here = self.keyframes.pose(index)
+        for other, lost in list(self._lost_from.items()):
+            if other == piece or lost.reach is None or self.keyframes.piece(lost.keyframe) != piece:
+                continue
+            # The other piece's frame in this one, as the front end guessed it.
+            T_piece_other = se2.compose(self.keyframes.pose(lost.keyframe), lost.T_keyframe_piece)
+            here_in_other = se2.between(T_piece_other, here)
+            near = self.keyframes.near(here_in_other, other, radius)
+            for first in (int(k) for k in near[: config.loop_candidates]):
+                predicted = se2.between(self.keyframes.pose(first), here_in_other)
+                result = self._match_windows(first, index, predicted)
+                if result.confidence < config.loop_confidence:
+                    self._refuse("confidence (join)")
+                    continue
+                found = pose_of_match(result.T_1_2)
+                motion = self._motion_since_lost(other, index, first, se2.between(found, _ORIGIN))
+                if motion is None or (
+                    np.hypot(motion[0], motion[1]) > lost.reach + radius
+                    or abs(motion[2]) > _TURN_BETWEEN_SCANS
+                ):
+                    self._refuse("beyond the robot's reach (join)")
+                    continue
+                T_found = self._piece_frame(first, index, found)
+                earlier = self._return_candidates.setdefault(other, [])
+                second_opinion = self._second_opinion(index, apart=True)
+                if any(
+                    second_opinion(k) and close_to(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE)
+                    for k, T in earlier
+                ):
+                    return [self._join(first, index, found, result.confidence)]
+                earlier.append((index, T_found))
         return []
 
     def _join_through_guess(
