@@ -185,9 +185,10 @@ class MergeConfig:
         "(and more than link_max_seen_through_fraction of its value) lies in free space the "
         "other robot saw from its keyframes (only when keyframe poses are given); the joint "
         "merger (pivot) refuses a pair's consistent set of links when it puts more than this "
-        "of the walls near its places there both with the maps rigid and with each wall "
-        "placed by its nearest confident link (no fraction: so placed, the maps' own drift "
-        "is small)",
+        "per link_min_support places it links (at least this) of the walls near its places "
+        "there, both with the maps rigid and with each wall placed by its nearest confident "
+        "link (not a fraction of the value: so placed, the maps' own drift is small, but "
+        "the walls near the places grow with the places)",
         minimum=0.0,
         maximum=1000000.0,
     )
