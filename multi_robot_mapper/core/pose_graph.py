@@ -4,7 +4,9 @@ Nodes are keyframes, each an SE(2) pose ``(x, y, theta)`` in its piece's frame; 
 relative poses ``T_first_second`` measured by scan matching, with an information matrix from
 the match itself (:func:`core.matching.refine.match_information`). Edges between keyframes
 far apart in time (loop closures, joins between pieces) carry a robust kernel (Huber), so
-one wrong closure that got past the checks pulls with a bounded force. Every piece (a part of
+one wrong closure that got past the checks pulls with a bounded force. A :class:`ReachBound`
+is not a measurement but a bound: a keyframe lies within a distance of a point in another's
+frame (the robot's reach across a loss), free inside, a soft wall beyond. Every piece (a part of
 the map started when the robot was lost) has a prior on its first keyframe: pieces float
 freely until a closure joins them (:meth:`PoseGraph.join`).
 
