@@ -205,8 +205,6 @@ def main() -> None:
         rows = [
             r for result in results for r in result if (r["log"], r["robots"]) == (name, robots)
         ]
-        if not rows:
-            continue
         pieces = [r for r in rows if "piece" in r]
         scans = sum(r["total"] for r in rows if "total" in r)
         count = Counter()

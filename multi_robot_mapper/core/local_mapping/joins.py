@@ -10,7 +10,6 @@ placed scan). The younger piece then moves into the older one's frame.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -66,7 +65,6 @@ class PieceJoins(WindowMatcher):
         self._lost_from: dict[int, LostFrom] = {}
         # piece -> where it was lost, until the robot's motion across the loss is bounded
         self._motion_bounds: dict[int, LostFrom] = {}
-        self.motion_bounds = 0  # bounds across a loss added (:meth:`_bound_motions`)
         # piece -> searched joins waiting for a partner: (keyframe, T_other_piece)
         self._join_candidates: dict[int, list[tuple[int, Pose]]] = {}
         # piece -> matches of the piece it was lost from, come back: (keyframe, T_piece_other)
@@ -79,6 +77,11 @@ class PieceJoins(WindowMatcher):
         self._lost_from[piece] = lost_from
         if lost_from.reach is not None:
             self._motion_bounds[piece] = lost_from
+
+    @property
+    def motion_bounds(self) -> int:
+        """Bounds across a loss in the graph (:meth:`_bound_motions`)."""
+        return len(self.graph.bounds)
 
     def lost_from(self, piece: int) -> LostFrom | None:
         """Where ``piece`` started, while it has not joined the piece it was lost from (None:
@@ -142,9 +145,7 @@ class PieceJoins(WindowMatcher):
         than a quarter turn), and a second keyframe whose window shares no scan with the
         first's must put the piece at the same place."""
         config = self.config
-        path = self._path_since_closure.get(piece, 0.0)
-        radius = config.loop_radius + 2.0 * config.keyframe_distance
-        radius += config.loop_radius_growth * path
+        radius = self._join_radius(piece)
         here = self.keyframes.pose(index)
         for other, lost in list(self._lost_from.items()):
             if other == piece or lost.reach is None or self.keyframes.piece(lost.keyframe) != piece:
@@ -169,13 +170,8 @@ class PieceJoins(WindowMatcher):
                     continue
                 T_found = self._piece_frame(first, index, found)
                 earlier = self._return_candidates.setdefault(other, [])
-                second_opinion = self._second_opinion(index, apart=True)
-                if any(
-                    second_opinion(k) and close_to(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE)
-                    for k, T in earlier
-                ):
+                if self._seconded(earlier, index, T_found, apart=True):
                     return [self._join(first, index, found, result.confidence)]
-                earlier.append((index, T_found))
         return []
 
     def _join_through_guess(
@@ -185,9 +181,7 @@ class PieceJoins(WindowMatcher):
         near it), where the guess puts this piece at ``T_other_piece``."""
         config = self.config
         other_piece = self.keyframes.piece(keyframe)
-        path = self._path_since_closure.get(piece, 0.0)
-        radius = config.loop_radius + 2.0 * config.keyframe_distance
-        radius += config.loop_radius_growth * path
+        radius = self._join_radius(piece)
         pairs: list[tuple[int, int]] = []  # (keyframe of this piece, of the other)
         young = len(self.keyframes.members(piece))
         if 1 < young <= _WINDOW and depth == 0:
@@ -240,23 +234,40 @@ class PieceJoins(WindowMatcher):
             # Away from the guess, a second opinion shares no scan with the first: neighbouring
             # keyframes' windows overlap, and see a corridor slid the same way (fhw: a join
             # 0.96 m off at 0.96).
-            second_opinion = self._second_opinion(mine, apart=(mine, first) in bounded)
-            if not any(
-                second_opinion(k) and close_to(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE)
-                for k, T in earlier
-            ):
-                earlier.append((mine, T_found))
-                continue
-            return [self._join(first, mine, found, result.confidence)]
+            if self._seconded(earlier, mine, T_found, apart=(mine, first) in bounded):
+                return [self._join(first, mine, found, result.confidence)]
         return []
 
-    def _second_opinion(self, mine: int, apart: bool) -> Callable[[int], bool]:
-        """Which keyframes' matches are a second opinion on keyframe ``mine``'s: any other
-        keyframe, or with ``apart`` one whose window shares no scan with ``mine``'s."""
-        if not apart:
-            return lambda other: other != mine
-        window = set(self._window_members(mine).tolist())
-        return lambda other: window.isdisjoint(self._window_members(other).tolist())
+    def _join_radius(self, piece: int) -> float:
+        """How far from where a guess puts a keyframe of ``piece`` its joins look: the loop
+        closures' region, two keyframe steps wider."""
+        config = self.config
+        path = self._path_since_closure.get(piece, 0.0)
+        return (
+            config.loop_radius + 2.0 * config.keyframe_distance + config.loop_radius_growth * path
+        )
+
+    def _seconded(
+        self, earlier: list[tuple[int, Pose]], mine: int, T_found: Pose, apart: bool
+    ) -> bool:
+        """Does a match in ``earlier`` (keyframe, piece frame) from a second opinion on
+        keyframe ``mine`` put the piece at ``T_found`` too? A second opinion is any other
+        keyframe, or with ``apart`` one whose window shares no scan with ``mine``'s. If none
+        does, this match waits in ``earlier`` for one."""
+        window = set(self._window_members(mine).tolist()) if apart else set()
+
+        def second_opinion(other: int) -> bool:
+            if apart:
+                return window.isdisjoint(self._window_members(other).tolist())
+            return other != mine
+
+        if any(
+            second_opinion(k) and close_to(T, T_found, RIGHT_DISTANCE, RIGHT_ANGLE)
+            for k, T in earlier
+        ):
+            return True
+        earlier.append((mine, T_found))
+        return False
 
     def _piece_frame(self, first: int, mine: int, T_first_mine: Pose) -> Pose:
         """The frame of keyframe ``mine``'s piece in keyframe ``first``'s piece, by a match
@@ -368,4 +379,3 @@ class PieceJoins(WindowMatcher):
             self.graph.add_bound(
                 ReachBound(lost.last_keyframe, piece, (x, y), lost.reach, RIGHT_DISTANCE)
             )
-            self.motion_bounds += 1
