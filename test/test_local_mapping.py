@@ -481,6 +481,47 @@ def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
         assert len(set(local.backend.map.pieces.tolist())) == 2
 
 
+@pytest.mark.parametrize("reach_known", [True, False])
+def test_a_piece_joins_through_a_chain_of_losses_where_the_robot_can_have_driven(
+    monkeypatch, reach_known: bool
+) -> None:  # type: ignore[no-untyped-def]
+    # A person blocks the laser at scan 25 (a piece of one scan that matches nothing) and the
+    # robot is lost again at scan 26; both guesses are 4 m and 30 degrees off, so the third
+    # piece's guess, composed through the second, is 8 m off. The robot's motion still bounds
+    # it: its first scan lies within two reaches, plus the second piece's extent (none), of
+    # the last scan placed in the first piece. Searched there, the third piece joins the first
+    # and the map is whole but for the blocked scan. Without a known reach it stays apart.
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
+    blocked = 25
+    scans = [_stranger(k) if k == blocked else s for k, s in enumerate(scans)]
+    original_add = loop_closer.LoopCloser.add_keyframe
+
+    def wrong_guess(self, scan, pose, piece, odometry, lost_from=None):  # type: ignore[no-untyped-def]
+        if lost_from is not None:
+            x, y, theta = lost_from.T_keyframe_piece
+            lost_from = lost_from._replace(
+                T_keyframe_piece=(x + 4.0, y, theta + np.radians(30.0)),
+                reach=lost_from.reach if reach_known else None,
+            )
+        return original_add(self, scan, pose, piece, odometry, lost_from)
+
+    monkeypatch.setattr(loop_closer.LoopCloser, "add_keyframe", wrong_guess)
+    local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {blocked, blocked + 1})
+    assert local.pieces_started == 2
+    pieces = local.backend.map.pieces
+    kept = [k for k in range(len(stamps)) if k != blocked]
+    if reach_known:
+        assert [c.kind for c in local.closures].count("join") == 1
+        assert set(pieces.tolist()) == {0, updates[blocked].piece}
+        times, poses = local.trajectory(0)
+        np.testing.assert_array_equal(times, stamps[kept])
+        truth_at = {float(stamps[k]): np.asarray(_relative(truth[0], truth[k])) for k in kept}
+        assert _ate(times, poses, truth_at) < 0.02
+    else:
+        assert [c.kind for c in local.closures].count("join") == 0
+        assert len(set(pieces.tolist())) == 3
+
+
 @pytest.mark.usefixtures("as_matched")
 @pytest.mark.parametrize(
     ("search_finds", "integrated"),

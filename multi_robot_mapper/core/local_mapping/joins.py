@@ -5,7 +5,8 @@ best match, right or not, is the guess of where the piece lies (:class:`LostFrom
 keyframe of the piece is matched with the keyframes of the piece the robot was lost from:
 near where the guess puts it, and on the ring of keyframes the robot's motion allows whatever
 the guess (the piece is rigid, and its first scan lies within the robot's reach of its last
-placed scan). The younger piece then moves into the older one's frame.
+placed scan, or of the last scan placed before a chain of losses, :class:`LastPlaced`). The
+younger piece then moves into the older one's frame.
 """
 
 from __future__ import annotations
@@ -27,6 +28,17 @@ from multi_robot_mapper.core.local_mapping.windows import (
 )
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.pose_graph import ReachBound
+
+
+class LastPlaced(NamedTuple):
+    """The robot's last placed scan before a piece, in another piece's frame (``pose``), or
+    the motion from there to the piece's first scan; ``reach``: how far apart the two can be
+    (m: the reach across each loss between, plus how far the robot got in each piece between,
+    from its first scan to its last placed one); ``losses``: how many losses lie between."""
+
+    pose: Pose
+    reach: float
+    losses: int
 
 
 class LostFrom(NamedTuple):
@@ -65,12 +77,14 @@ class PieceJoins(WindowMatcher):
         self._lost_from: dict[int, LostFrom] = {}
         # piece -> where it was lost, until the robot's motion across the loss is bounded
         self._motion_bounds: dict[int, LostFrom] = {}
-        # piece -> searched joins waiting for a partner: (keyframe, T_other_piece)
-        self._join_candidates: dict[int, list[tuple[int, Pose]]] = {}
+        # (piece, other piece) -> searched joins waiting for a partner: (keyframe,
+        # T_other_piece)
+        self._join_candidates: dict[tuple[int, int], list[tuple[int, Pose]]] = {}
         # piece -> matches of the piece it was lost from, come back: (keyframe, T_piece_other)
         self._return_candidates: dict[int, list[tuple[int, Pose]]] = {}
-        # piece -> how far along the ring of reachable keyframes its joins have tried
-        self._ring_cursor: dict[int, int] = {}
+        # (piece, other piece) -> how far along the ring of the other's reachable keyframes
+        # the piece's joins have tried
+        self._ring_cursor: dict[tuple[int, int], int] = {}
 
     def _lost(self, piece: int, lost_from: LostFrom) -> None:
         """``piece`` was started when the robot was lost (``lost_from``: where)."""
@@ -106,11 +120,15 @@ class PieceJoins(WindowMatcher):
         waits, within a region around the guess (the robot does not jump: its last placed
         scan was near), for a second one from another keyframe that puts the piece at the
         same place (any heading: a guess that was not confident may be turned round). Where
-        the guess is wrong, the piece the robot was lost from is also searched on the ring
-        of keyframes its motion allows (:meth:`_reachable_candidates`): a match there must
-        put the piece's first scan within the robot's reach of its last placed scan, and
-        waits for a second one from a keyframe whose window shares no scan with its own.
-        The younger piece then moves into the older one's frame."""
+        the guess is wrong, each piece the robot was lost from (directly or through a chain
+        of losses) is also searched on the ring of keyframes its motion allows
+        (:meth:`_reachable_candidates`). A match away from the guess, on the ring or not,
+        must put the piece's first scan within the robot's reach of its last placed scan
+        (through a chain: the reaches across each loss plus how far the robot got in each
+        piece between, :meth:`_last_placed_scan`; a chain's composed guess is as wrong as
+        its guesses together, csail 4 robot4: 8 m off where a match 5 cm from the truth was
+        refused), and waits for a second one from a keyframe whose window shares no scan
+        with its own. The younger piece then moves into the older one's frame."""
         piece = self.keyframes.piece(index)
         # The pieces the robot was lost from, one after the other (a piece of one scan, lost
         # again at once, never grows to join by itself): each with the guess of this piece's
@@ -163,8 +181,8 @@ class PieceJoins(WindowMatcher):
                 found = pose_of_match(result.T_1_2)
                 motion = self._motion_since_lost(other, index, first, se2.between(found, _ORIGIN))
                 if motion is None or (
-                    np.hypot(motion[0], motion[1]) > lost.reach + radius
-                    or abs(motion[2]) > _TURN_BETWEEN_SCANS
+                    np.hypot(*motion.pose[:2]) > motion.reach + radius
+                    or (motion.losses == 1 and abs(motion.pose[2]) > _TURN_BETWEEN_SCANS)
                 ):
                     self._refuse("beyond the robot's reach (join)")
                     continue
@@ -194,7 +212,7 @@ class PieceJoins(WindowMatcher):
         near = self.keyframes.near(guess, other_piece, radius)
         pairs += [(index, int(k)) for k in near[: config.loop_candidates] if index != piece]
         # Where the guess is wrong, the robot's motion still bounds where the piece lies.
-        ring = self._reachable_candidates(index, piece, other_piece, radius) if depth == 0 else []
+        ring = self._reachable_candidates(index, piece, other_piece, radius)
         bounded = [(index, k) for k in ring if (index, k) not in pairs]
         for mine, first in pairs + bounded:
             predicted = se2.between(
@@ -206,35 +224,41 @@ class PieceJoins(WindowMatcher):
             if result.confidence < config.loop_confidence:
                 self._refuse("confidence (join)")
                 continue
-            motion = self._motion_since_lost(piece, first, mine, found) if depth == 0 else None
-            if motion is not None and abs(motion[2]) > _TURN_BETWEEN_SCANS:
+            motion = self._motion_since_lost(piece, first, mine, found)
+            if (
+                motion is not None
+                and motion.losses == 1
+                and abs(motion.pose[2]) > _TURN_BETWEEN_SCANS
+            ):
                 self._refuse("turned round from the robot's last pose (join)")
                 continue
-            if (mine, first) in bounded:
-                # Found away from the guess: the piece's first scan must lie where the robot
-                # can have driven since its last placed scan, and a second keyframe's match
-                # must put the piece at the same place (below).
-                reach = self._lost_from[piece].reach
-                if motion is None or reach is None or np.hypot(motion[0], motion[1]) > reach:
-                    self._refuse("beyond the robot's reach (join)")
-                    continue
-            elif mine != piece and close_to(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE):
+            reachable = motion is not None and np.hypot(*motion.pose[:2]) <= motion.reach
+            # Any heading near the guess where the robot's last placed scan rules out a half
+            # turn (above); through a chain of pieces nothing does, and the chained guess must.
+            near_guess = (mine, first) not in bounded and close_to(
+                found, predicted, radius, np.pi if depth == 0 else _TURN_BETWEEN_SCANS
+            )
+            if (
+                mine != piece
+                and near_guess
+                and close_to(found, predicted, RIGHT_DISTANCE, RIGHT_ANGLE)
+            ):
                 # The guess came from the piece's first scan: only another keyframe's match
                 # is a second opinion.
                 return [self._join(first, mine, found, result.confidence)]
-            # Any heading where the robot's last placed scan rules out a half turn (above);
-            # through a chain of pieces nothing does, and the chained guess must.
-            elif not close_to(
-                found, predicted, radius, np.pi if depth == 0 else _TURN_BETWEEN_SCANS
-            ):
-                self._refuse("far from the guess (join)")
+            if not near_guess and not reachable:
+                # Found away from the guess (on the ring, or through a chain of pieces lost
+                # one after the other, whose guesses compose their errors): the piece's first
+                # scan must lie where the robot can have driven since its last placed scan,
+                # and a second keyframe's match must put the piece at the same place (below).
+                self._refuse("beyond the robot's reach (join)")
                 continue
             T_found = self._piece_frame(first, mine, found)
-            earlier = self._join_candidates.setdefault(piece, [])
+            earlier = self._join_candidates.setdefault((piece, other_piece), [])
             # Away from the guess, a second opinion shares no scan with the first: neighbouring
             # keyframes' windows overlap, and see a corridor slid the same way (fhw: a join
             # 0.96 m off at 0.96).
-            if self._seconded(earlier, mine, T_found, apart=(mine, first) in bounded):
+            if self._seconded(earlier, mine, T_found, apart=not near_guess):
                 return [self._join(first, mine, found, result.confidence)]
         return []
 
@@ -275,43 +299,54 @@ class PieceJoins(WindowMatcher):
         T_other_mine = se2.compose(self.keyframes.pose(first), T_first_mine)
         return se2.compose(T_other_mine, se2.between(self.keyframes.pose(mine), _ORIGIN))
 
-    def _last_placed_scan(self, piece: int) -> tuple[int, Pose] | None:
-        """The piece that held the robot's last placed scan before ``piece``, and where that
-        scan was in its frame (None: ``piece`` was not started by a loss)."""
-        lost = self._lost_from.get(piece)
-        if lost is None:
-            return None
-        pose = se2.compose(self.keyframes.pose(lost.last_keyframe), lost.T_last_keyframe_scan)
-        return self.keyframes.piece(lost.last_keyframe), pose
+    def _last_placed_scan(self, piece: int, other: int) -> LastPlaced | None:
+        """Where the robot's last scan placed in ``other`` before ``piece`` was, followed back
+        along the chain of losses (a piece lost from a piece lost from ``other`` ...; up to
+        ``_CHAIN`` losses). None: no such chain, or no speed was known at one of its losses."""
+        reach, current = 0.0, piece
+        for losses in range(1, _CHAIN + 1):
+            lost = self._lost_from.get(current)
+            if lost is None or lost.reach is None:
+                return None
+            reach += lost.reach
+            last = se2.compose(self.keyframes.pose(lost.last_keyframe), lost.T_last_keyframe_scan)
+            current = self.keyframes.piece(lost.last_keyframe)
+            if current == other:
+                return LastPlaced(last, reach, losses)
+            # From the first scan of the piece between to its last placed one.
+            start = self.keyframes.pose(current)
+            reach += float(np.hypot(last[0] - start[0], last[1] - start[1]))
+        return None
 
     def _motion_since_lost(
         self, piece: int, first: int, mine: int, T_first_mine: Pose
-    ) -> Pose | None:
-        """The robot's motion from its last placed scan to the first scan of ``piece`` if this
-        match (keyframe ``mine`` of the piece placed in keyframe ``first``'s frame) joined the
-        pieces; None when the last placed scan is not in ``first``'s piece (nothing to
-        compare)."""
-        last = self._last_placed_scan(piece)
-        if last is None or last[0] != self.keyframes.piece(first):
+    ) -> LastPlaced | None:
+        """The robot's motion from its last placed scan in ``first``'s piece to the first scan
+        of ``piece`` if this match (keyframe ``mine`` of the piece placed in keyframe
+        ``first``'s frame) joined the pieces (:meth:`_last_placed_scan`, with the motion in
+        place of the scan's pose); None when the robot was not lost from ``first``'s piece
+        into ``piece`` (nothing to compare)."""
+        last = self._last_placed_scan(piece, self.keyframes.piece(first))
+        if last is None:
             return None
         # The piece's first scan is the origin of its frame.
         T_other_piece = self._piece_frame(first, mine, T_first_mine)
         first_scan = se2.compose(T_other_piece, self.keyframes.pose(piece))
-        return se2.between(last[1], first_scan)
+        return last._replace(pose=se2.between(last.pose, first_scan))
 
     def _reachable_candidates(self, index: int, piece: int, other: int, radius: float) -> list[int]:
-        """Keyframes of ``other`` (the piece the robot was last placed in) that keyframe
-        ``index`` of ``piece`` can lie near, whatever the guess, up to ``loop_candidates``.
-        The piece is rigid and its first scan lies within the robot's reach of its last
-        placed scan, so the new keyframe lies at its own distance from the piece's first scan
-        from there, give or take that reach; a window matches within ``radius``. The ring is
-        walked a few keyframes per new keyframe (a window holds ``_WINDOW``), so a piece that
-        grows tries the whole ring over time."""
-        last = self._last_placed_scan(piece)
-        reach = self._lost_from[piece].reach if last is not None else None
-        if last is None or reach is None or last[0] != other or index == piece:
+        """Keyframes of ``other`` (a piece the robot was lost from before ``piece``: one loss
+        or a chain of them) that keyframe ``index`` of ``piece`` can lie near, whatever the
+        guess, up to ``loop_candidates``. The piece is rigid and its first scan lies within the
+        robot's reach of its last placed scan (:meth:`_last_placed_scan`), so the new keyframe
+        lies at its own distance from the piece's first scan from there, give or take that
+        reach; a window matches within ``radius``. The ring is walked a few keyframes per new
+        keyframe (a window holds ``_WINDOW``), so a piece that grows tries the whole ring over
+        time."""
+        last = self._last_placed_scan(piece, other)
+        if last is None or index == piece:
             return []
-        last_scan = last[1]
+        last_scan, reach, _ = last
         here, origin = self.keyframes.pose(index), self.keyframes.pose(piece)
         offset = float(np.hypot(here[0] - origin[0], here[1] - origin[1]))
         members = self.keyframes.members(other)
@@ -320,9 +355,9 @@ class PieceJoins(WindowMatcher):
         ring = members[np.abs(distance - offset) <= reach + radius]
         if len(ring) == 0:
             return []
-        start = self._ring_cursor.get(piece, 0)
+        start = self._ring_cursor.get((piece, other), 0)
         steps = start + _WINDOW * np.arange(self.config.loop_candidates)
-        self._ring_cursor[piece] = start + _WINDOW * self.config.loop_candidates
+        self._ring_cursor[(piece, other)] = start + _WINDOW * self.config.loop_candidates
         return sorted({int(ring[k % len(ring)]) for k in steps})
 
     def _join(
