@@ -57,8 +57,11 @@ class LostFrom(NamedTuple):
 
 
 # Pieces followed back along the chain of losses when joining (a piece lost from a piece
-# lost from a third ...).
-_CHAIN = 3
+# lost from a third ...): on the sparse logs a robot is lost up to five times in six scans
+# (fhw 4 robot1, scans 57-62, pieces of one or two scans between), and only the reach summed
+# along the chain bounds where the piece before them lies. Each piece of the chain costs its
+# window matches.
+_CHAIN = 5
 # A robot turns less than a quarter turn between two consecutive scans (at most 79 deg on the
 # shared logs, whose scans are up to 1.5 m apart): a join that turns a piece's first scan more
 # than this from the robot's last placed scan is the half-turned look-alike of a symmetric
