@@ -79,3 +79,27 @@ def test_a_match_wrong_only_by_a_turned_reference_is_told_apart(
     assert judge.verdict("robot1", first.stamp, "robot1", after.stamp, motion) == "right"
     turned = (motion[0], motion[1], motion[2] + np.radians(15.0))
     assert judge.verdict("robot1", first.stamp, "robot1", after.stamp, turned) == "wrong"
+
+
+@pytest.mark.parametrize("length", [2, 3])
+def test_a_stretch_of_turned_references_is_seen_past(
+    reference_check: ModuleType, drive: RobotRecording, length: int
+) -> None:
+    # The reference of ``length`` consecutive scans turned together (csail: three scans, 11-12
+    # deg): a match right by the scans is wrong by the reference, and the scans either side of
+    # the stretch tell it apart; a match wrong by the scans stays wrong.
+    stretch = range(MIDDLE, MIDDLE + length)
+    turned = drive
+    for index in stretch:
+        turned = _turned(turned, index, np.radians(12.0))
+    judge = reference_check.ReferenceJudge({"robot1": turned})
+    first = drive.ground_truth[0]
+    for index in stretch:
+        scan = drive.ground_truth[index]
+        true_motion = se2.between(first.pose, scan.pose)
+        assert judge.verdict("robot1", first.stamp, "robot1", scan.stamp, true_motion) == (
+            "reference"
+        )
+        x, y, theta = true_motion
+        wrong_motion = (x + 0.5, y, theta)
+        assert judge.verdict("robot1", first.stamp, "robot1", scan.stamp, wrong_motion) == "wrong"
