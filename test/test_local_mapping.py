@@ -447,17 +447,9 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
         assert _ate_of_one_map(local, stamps, truth) > 0.1
 
 
-@pytest.mark.parametrize("reach_known", [True, False])
-def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
-    monkeypatch, reach_known: bool
-) -> None:  # type: ignore[no-untyped-def]
-    # The robot is lost once and the front end's guess of the new piece is 4 m and 30 degrees
-    # off, so nothing is found near it. The robot's motion still bounds the piece: its first
-    # scan lies within the robot's reach of its last placed scan. Searched on the ring of the
-    # old piece's keyframes that this allows, two keyframes of the new piece find the same
-    # placement and the piece joins the map where it belongs. Without a known reach (no
-    # speed yet) only the guess is searched, and the piece stays apart.
-    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
+def _guessing_wrong(monkeypatch: pytest.MonkeyPatch, reach_known: bool) -> None:
+    """Every loss's guess made 4 m and 30 degrees off (and its reach unknown, unless
+    ``reach_known``)."""
     original_add = loop_closer.LoopCloser.add_keyframe
 
     def wrong_guess(self, scan, pose, piece, odometry, lost_from=None):  # type: ignore[no-untyped-def]
@@ -470,6 +462,20 @@ def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
         return original_add(self, scan, pose, piece, odometry, lost_from)
 
     monkeypatch.setattr(loop_closer.LoopCloser, "add_keyframe", wrong_guess)
+
+
+@pytest.mark.parametrize("reach_known", [True, False])
+def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
+    monkeypatch, reach_known: bool
+) -> None:  # type: ignore[no-untyped-def]
+    # The robot is lost once and the front end's guess of the new piece is 4 m and 30 degrees
+    # off, so nothing is found near it. The robot's motion still bounds the piece: its first
+    # scan lies within the robot's reach of its last placed scan. Searched on the ring of the
+    # old piece's keyframes that this allows, two keyframes of the new piece find the same
+    # placement and the piece joins the map where it belongs. Without a known reach (no
+    # speed yet) only the guess is searched, and the piece stays apart.
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
+    _guessing_wrong(monkeypatch, reach_known)
     local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
     assert local.pieces_started == 1
     joins = [c for c in local.closures if c.kind == "join"]
@@ -494,18 +500,7 @@ def test_a_piece_joins_through_a_chain_of_losses_where_the_robot_can_have_driven
     stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
     blocked = 25
     scans = [_stranger(k) if k == blocked else s for k, s in enumerate(scans)]
-    original_add = loop_closer.LoopCloser.add_keyframe
-
-    def wrong_guess(self, scan, pose, piece, odometry, lost_from=None):  # type: ignore[no-untyped-def]
-        if lost_from is not None:
-            x, y, theta = lost_from.T_keyframe_piece
-            lost_from = lost_from._replace(
-                T_keyframe_piece=(x + 4.0, y, theta + np.radians(30.0)),
-                reach=lost_from.reach if reach_known else None,
-            )
-        return original_add(self, scan, pose, piece, odometry, lost_from)
-
-    monkeypatch.setattr(loop_closer.LoopCloser, "add_keyframe", wrong_guess)
+    _guessing_wrong(monkeypatch, reach_known)
     local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {blocked, blocked + 1})
     assert local.pieces_started == 2
     pieces = local.backend.map.pieces
