@@ -40,6 +40,15 @@ class LastPlaced(NamedTuple):
     reach: float
     losses: int
 
+    def within(self, slack: float = 0.0) -> bool:
+        """Is the motion within the reach (plus ``slack``, m)?"""
+        return bool(np.hypot(self.pose[0], self.pose[1]) <= self.reach + slack)
+
+    def turned_round(self) -> bool:
+        """Does the motion turn the robot round across one loss (more than
+        ``_TURN_BETWEEN_SCANS``)? Across two or more the robot may have turned further."""
+        return self.losses == 1 and abs(self.pose[2]) > _TURN_BETWEEN_SCANS
+
 
 class LostFrom(NamedTuple):
     """Where a piece started: the front end's guess of its origin (the keyframe the best match
@@ -183,10 +192,7 @@ class PieceJoins(WindowMatcher):
                     continue
                 found = pose_of_match(result.T_1_2)
                 motion = self._motion_since_lost(other, index, first, se2.between(found, _ORIGIN))
-                if motion is None or (
-                    np.hypot(*motion.pose[:2]) > motion.reach + radius
-                    or (motion.losses == 1 and abs(motion.pose[2]) > _TURN_BETWEEN_SCANS)
-                ):
+                if motion is None or not motion.within(radius) or motion.turned_round():
                     self._refuse("beyond the robot's reach (join)")
                     continue
                 T_found = self._piece_frame(first, index, found)
@@ -228,14 +234,10 @@ class PieceJoins(WindowMatcher):
                 self._refuse("confidence (join)")
                 continue
             motion = self._motion_since_lost(piece, first, mine, found)
-            if (
-                motion is not None
-                and motion.losses == 1
-                and abs(motion.pose[2]) > _TURN_BETWEEN_SCANS
-            ):
+            if motion is not None and motion.turned_round():
                 self._refuse("turned round from the robot's last pose (join)")
                 continue
-            reachable = motion is not None and np.hypot(*motion.pose[:2]) <= motion.reach
+            reachable = motion is not None and motion.within()
             # Any heading near the guess where the robot's last placed scan rules out a half
             # turn (above); through a chain of pieces nothing does, and the chained guess must.
             near_guess = (mine, first) not in bounded and close_to(
