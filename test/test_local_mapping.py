@@ -487,6 +487,93 @@ def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
         assert len(set(local.backend.map.pieces.tolist())) == 2
 
 
+def _joining_far_from_the_loss(monkeypatch: pytest.MonkeyPatch, keyframes: int = 40) -> None:
+    """The piece a robot was lost into matches nothing of the piece before it until it has
+    ``keyframes`` keyframes (the place of the loss is hard to match): it joins where the
+    robot comes back, far from the loss."""
+    original = piece_joins.PieceJoins._join_through_guess
+
+    def held(self, index, piece, keyframe, T_other_piece, depth):  # type: ignore[no-untyped-def]
+        if index - piece < keyframes:
+            return []
+        return original(self, index, piece, keyframe, T_other_piece, depth)
+
+    monkeypatch.setattr(piece_joins.PieceJoins, "_join_through_guess", held)
+
+
+@pytest.mark.parametrize("heading", [True, False])
+def test_the_heading_across_a_loss_closes_the_loop_where_the_join_is_far_from_it(
+    monkeypatch, heading: bool
+) -> None:  # type: ignore[no-untyped-def]
+    # Every match the front end accepts turns 1 degree per metre too far. The robot is lost
+    # at scan 25, and its piece joins the map only where it comes back to its start, a lap
+    # later: the loop is open at the loss, where nothing but the reach bound ties the two
+    # sides. The front end's guess across the loss (its best match, not confident enough to
+    # integrate) gives the graph its heading there: an edge with the heading information of
+    # the two scans at the guess and none in position (a wrong guess is mostly a corridor
+    # slid along itself). With it the loop closes and the bias is straightened out.
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=1.2, seed=3)
+
+    def biased(*args: object, **kwargs: object) -> MatchResult:
+        result = integrate(*args, **kwargs)  # type: ignore[arg-type]
+        T = result.T_1_2.copy()
+        T[0] += np.radians(1.0) * float(np.hypot(T[1], T[2]))
+        return dataclasses.replace(result, T_1_2=T)
+
+    monkeypatch.setattr(attempts, "integrate", biased)
+    _joining_far_from_the_loss(monkeypatch)
+    if not heading:
+        monkeypatch.setattr(loop_closer.LoopCloser, "_bridge_headings", lambda self: [])
+    local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
+    closer = local.backend.closer
+    (join,) = [c for c in local.closures if c.kind == "join"]
+    assert join.second - updates[25].piece >= 40  # found where the robot came back
+    if heading:
+        (bridge,) = closer.headings
+        assert (bridge.second, bridge.kind) == (updates[25].piece, "heading")
+        (edge,) = [
+            e
+            for e in closer.graph.edges.values()
+            if (e.first, e.second, e.T_first_second)
+            == (bridge.first, bridge.second, bridge.T_first_second)
+        ]
+        assert np.all(np.diag(edge.information)[:2] <= 1e-6)
+        assert edge.information[2, 2] > 1.0 / np.radians(5.0) ** 2
+        assert _ate_of_one_map(local, stamps, truth) < 0.03
+    else:
+        assert _ate_of_one_map(local, stamps, truth) > 0.04
+
+
+def test_a_heading_across_a_loss_that_disagrees_with_the_joined_map_is_refused(
+    monkeypatch,
+) -> None:  # type: ignore[no-untyped-def]
+    # The guess is 4 m and 30 degrees off; the piece joins a lap later, where the robot comes
+    # back (on the ring its motion allows). The joined map knows the heading across the loss
+    # far better than 30 degrees, so the guess's heading is refused and the map is right.
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=1.2, seed=3)
+    _joining_far_from_the_loss(monkeypatch)
+    _guessing_wrong(monkeypatch, reach_known=True)
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
+    closer = local.backend.closer
+    assert [c.kind for c in local.closures].count("join") == 1
+    assert closer.headings == []
+    assert closer.refused["heading far from the graph's (loss)"] == 1
+    assert _ate_of_one_map(local, stamps, truth) < 0.02
+
+
+def test_a_loss_its_join_spans_gets_no_second_heading(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # The piece joins at the loss itself (its first keyframes' window against the window of
+    # the keyframe the robot was lost near): that join's edge already closes the loss, from
+    # the same scans as the guess, so the guess's heading is not added on top.
+    stamps, scans, truth = _looped_drive(rate=4.0, laps=0.5, seed=4)
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
+    closer = local.backend.closer
+    assert [c.kind for c in local.closures].count("join") == 1
+    assert closer.headings == []
+    assert closer.refused["loss spanned by its join (heading)"] == 1
+    assert _ate_of_one_map(local, stamps, truth) < 0.02
+
+
 @pytest.mark.parametrize("reach_known", [True, False])
 def test_a_piece_joins_through_a_chain_of_losses_where_the_robot_can_have_driven(
     monkeypatch, reach_known: bool

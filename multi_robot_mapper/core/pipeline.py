@@ -259,6 +259,16 @@ def _run_local(
                 }
                 for c in mapper.closures
             ],
+            # headings across losses (the front end's guess's heading; its position unused)
+            "headings": [
+                {
+                    "first_stamp": scans[c.first].stamp,
+                    "second_stamp": scans[c.second].stamp,
+                    "T_first_second": [round(v, 6) for v in c.T_first_second],
+                    "confidence": round(c.confidence, 4),
+                }
+                for c in backend.closer.headings
+            ],
             "front_end_stage_s": {k: round(v, 4) for k, v in mapper.stage_seconds.items()},
         }
 

@@ -56,13 +56,15 @@ class LostFrom(NamedTuple):
     placed scan was (its keyframe and T_keyframe_scan): the piece's first scan is the next
     scan, so the robot was there one scan interval before. ``reach``: how far it can have
     driven in that interval (m: the front end's 95th-percentile speed times the interval, plus
-    the correctness tolerance; None before the front end knows a speed)."""
+    the correctness tolerance; None before the front end knows a speed). ``confidence``: the
+    best match's."""
 
     keyframe: int
     T_keyframe_piece: Pose
     last_keyframe: int
     T_last_keyframe_scan: Pose
     reach: float | None = None
+    confidence: float = 0.0
 
 
 # Pieces followed back along the chain of losses when joining (a piece lost from a piece
@@ -97,10 +99,14 @@ class PieceJoins(WindowMatcher):
         # (piece, other piece) -> how far along the ring of the other's reachable keyframes
         # the piece's joins have tried
         self._ring_cursor: dict[tuple[int, int], int] = {}
+        # piece -> where it was lost, until its heading across the loss is tested against
+        # the graph (once the two sides are one piece: LoopCloser._bridge_headings)
+        self._unbridged: dict[int, LostFrom] = {}
 
     def _lost(self, piece: int, lost_from: LostFrom) -> None:
         """``piece`` was started when the robot was lost (``lost_from``: where)."""
         self._lost_from[piece] = lost_from
+        self._unbridged[piece] = lost_from
         if lost_from.reach is not None:
             self._motion_bounds[piece] = lost_from
 

@@ -209,6 +209,7 @@ class LocalMapper:
                 last.anchor.keyframe,
                 last.anchor.T_keyframe_scan,
                 None if top_speed is None else reach_in(top_speed, dt),
+                chosen.confidence,
             )
             return self._start_piece(stamp, new, view, "lost: no confident match", lost_from)
         pose = chosen.pose
