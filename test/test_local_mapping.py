@@ -247,19 +247,21 @@ def _looped_drive(rate: float, laps: float, seed: int) -> tuple[np.ndarray, list
     return 1000.0 + np.arange(len(poses)) / rate, scans, poses
 
 
+def _biased(*args: object, **kwargs: object) -> MatchResult:
+    """INTEGRATE turning 1 degree per metre of motion too far."""
+    result = integrate(*args, **kwargs)  # type: ignore[arg-type]
+    T = result.T_1_2.copy()
+    T[0] += np.radians(1.0) * float(np.hypot(T[1], T[2]))
+    return dataclasses.replace(result, T_1_2=T)
+
+
 def test_a_heading_bias_is_straightened_by_loop_closures(monkeypatch) -> None:  # type: ignore[no-untyped-def]
     # Every match the front end accepts turns 1 degree per metre of motion too far: the map
     # bends by tens of degrees over a lap. Driving the office round twice, the back end (its
     # local edges and loop closures, matched without the bias) pulls it straight again.
     stamps, scans, truth = _looped_drive(rate=4.0, laps=2.0, seed=3)
 
-    def biased(*args: object, **kwargs: object) -> MatchResult:
-        result = integrate(*args, **kwargs)  # type: ignore[arg-type]
-        T = result.T_1_2.copy()
-        T[0] += np.radians(1.0) * float(np.hypot(T[1], T[2]))
-        return dataclasses.replace(result, T_1_2=T)
-
-    monkeypatch.setattr(attempts, "integrate", biased)
+    monkeypatch.setattr(attempts, "integrate", _biased)
     local = _mapped(stamps, scans)
     assert local.pieces_started == 0
     assert len(local.closures) >= 10
@@ -269,7 +271,7 @@ def test_a_heading_bias_is_straightened_by_loop_closures(monkeypatch) -> None:  
     }
     assert _ate(times, poses, truth_at) < 0.05
     # Without the back end's edges the same bias bends the map by metres.
-    monkeypatch.setattr(windows, "integrate", biased)
+    monkeypatch.setattr(windows, "integrate", _biased)
     unclosed = LocalMapper(
         dataclasses.replace(LocalMapperConfig(), loop_candidates=0, local_edges=0)
     )
@@ -514,13 +516,7 @@ def test_the_heading_across_a_loss_closes_the_loop_where_the_join_is_far_from_it
     # slid along itself). With it the loop closes and the bias is straightened out.
     stamps, scans, truth = _looped_drive(rate=4.0, laps=1.2, seed=3)
 
-    def biased(*args: object, **kwargs: object) -> MatchResult:
-        result = integrate(*args, **kwargs)  # type: ignore[arg-type]
-        T = result.T_1_2.copy()
-        T[0] += np.radians(1.0) * float(np.hypot(T[1], T[2]))
-        return dataclasses.replace(result, T_1_2=T)
-
-    monkeypatch.setattr(attempts, "integrate", biased)
+    monkeypatch.setattr(attempts, "integrate", _biased)
     _joining_far_from_the_loss(monkeypatch)
     if not heading:
         monkeypatch.setattr(loop_closer.LoopCloser, "_bridge_headings", lambda self: [])
