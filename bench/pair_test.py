@@ -35,6 +35,7 @@ from pathlib import Path  # noqa: E402
 from typing import TextIO  # noqa: E402
 
 import numpy as np  # noqa: E402
+from reference_check import ReferenceJudge  # noqa: E402
 
 from multi_robot_mapper.cli.common import add_set_option  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
@@ -44,6 +45,7 @@ from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: 
 from multi_robot_mapper.core.local_mapping import LocalMapperConfig  # noqa: E402
 from multi_robot_mapper.core.matching import HEURISTICS, IntegrateConfig, integrate  # noqa: E402
 from multi_robot_mapper.core.scan import LaserScanData  # noqa: E402
+from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
@@ -85,6 +87,10 @@ class Row:
     # these pairs: the held-out figures come from bench/fit_confidence.py)
     confident_precision: float = float("nan")
     confident_recall: float = float("nan")
+    # confident pairs wrong by the reference but right once the reference of their scans is
+    # replaced by the pose the scans either side agree on (reference_check.ReferenceJudge)
+    confident_wrong_by_reference: int = 0
+    confident_precision_judged: float = float("nan")
 
 
 def load_log(name: str) -> Log | None:
@@ -116,6 +122,7 @@ def run_log(
     ok = strict = valid = valid_and_ok = confident = confident_and_ok = 0
     times = []
     stages: dict[str, list[float]] = {}
+    suspects: list[tuple[int, tuple[float, float, float]]] = []  # confident and wrong
     for k in pairs:
         T_world_1 = se2.matrix_from_pose(*log.poses[k])
         T_world_2 = se2.matrix_from_pose(*log.poses[k + 1])
@@ -141,6 +148,9 @@ def run_log(
         sure = result.confidence >= INTEGRATE_CONFIDENCE
         confident += sure
         confident_and_ok += sure and correct
+        if sure and not correct:
+            suspects.append((int(k), se2.pose_from_matrix(result.matrix)))
+    by_reference = wrong_by_reference(log, suspects)
     n = max(len(pairs), 1)
     return Row(
         log=log.name,
@@ -158,6 +168,31 @@ def run_log(
         stage_median_ms={k: float(np.median(v)) * 1e3 for k, v in stages.items()},
         confident_precision=confident_and_ok / confident if confident else float("nan"),
         confident_recall=confident_and_ok / ok if ok else float("nan"),
+        confident_wrong_by_reference=by_reference,
+        confident_precision_judged=(
+            (confident_and_ok + by_reference) / confident if confident else float("nan")
+        ),
+    )
+
+
+def wrong_by_reference(log: Log, suspects: list[tuple[int, tuple[float, float, float]]]) -> int:
+    """How many of ``suspects`` (pair k, k+1 and its match) are wrong only by the reference:
+    right once the reference of scan k or k+1 is replaced by the pose their neighbours agree
+    on (``ReferenceJudge.verdict`` "reference", the judge of the local and merge tables)."""
+    if not suspects:
+        return 0
+    stamps = [float(k) for k in range(len(log.views))]  # the scan index stands for its time
+    recording = RobotRecording(
+        name=log.name,
+        scans=[TimedScan(t, "laser", view) for t, view in zip(stamps, log.views, strict=True)],
+        ground_truth=[
+            TimedPose(t, pose, "world") for t, pose in zip(stamps, log.poses, strict=True)
+        ],
+    )
+    judge = ReferenceJudge({log.name: recording})
+    return sum(
+        judge.verdict(log.name, float(k), log.name, float(k + 1), found) == "reference"
+        for k, found in suspects
     )
 
 
@@ -169,8 +204,9 @@ def print_row(row: Row, out: TextIO) -> None:
         f"valid among correct {row.recall:.3f})  median {row.median_ms:.1f} ms  "
         f"p90 {row.p90_ms:.1f} ms\n"
         f"       confidence >= {INTEGRATE_CONFIDENCE:g}: precision {row.confident_precision:.3f}"
-        f" recall {row.confident_recall:.3f}; median ms per stage: "
-        + ", ".join(f"{k} {v:.2f}" for k, v in row.stage_median_ms.items()),
+        f" recall {row.confident_recall:.3f} ({row.confident_wrong_by_reference} wrong only by "
+        f"the reference: precision judged {row.confident_precision_judged:.3f}); "
+        "median ms per stage: " + ", ".join(f"{k} {v:.2f}" for k, v in row.stage_median_ms.items()),
         file=out,
         flush=True,
     )
