@@ -28,7 +28,10 @@ For every new keyframe (:meth:`LoopCloser.add_keyframe`):
 4. **joins**: a piece started when the robot was lost is joined to the piece it was lost
    from: its keyframes' windows are matched with the other piece's keyframes near where the
    front end's guess puts them, and on the ring of keyframes the robot's motion allows
-   (``joins.py``); the younger piece moves into the older one's frame;
+   (``joins.py``); the younger piece moves into the older one's frame. Once a join makes the
+   two sides of a loss one piece, the robot's reach bounds the motion across it, and the
+   front end's guess gives its heading where the join does not span the loss
+   (:meth:`LoopCloser._bridge_headings`);
 5. the graph is optimised (ISAM2), the keyframes that moved are reported.
 """
 
