@@ -27,8 +27,10 @@ that the model sees what the mappers ask of it:
 ``fit`` fits the model (L2-regularised logistic regression, scipy) on all logs but one and
 checks it on the one left out, in turn: log loss, Brier score, and precision / recall of
 "confidence >= threshold" for each use's threshold, on the consecutive pairs (the pair
-bench) and on all pairs. It draws the reliability diagram (predicted against observed
-success, in bins, every log left out in turn) and the precision/recall curves to
+bench) and on all pairs, and at the integration threshold the precision **judged** on both:
+pairs wrong only by the reference (``reference_check.ReferenceJudge``) counted right. It
+draws the reliability diagram (predicted against observed success, in bins, every log left
+out in turn) and the precision/recall curves to
 ``OUT/reliability.png`` and ``OUT/precision_recall.png``. ``--write`` writes the model fitted
 on every log into ``multi_robot_mapper/core/matching/confidence_model.py``.
 """
@@ -50,12 +52,14 @@ from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+from reference_check import ReferenceJudge, judge_of_log  # noqa: E402
 from scipy.optimize import minimize  # noqa: E402
 
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.fusion import fuse  # noqa: E402
+from multi_robot_mapper.core.local_mapping import LocalMapperConfig  # noqa: E402
 from multi_robot_mapper.core.matching import IntegrateConfig, integrate  # noqa: E402
 from multi_robot_mapper.core.matching.beams import Viewpoint, Views  # noqa: E402
 from multi_robot_mapper.core.matching.confidence import (  # noqa: E402
@@ -87,6 +91,8 @@ WINDOW = 3  # scans per window
 WINDOW_SAMPLES = 150  # revisit and unrelated window pairs per log
 RAW = 19  # numbers of MatchEvidence.as_array
 SAMPLES = 300  # revisit and unrelated pairs per log
+# The local mapper's threshold for integrating a scan, where precision is judged.
+INTEGRATE_CONFIDENCE = LocalMapperConfig().integrate_confidence
 L2 = 1e-2  # regularisation of the logistic fit (per pair, on standardised features)
 
 
@@ -152,6 +158,7 @@ def collect_log(name: str, out_dir: Path) -> str:
     poses = np.array([s.reference_pose for s in scans])
     config = IntegrateConfig()
     rows, at_truth, kinds, right, times, errors = [], [], [], [], [], []
+    anchors, found = [], []  # (scan of A, scan of B) and the placement found, per pair
     nothing = MatchEvidence.from_array(np.zeros(RAW))
     rng = np.random.default_rng(11)
 
@@ -214,6 +221,8 @@ def collect_log(name: str, out_dir: Path) -> str:
         kinds.append(KINDS.index(kind))
         right.append(ok)
         errors.append((np.hypot(dx, dy), abs(dth)))
+        anchors.append((a[0], b[0]))
+        found.append(se2.pose_from_matrix(result.matrix))
     np.savez_compressed(
         out_dir / f"{name}.npz",
         evidence=np.array(rows),
@@ -222,6 +231,8 @@ def collect_log(name: str, out_dir: Path) -> str:
         right=np.array(right),
         seconds=np.array(times),
         error=np.array(errors),
+        anchors=np.array(anchors, dtype=np.int64),
+        found=np.array(found),
     )
     return (
         f"{name}: {len(rows)} pairs, right {np.mean(right):.3f}, "
@@ -271,6 +282,42 @@ def precision_recall(p: np.ndarray, y: np.ndarray, threshold: float) -> tuple[fl
     return precision, recall
 
 
+def judged_precision(
+    name: str, test: dict[str, np.ndarray], p: np.ndarray, among: np.ndarray
+) -> tuple[float, int] | None:
+    """Precision of "confidence >= integrate_confidence" on the pairs ``among`` (a mask), with
+    the pairs wrong only by the reference counted right (``reference_check.ReferenceJudge``:
+    right once the reference of their anchor scans is replaced by the pose the scans either
+    side agree on; the labels of the fit stay the reference's), and how many those are. Pairs
+    of unrelated places stay wrong whatever the reference. None for data collected before
+    pairs were stored with their scans."""
+    if "anchors" not in test:
+        return None
+    accepted = among & (p >= INTEGRATE_CONFIDENCE)
+    if not accepted.any():
+        return float("nan"), 0
+    unrelated = np.isin(test["kind"], [KINDS.index(k) for k in KINDS if "unrelated" in k])
+    suspects = np.flatnonzero(accepted & ~test["right"].astype(bool) & ~unrelated)
+    by_reference = 0
+    if len(suspects):
+        judge = _judges.get(name)
+        if judge is None:
+            scans = list(read_carmen(DATA / f"{name}.log.gz"))
+            judge = _judges[name] = judge_of_log(
+                name, [carmen_scan_data(s) for s in scans], [s.reference_pose for s in scans]
+            )
+        for row in suspects:
+            a, b = (int(v) for v in test["anchors"][row])
+            x, y, theta = (float(v) for v in test["found"][row])
+            verdict = judge.verdict(name, float(a), name, float(b), (x, y, theta))
+            by_reference += verdict == "reference"
+    right = int(np.count_nonzero(accepted & test["right"].astype(bool)))
+    return (right + by_reference) / int(np.count_nonzero(accepted)), by_reference
+
+
+_judges: dict[str, ReferenceJudge] = {}  # per log, its searches remembered
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("step", choices=("collect", "fit"))
@@ -313,6 +360,10 @@ def main() -> None:
             "log_loss": loss,
             "brier": float(np.mean((p - yt) ** 2)),
         }
+        for among, mask in (("consecutive", consecutive), ("all", np.ones_like(consecutive))):
+            judged = judged_precision(name, test, p, mask)
+            if judged is not None:
+                entry[f"{among}_precision_judged"], entry[f"{among}_by_reference"] = judged
         for threshold in args.thresholds:
             pc, rc = precision_recall(p[consecutive], yt[consecutive], threshold)
             pa, ra = precision_recall(p, yt, threshold)

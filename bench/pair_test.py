@@ -35,7 +35,7 @@ from pathlib import Path  # noqa: E402
 from typing import TextIO  # noqa: E402
 
 import numpy as np  # noqa: E402
-from reference_check import ReferenceJudge  # noqa: E402
+from reference_check import judge_of_log  # noqa: E402
 
 from multi_robot_mapper.cli.common import add_set_option  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
@@ -45,7 +45,6 @@ from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: 
 from multi_robot_mapper.core.local_mapping import LocalMapperConfig  # noqa: E402
 from multi_robot_mapper.core.matching import HEURISTICS, IntegrateConfig, integrate  # noqa: E402
 from multi_robot_mapper.core.scan import LaserScanData  # noqa: E402
-from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
@@ -181,15 +180,7 @@ def wrong_by_reference(log: Log, suspects: list[tuple[int, tuple[float, float, f
     on (``ReferenceJudge.verdict`` "reference", the judge of the local and merge tables)."""
     if not suspects:
         return 0
-    stamps = [float(k) for k in range(len(log.views))]  # the scan index stands for its time
-    recording = RobotRecording(
-        name=log.name,
-        scans=[TimedScan(t, "laser", view) for t, view in zip(stamps, log.views, strict=True)],
-        ground_truth=[
-            TimedPose(t, pose, "world") for t, pose in zip(stamps, log.poses, strict=True)
-        ],
-    )
-    judge = ReferenceJudge({log.name: recording})
+    judge = judge_of_log(log.name, log.views, log.poses)
     return sum(
         judge.verdict(log.name, float(k), log.name, float(k + 1), found) == "reference"
         for k, found in suspects

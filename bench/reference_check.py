@@ -29,7 +29,13 @@ from multi_robot_mapper.core.local_mapping import LocalMapperConfig
 from multi_robot_mapper.core.matching import HEURISTICS, integrate
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.scan import LaserScanData
-from multi_robot_mapper.io.bags import RobotRecording, nearest_stamps, reference_poses
+from multi_robot_mapper.io.bags import (
+    RobotRecording,
+    TimedPose,
+    TimedScan,
+    nearest_stamps,
+    reference_poses,
+)
 
 Pose = tuple[float, float, float]
 # Each search between consecutive scans must be right with this probability (the loop-closure
@@ -170,3 +176,20 @@ class ReferenceJudge:
         if (fixed_a, fixed_b) != (a, b) and right(T_a_b, se2.between(fixed_a, fixed_b)):
             return "reference"
         return "wrong"
+
+
+def judge_of_log(
+    name: str, views: Sequence[LaserScanData], poses: Sequence[Pose]
+) -> ReferenceJudge:
+    """A judge of one log's scans (a CARMEN log read directly, not a bag): robot ``name``,
+    each scan's index standing for its time."""
+    stamps = [float(k) for k in range(len(views))]
+    recording = RobotRecording(
+        name=name,
+        scans=[TimedScan(t, "laser", view) for t, view in zip(stamps, views, strict=True)],
+        ground_truth=[
+            TimedPose(t, (float(pose[0]), float(pose[1]), float(pose[2])), "world")
+            for t, pose in zip(stamps, poses, strict=True)
+        ],
+    )
+    return ReferenceJudge({name: recording})
