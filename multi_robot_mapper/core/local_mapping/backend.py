@@ -15,7 +15,9 @@ comes back as it was, and the keyframe that was in flight is not lost."""
 
 from __future__ import annotations
 
+import threading
 import traceback
+from collections.abc import Callable
 from typing import Any, Protocol, cast
 
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
@@ -165,3 +167,47 @@ class HostedBackend:
     def shutdown(self) -> None:
         """Stop the worker at once (a keyframe it is on is abandoned)."""
         self.runner.shutdown()
+
+
+class BackendThread:
+    """The back end on a thread of its own (what a node runs): ``step`` (the back end's next
+    queued keyframe; False when none is queued) runs whenever the thread is woken, until
+    none is left. A step that raises is reported to ``failed`` (its traceback) and the next
+    keyframe is tried: a bug must not end the thread."""
+
+    def __init__(self, step: Callable[[], bool], failed: Callable[[str], None]) -> None:
+        self._step, self._failed = step, failed
+        self._wake = threading.Event()  # keyframes queued
+        self._stop = threading.Event()
+        # daemon: never holds a process open at exit
+        self._thread = threading.Thread(
+            target=self._work, name="local-mapping-back-end", daemon=True
+        )
+        self._thread.start()
+        self._wake.set()  # keyframes queued before it started
+
+    def wake(self) -> None:
+        """Keyframes are queued."""
+        self._wake.set()
+
+    def stop(self, timeout: float, interrupt: Callable[[], None] | None = None) -> None:
+        """Stop after the step it is on (a thread left inside gtsam while the interpreter
+        exits can crash the process); ``interrupt`` ends that step sooner (a worker
+        process's back end shut down under it)."""
+        self._stop.set()
+        self._wake.set()
+        if interrupt is not None:
+            interrupt()
+        self._thread.join(timeout)
+
+    def _work(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait()
+            self._wake.clear()
+            try:
+                while not self._stop.is_set() and self._step():
+                    pass
+            except Exception:
+                if self._stop.is_set():
+                    return  # a worker process shut down under the keyframe it was on
+                self._failed(traceback.format_exc())

@@ -32,7 +32,6 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
-import traceback
 from collections import deque
 
 import numpy as np
@@ -51,7 +50,12 @@ from multi_robot_mapper.core.local_mapping.attempts import (
     pose_of_match,
     reach_in,
 )
-from multi_robot_mapper.core.local_mapping.backend import Backend, HostedBackend, Runner
+from multi_robot_mapper.core.local_mapping.backend import (
+    Backend,
+    BackendThread,
+    HostedBackend,
+    Runner,
+)
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.joins import LostFrom
 from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeScan
@@ -149,10 +153,8 @@ class LocalMapper:
         self._pieces: dict[int, int] = {}
         self._scans: dict[int, KeyframeScan] = {}
         self._lock = threading.Lock()  # front end vs. a back end on another thread
-        self._worker: threading.Thread | None = None  # the back end's thread, when started
-        self._wake = threading.Event()  # keyframes queued for the worker
+        self._worker: BackendThread | None = None  # the back end's thread, when started
         self._busy = False  # the back end is on a keyframe
-        self._stop = threading.Event()
         self._keyframes: list[Keyframe] = []  # the back end's last published state
 
     # --- the method -------------------------------------------------------------------------
@@ -382,7 +384,7 @@ class LocalMapper:
             self._pieces[scan.index] = piece
             self._queue.append((scan, pose, piece, edge, lost_from))
         if self._worker is not None:
-            self._wake.set()
+            self._worker.wake()
         elif self.inline_backend:
             self.run_backend()
 
@@ -411,36 +413,21 @@ class LocalMapper:
             if self._scans:
                 raise ValueError("the back end moves to a worker process before any keyframe")
             self.backend = HostedBackend(self.config, runner)
-        self._stop.clear()
-        self._worker = threading.Thread(target=self._work, name="local-mapping-back-end")
-        self._worker.daemon = True  # never holds a process open at exit
-        self._worker.start()
-        self._wake.set()  # keyframes queued before
+        self._worker = BackendThread(lambda: bool(self.run_backend(limit=1)), self._failed)
 
     def stop_worker(self, timeout: float = 120.0) -> None:
         """Stop the back-end thread (the keyframe it is on is finished first: a thread left
         inside gtsam while the interpreter exits can crash the process)."""
         worker, self._worker = self._worker, None
-        if worker is None:
-            return
-        self._stop.set()
-        self._wake.set()
-        if isinstance(self.backend, HostedBackend):
-            self.backend.shutdown()  # no gtsam in this process: the keyframe is abandoned
-        worker.join(timeout)
+        if worker is not None:
+            backend = self.backend
+            # no gtsam in a worker's host: the keyframe in flight there is abandoned
+            worker.stop(timeout, backend.shutdown if isinstance(backend, HostedBackend) else None)
 
-    def _work(self) -> None:
-        while not self._stop.is_set():
-            self._wake.wait()
-            self._wake.clear()
-            try:
-                while not self._stop.is_set() and self.run_backend(limit=1):
-                    pass
-            except Exception:  # a bug must not end the thread: the next keyframe is tried
-                if self._stop.is_set():
-                    return  # a worker process shut down under the keyframe it was on
-                self.backend_errors += 1
-                self.last_backend_error = traceback.format_exc()
+    def _failed(self, trace: str) -> None:
+        """A back-end step on the worker thread failed (a bug; the next keyframe is tried)."""
+        self.backend_errors += 1
+        self.last_backend_error = trace
 
     # --- the back end -----------------------------------------------------------------------
 
