@@ -56,10 +56,9 @@ COLUMNS = (
 )
 
 
-def wrong_closures(bag: Path, stats: dict[str, Any]) -> tuple[int, int, int]:
+def wrong_closures(judge: ReferenceJudge, stats: dict[str, Any]) -> tuple[int, int, int]:
     """(closures, wrong by the reference, right once the reference's own error at one scan is
     set aside) over every robot's accepted closures (``reference_check.ReferenceJudge``)."""
-    judge = ReferenceJudge(read_recordings(bag))
     verdicts = [
         judge.verdict(
             robot,
@@ -74,10 +73,9 @@ def wrong_closures(bag: Path, stats: dict[str, Any]) -> tuple[int, int, int]:
     return len(verdicts), verdicts.count("wrong"), verdicts.count("reference")
 
 
-def wrong_headings(bag: Path, stats: dict[str, Any]) -> tuple[int, int]:
+def wrong_headings(judge: ReferenceJudge, stats: dict[str, Any]) -> tuple[int, int]:
     """(headings across losses, wrong by the reference): a heading edge holds the guess's
     heading only, so only its heading is judged (within the correctness tolerance, 5 deg)."""
-    judge = ReferenceJudge(read_recordings(bag))
     wrong = judged = 0
     for robot, entry in stats["robots"].items():
         for heading in entry.get("headings", []):
@@ -91,15 +89,13 @@ def wrong_headings(bag: Path, stats: dict[str, Any]) -> tuple[int, int]:
     return judged, wrong
 
 
-def pairs_judged(bag: Path, result: Path) -> tuple[float, int]:
+def pairs_judged(judge: ReferenceJudge, result: Path) -> tuple[float, int]:
     """(pair_success with the pairs wrong only by the reference counted right, how many those
     are): a consecutive pair whose estimate is off by the reference but right once the
     reference of its scans is replaced by the pose their neighbours agree on
     (``ReferenceJudge.verdict`` "reference": csail's reference turns 11-12 deg for a stretch
     of scans). Unposed pairs stay failures."""
-    recordings = read_recordings(bag)
-    judge = ReferenceJudge(recordings)
-    tracks = build_inputs(read_results(result), recordings).tracks
+    tracks = build_inputs(read_results(result), judge.recordings).tracks
     right = pairs = by_reference = 0
     for robot, track in tracks.items():
         both, translation, rotation = pair_errors(track)
@@ -136,10 +132,11 @@ def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]
         row["evaluate_wall_s"] = mrm(["evaluate", str(out), "--bag", str(bag), "--json"], log)
         row["stats"] = read_results(out).stats
         row["metrics"] = json.loads((out / METRICS_FILE).read_text())
-        closures = wrong_closures(bag, row["stats"])
+        judge = ReferenceJudge(read_recordings(bag))  # one bag read, its searches shared
+        closures = wrong_closures(judge, row["stats"])
         row["closures"], row["closures_wrong"], row["closures_reference"] = closures
-        row["headings"], row["headings_wrong"] = wrong_headings(bag, row["stats"])
-        row["pair_success_judged"], row["pairs_by_reference"] = pairs_judged(bag, out)
+        row["headings"], row["headings_wrong"] = wrong_headings(judge, row["stats"])
+        row["pair_success_judged"], row["pairs_by_reference"] = pairs_judged(judge, out)
     except Exception as exc:  # one failing case must not stop the table
         row["error"] = str(exc)
     return row
