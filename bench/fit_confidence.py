@@ -25,8 +25,14 @@ that the model sees what the mappers ask of it:
   was lost), revisits, unrelated places (what a join of pieces and a merger match).
 
 ``fit`` fits the model (L2-regularised logistic regression, scipy) on all logs but one and
-checks it on the one left out, in turn: log loss, Brier score, and precision / recall of
-"confidence >= threshold" for each use's threshold, on the consecutive pairs (the pair
+checks it on the one left out, in turn. The penalty is ``--l2`` (default :data:`L2`, the
+deployed model's); ``--l2 cv`` takes the one of :data:`L2_GRID` whose fits predict the logs
+they were not fitted on best (mean held-out log loss, leaving each training log out in turn),
+chosen on the training logs alone for each log checked, and on every log for a model written
+(README, "Match confidence": it predicts the held-out pairs better, and was not deployed, as
+the merger and the joins of pieces did worse with it end to end). The check reports: log
+loss, Brier score, and precision / recall of "confidence >= threshold" for each use's
+threshold, on the consecutive pairs (the pair
 bench) and on all pairs, and at the integration threshold the precision **judged** on both:
 pairs wrong only by the reference (``reference_check.ReferenceJudge``) counted right. It
 draws the reliability diagram (predicted against observed success, in bins, every log left
@@ -94,6 +100,9 @@ SAMPLES = 300  # revisit and unrelated pairs per log
 # The local mapper's threshold for integrating a scan, where precision is judged.
 INTEGRATE_CONFIDENCE = LocalMapperConfig().integrate_confidence
 L2 = 1e-2  # regularisation of the logistic fit (per pair, on standardised features)
+# Penalties tried by ``--l2 cv`` (choose_l2): held-out log loss is least at 1e-4-3e-4, but the
+# model fitted so cost the merger its links on freiburg-079 (README, "Match confidence").
+L2_GRID = (1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1)
 
 
 Pair = tuple[str, tuple[int, ...], tuple[int, ...]]  # kind, scans of A (anchor first), of B
@@ -256,7 +265,7 @@ def load(out_dir: Path, logs: list[str]) -> dict[str, dict[str, np.ndarray]]:
     return data
 
 
-def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = L2) -> LogisticModel:
+def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float) -> LogisticModel:
     """Maximum-likelihood logistic regression with an L2 penalty on standardised features."""
     mean, scale = x.mean(axis=0), x.std(axis=0) + 1e-9
     z = (x - mean) / scale
@@ -273,6 +282,26 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = L2) -> LogisticModel:
     w = minimize(loss, np.zeros(design.shape[1]), jac=True, method="L-BFGS-B").x
     weights = w[1:] / scale
     return LogisticModel(float(w[0] - np.dot(weights, mean)), weights)
+
+
+def held_out_log_loss(data: dict[str, dict[str, np.ndarray]], l2: float) -> float:
+    """Mean over the logs of ``data`` of the log loss on each, of the fit on the others with
+    penalty ``l2`` (each log counts once, whatever its number of pairs: a building the model
+    has not seen is the case to predict)."""
+    losses = []
+    for name, test in data.items():
+        train = [d for n, d in data.items() if n != name]
+        x = np.vstack([d["features"] for d in train])
+        y = np.concatenate([d["right"] for d in train]).astype(float)
+        p = np.clip(fit_logistic(x, y, l2).probability(test["features"]), 1e-12, 1.0 - 1e-12)
+        yt = test["right"].astype(float)
+        losses.append(float(np.mean(-(yt * np.log(p) + (1.0 - yt) * np.log(1.0 - p)))))
+    return float(np.mean(losses))
+
+
+def choose_l2(data: dict[str, dict[str, np.ndarray]]) -> float:
+    """The penalty of :data:`L2_GRID` with the least :func:`held_out_log_loss` on ``data``."""
+    return min(L2_GRID, key=lambda l2: held_out_log_loss(data, l2))
 
 
 def precision_recall(p: np.ndarray, y: np.ndarray, threshold: float) -> tuple[float, float]:
@@ -332,6 +361,11 @@ def main() -> None:
         default=[0.5, 0.8, 0.9, 0.95, 0.98],
         help="thresholds reported",
     )
+    parser.add_argument(
+        "--l2",
+        default=str(L2),
+        help=f"penalty of the fit (default {L2}), or 'cv': chosen by held-out log loss",
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     if args.step == "collect":
@@ -343,10 +377,12 @@ def main() -> None:
     report: dict[str, object] = {}
     held_out_p: dict[str, np.ndarray] = {}
     for name in data:
-        train = [d for n, d in data.items() if n != name]
-        x = np.vstack([d["features"] for d in train])
-        y = np.concatenate([d["right"] for d in train]).astype(float)
-        model = fit_logistic(x, y)
+        others = {n: d for n, d in data.items() if n != name}
+        # A penalty chosen by cross-validation is chosen without the log it is checked on.
+        l2 = choose_l2(others) if args.l2 == "cv" else float(args.l2)
+        x = np.vstack([d["features"] for d in others.values()])
+        y = np.concatenate([d["right"] for d in others.values()]).astype(float)
+        model = fit_logistic(x, y, l2)
         test = data[name]
         p = model.probability(test["features"])
         held_out_p[name] = p
@@ -355,6 +391,7 @@ def main() -> None:
         loss = float(np.mean(np.logaddexp(0.0, -np.where(yt, 1, -1) * np.log(p / (1 - p)))))
         entry: dict[str, object] = {
             "pairs": len(yt),
+            "l2": l2,
             "right": float(yt.mean()),
             "consecutive_right": float(yt[consecutive].mean()),
             "log_loss": loss,
@@ -380,7 +417,8 @@ def main() -> None:
     if args.write:
         x = np.vstack([d["features"] for d in data.values()])
         y = np.concatenate([d["right"] for d in data.values()]).astype(float)
-        write_model(fit_logistic(x, y), list(data), len(y))
+        l2 = choose_l2(data) if args.l2 == "cv" else float(args.l2)
+        write_model(fit_logistic(x, y, l2), list(data), len(y), l2)
         print(f"wrote {MODEL_FILE.relative_to(REPO)}")
 
 
@@ -431,13 +469,14 @@ def draw(
     plt.close(fig)
 
 
-def write_model(model: LogisticModel, logs: list[str], pairs: int) -> None:
+def write_model(model: LogisticModel, logs: list[str], pairs: int, l2: float) -> None:
     weights = "".join(f"    {w:.6g},\n" for w in model.weights)
     names = "".join(f'    "{n}",\n' for n in FEATURES)
     day = datetime.date.today().isoformat()
     provenance = textwrap.fill(
         f"Fitted on {day} on {pairs} scan pairs of {', '.join(logs)} (kinds: "
-        f"{', '.join(KINDS)}): ``.venv/bin/python bench/fit_confidence.py collect && "
+        f"{', '.join(KINDS)}), L2 penalty {l2:g}: "
+        f"``.venv/bin/python bench/fit_confidence.py collect && "
         f".venv/bin/python bench/fit_confidence.py fit --write``. Calibration checked leaving "
         f"each log out in turn (README, 'Match confidence').",
         width=95,
