@@ -28,7 +28,13 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import SegmentScan, extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
-from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalMapperConfig
+from multi_robot_mapper.core.local_mapping import (
+    Closure,
+    Keyframe,
+    KeyframeScan,
+    LocalMapper,
+    LocalMapperConfig,
+)
 from multi_robot_mapper.core.local_mapping.backend import Backend
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult, merge
 from multi_robot_mapper.core.merging.joint import JointState, place_scans
@@ -175,6 +181,17 @@ def run_offline(
     return OfflineMap(robots, map_segments, segment_robot, trajectories, frames, stats)
 
 
+def _closure_record(closure: Closure, scans: Sequence[KeyframeScan]) -> dict[str, object]:
+    """A closure (or a heading across a loss) in ``stats.json``: its keyframes' stamps, the
+    relative pose and the confidence."""
+    return {
+        "first_stamp": scans[closure.first].stamp,
+        "second_stamp": scans[closure.second].stamp,
+        "T_first_second": [round(v, 6) for v in closure.T_first_second],
+        "confidence": round(closure.confidence, 4),
+    }
+
+
 def _run_local(
     recordings: Mapping[str, Sequence[TimedLaserScan]],
     extraction: ExtractionConfig,
@@ -249,26 +266,9 @@ def _run_local(
             "motion_bounds": backend.closer.motion_bounds,
             "closures_accepted": len(mapper.closures),
             "closures_refused": dict(backend.closer.refused),
-            "closures": [
-                {
-                    "kind": c.kind,
-                    "first_stamp": scans[c.first].stamp,
-                    "second_stamp": scans[c.second].stamp,
-                    "T_first_second": [round(v, 6) for v in c.T_first_second],
-                    "confidence": round(c.confidence, 4),
-                }
-                for c in mapper.closures
-            ],
+            "closures": [{"kind": c.kind, **_closure_record(c, scans)} for c in mapper.closures],
             # headings across losses (the front end's guess's heading; its position unused)
-            "headings": [
-                {
-                    "first_stamp": scans[c.first].stamp,
-                    "second_stamp": scans[c.second].stamp,
-                    "T_first_second": [round(v, 6) for v in c.T_first_second],
-                    "confidence": round(c.confidence, 4),
-                }
-                for c in backend.closer.headings
-            ],
+            "headings": [_closure_record(c, scans) for c in backend.closer.headings],
             "front_end_stage_s": {k: round(v, 4) for k, v in mapper.stage_seconds.items()},
         }
 
