@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
-from multi_robot_mapper.core.ffs import FfsConfig, make_bodies, run_ffs  # noqa: E402
+from multi_robot_mapper.core.ffs import FfsConfig, facing_sensor, make_bodies, run_ffs  # noqa: E402
 from multi_robot_mapper.core.ffs.merge import (  # noqa: E402
     body_chunks,
     body_segments,
@@ -63,7 +63,7 @@ def keyframe_scans(log: str, count: int) -> tuple[list[np.ndarray], np.ndarray, 
         ):
             continue
         data = carmen_scan_data(scan)
-        sets.append(extract_scan(data, config)[0].segments)
+        sets.append(facing_sensor(extract_scan(data, config)[0].segments))
         poses.append(pose)
         raw += int(np.isfinite(data.ranges).sum())
         if len(sets) == count:  # count 0: the whole log

@@ -3,6 +3,8 @@ Algorithm 1 on synthetic geometry with a known answer, and the 'ffs' merging met
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -10,9 +12,9 @@ from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError
-from multi_robot_mapper.core.ffs import FfsConfig, make_bodies, resample, run_ffs
+from multi_robot_mapper.core.ffs import FfsConfig, facing_sensor, make_bodies, resample, run_ffs
 from multi_robot_mapper.core.ffs.bodies import corner_points, placed
-from multi_robot_mapper.core.ffs.simulation import force_field
+from multi_robot_mapper.core.ffs.simulation import ChainSprings, force_field
 
 # A 4 m x 3 m room with an L-shaped cabinet: corners in every direction.
 ROOM = np.array(
@@ -75,6 +77,20 @@ def test_orthogonal_walls_do_not_attract_and_parallel_ones_pull_equally() -> Non
     assert force_field(points, directions, alone, np.zeros((1, 2)), 0.1, 3.0).pairs == 0
 
 
+def test_walls_face_their_sensor_and_back_to_back_faces_do_not_attract() -> None:
+    # A wall 2 m ahead, given either way round, runs with the sensor on its left.
+    wall = np.array([[2.0, 1.0, 2.0, -1.0], [2.0, -1.0, 2.0, 1.0]])
+    assert np.allclose(facing_sensor(wall), [[2.0, -1.0, 2.0, 1.0]] * 2)
+    # The two faces of a 0.1 m thick wall, seen from the rooms on either side: no force.
+    config = FfsConfig()
+    faces = [facing_sensor(np.array([[-1.0, 0.0, 1.0, 0.0]]) - [0, y, 0, y]) for y in (1, -1)]
+    bodies = make_bodies(faces, 0.1, 0.0, 1.0)
+    poses = np.array([[0.0, 1.0, 0.0], [0.0, -1.1, 0.0]])  # sensors 1 m either side
+    points, directions = placed(bodies, poses)
+    field = force_field(points, directions, bodies, poses[:, :2], 0.1, config.cutoff)
+    assert field.pairs > 0 and np.allclose(field.force, 0.0) and field.potential == 0.0
+
+
 def test_ffs_brings_perturbed_views_of_a_room_back() -> None:
     config = FfsConfig()
     bodies = room_bodies(config)
@@ -110,6 +126,51 @@ def test_moving_the_whole_scene_moves_the_result_the_same_way(
     assert np.allclose(se2.wrap_angle(there[:, 2] - expected[:, 2]), 0.0, atol=1e-7)
 
 
+@settings(max_examples=30, deadline=None)
+@given(
+    x=st.floats(-20.0, 20.0),
+    y=st.floats(-20.0, 20.0),
+    theta=st.floats(-np.pi, np.pi),
+    seed=st.integers(0, 1000),
+)
+def test_chain_springs_rest_at_the_start_and_under_any_rigid_motion_of_the_chain(
+    x: float, y: float, theta: float, seed: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    start = np.column_stack([rng.uniform(-10, 10, (4, 2)), rng.uniform(-np.pi, np.pi, 4)])
+    springs = ChainSprings(start, np.array([[0, 1], [1, 2], [2, 3]]), 0.7)
+    assert np.allclose(springs.acceleration(start), 0.0)
+    T = se2.matrix_from_pose(x, y, theta)
+    moved = np.array([se2.pose_from_matrix(T @ se2.matrix_from_pose(*p)) for p in start])
+    assert np.allclose(springs.acceleration(moved), 0.0, atol=1e-9)
+    # A body shifted by d: pulled back by -stiffness * d, its partners pulled along by it.
+    shifted = start.copy()
+    shifted[1, :2] += [0.2, -0.1]
+    pull = springs.acceleration(shifted)
+    assert np.allclose(pull[1], [-2 * 0.7 * 0.2, 2 * 0.7 * 0.1, 0.0])  # two partners
+    assert np.allclose(pull[[0, 2]], [[0.14, -0.07, 0.0]] * 2) and np.allclose(pull[3], 0.0)
+
+
+def test_stiff_chain_springs_move_a_robots_bodies_as_one() -> None:
+    # Views 1 and 2 share one rigid error (their relative pose is right): FFS brings them back
+    # with or without springs, but only springs keep their relative pose on the way.
+    config = FfsConfig()
+    bodies = room_bodies(config)
+    T_error = se2.matrix_from_pose(0.06, -0.05, 0.03)
+    start = VIEWS.copy()
+    start[1:] = [se2.pose_from_matrix(T_error @ se2.matrix_from_pose(*p)) for p in VIEWS[1:]]
+    fixed = np.array([True, False, False])
+    T_1_2 = se2.between(VIEWS[1], VIEWS[2])
+    bent = {}
+    for stiffness in (0.0, 1.0):
+        springs = ChainSprings(start, np.array([[1, 2]]), stiffness)
+        result = run_ffs(bodies, start, config, fixed=fixed, springs=springs)
+        assert result.converged, stiffness
+        assert np.abs(result.poses[:, :2] - VIEWS[:, :2]).max() < 0.005, stiffness
+        bent[stiffness] = np.abs(np.subtract(se2.between(*result.poses[1:]), T_1_2)).max()
+    assert bent[1.0] < bent[0.0]
+
+
 def test_the_config_cools_down_and_says_so_when_it_would_not() -> None:
     with pytest.raises(ConfigError, match="sigma_end"):
         FfsConfig(sigma_start=0.05, sigma_end=0.1)
@@ -117,21 +178,31 @@ def test_the_config_cools_down_and_says_so_when_it_would_not() -> None:
         FfsConfig(spacing=0.0)
 
 
-def test_method_ffs_merges_simulated_robots_where_the_truth_has_them() -> None:
-    # Two office robots mapped offline without odometry, merged by 'ffs': the joint graph
-    # places them, FFS moves every body; both robots' trajectories stay on the truth.
-    from multi_robot_mapper.core.extraction_config import ExtractionConfig
-    from multi_robot_mapper.core.pipeline import TimedLaserScan, run_offline
+@pytest.fixture(scope="module")
+def office_recordings() -> dict[str, list[Any]]:
+    """Two simulated office robots' scans (every 4th), with their true poses."""
+    from multi_robot_mapper.core.pipeline import TimedLaserScan
     from multi_robot_mapper.core.simulation import LaserModel, simulate_robots
 
     runs = simulate_robots("office", 2, LaserModel(), seed=0, duration=20.0, overlap=0.45)
-    recordings = {
+    return {
         f"robot{k + 1}": [
             TimedLaserScan(float(t), scan, tuple(pose))
             for t, scan, pose in zip(run.stamps, run.scans, run.T_world_laser, strict=True)
         ][::4]
         for k, run in enumerate(runs)
     }
+
+
+def test_method_ffs_merges_simulated_robots_where_the_truth_has_them(
+    office_recordings: dict[str, list[Any]],
+) -> None:
+    # Two office robots mapped offline without odometry, merged by 'ffs': the joint graph
+    # places them, FFS moves every body; both robots' trajectories stay on the truth.
+    from multi_robot_mapper.core.extraction_config import ExtractionConfig
+    from multi_robot_mapper.core.pipeline import run_offline
+
+    recordings = office_recordings
     out = run_offline(recordings, "ffs", ExtractionConfig())
     assert all(out.robot_frames[r] is not None for r in recordings), out.robot_frames
     assert out.stats["merge_stats"]["ffs_iterations"] > 0
@@ -147,3 +218,49 @@ def test_method_ffs_merges_simulated_robots_where_the_truth_has_them() -> None:
         placed_xy = se2.transform_points(T_world_map, poses[:, :2])
         rmse = float(np.sqrt(np.mean(np.sum((placed_xy - true_xy) ** 2, axis=1))))
         assert rmse < 0.05, (robot, rmse)
+
+
+def test_ffs_updates_resume_where_the_last_one_stopped(
+    office_recordings: dict[str, list[Any]],
+) -> None:
+    # An update cut short (3 iterations) leaves its poses and cooling to the next, which goes
+    # on cooling from there; once settled, an update with nothing new settles at once.
+    from multi_robot_mapper.core.extraction_config import ExtractionConfig
+    from multi_robot_mapper.core.ffs.merge import FfsState, merge_ffs
+    from multi_robot_mapper.core.merging import MergeConfig
+    from multi_robot_mapper.core.pipeline import run_offline
+
+    local = run_offline(office_recordings, "local", ExtractionConfig())
+    short = MergeConfig(ffs=FfsConfig(max_iterations=3))
+    first = merge_ffs(local.keyframes, short, budget=0.0)
+    state = first.refinement
+    assert isinstance(state, FfsState) and set(state.keyframes) == set(first.robots)
+    assert state.sigma == pytest.approx(short.ffs.sigma_start - 3 * short.ffs.sigma_step)
+    second = merge_ffs(local.keyframes, short, previous=first, budget=0.0)
+    assert isinstance(second.refinement, FfsState)
+    assert second.refinement.sigma == pytest.approx(state.sigma - 3 * short.ffs.sigma_step)
+    settled = merge_ffs(local.keyframes, budget=0.0)
+    assert settled.stats["ffs_converged"] == 1
+    again = merge_ffs(local.keyframes, previous=settled, budget=0.0)
+    assert again.stats["ffs_converged"] == 1 and again.stats["ffs_iterations"] == 1
+    for robot in again.robots:
+        moved = again.keyframe_poses[robot] - settled.keyframe_poses[robot]
+        assert np.abs(moved).max() < 1e-3, robot
+
+
+def test_a_warm_start_carries_each_keyframe_as_the_last_simulation_corrected_it() -> None:
+    from multi_robot_mapper.core.ffs.merge import FfsState, warm_started
+
+    before = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.1], [2.0, 0.5, 0.2]])
+    T_fix = se2.matrix_from_pose(0.05, -0.02, 0.01)  # what FFS did to the held keyframes
+    after = np.array([se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in before])
+    state = FfsState({"a": np.array([0, 1, 2])}, {"a": before}, {"a": after}, 0.05, 0.6)
+    # The graph moved keyframe 1 a little and added keyframe 3; robot b is new.
+    start = np.vstack([before, [[3.0, 1.0, 0.3]], [[5.0, 5.0, 1.0]]])
+    start[1] += [0.02, 0.0, 0.0]
+    owners = [("a", 0), ("a", 1), ("a", 2), ("a", 3), ("b", 0)]
+    index = {"a": np.array([0, 1, 2, 3]), "b": np.array([0])}
+    warm = warm_started(state, owners, index, start)
+    expected = [se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in start[:4]]
+    assert np.allclose(warm[:4], expected)  # 3 takes the correction of 2, its nearest
+    assert np.allclose(warm[4], start[4])

@@ -105,6 +105,20 @@ def between_each(T_a_b: ArrayLike, T_a_c: ArrayLike) -> FloatArray:
     return np.column_stack((c * dx + s * dy, -s * dx + c * dy, theta))
 
 
+def compose_each(T_a_b: ArrayLike, T_b_c: ArrayLike) -> FloatArray:
+    """``(N, 3)`` rows ``T_a_c`` of ``(N, 3)`` pose pairs (:func:`compose` row by row, at
+    once)."""
+    ab, bc = np.asarray(T_a_b, dtype=np.float64), np.asarray(T_b_c, dtype=np.float64)
+    c, s = np.cos(ab[:, 2]), np.sin(ab[:, 2])
+    return np.column_stack(
+        (
+            ab[:, 0] + c * bc[:, 0] - s * bc[:, 1],
+            ab[:, 1] + s * bc[:, 0] + c * bc[:, 1],
+            wrap_angle(ab[:, 2] + bc[:, 2]),
+        )
+    )
+
+
 def rigid_fit(poses_from: FloatArray, poses_to: FloatArray) -> FloatArray:
     """``T_to_from`` (3x3): the rigid motion that best carries ``(K, 3)`` poses given in frame
     ``from`` onto the same poses given in frame ``to`` (least squares on their positions,

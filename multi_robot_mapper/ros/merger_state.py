@@ -182,6 +182,7 @@ def after_new_session(result: MergeResult | None, robot: str, kept: str) -> Merg
         reference=kept if result.reference == robot else result.reference,
         pairs={pair: record for pair, record in result.pairs.items() if robot not in pair},
         links=[lk for lk in result.links if robot not in (lk.robot_a, lk.robot_b)],
+        refinement=None,  # its keyframes are a new session's: FFS starts afresh
     )
 
 

@@ -5,8 +5,17 @@ Modules: ``config`` (FfsConfig, units), ``bodies`` (resampling, regions of inter
 ``simulation`` (the force field and Algorithm 1), ``merge`` (FFS after the joint merger's
 placement: the ``ffs`` merging method)."""
 
-from multi_robot_mapper.core.ffs.bodies import Bodies, make_bodies, resample
+from multi_robot_mapper.core.ffs.bodies import Bodies, facing_sensor, make_bodies, resample
 from multi_robot_mapper.core.ffs.config import FfsConfig
 from multi_robot_mapper.core.ffs.simulation import FfsResult, force_field, run_ffs
 
-__all__ = ["Bodies", "FfsConfig", "FfsResult", "force_field", "make_bodies", "resample", "run_ffs"]
+__all__ = [
+    "Bodies",
+    "FfsConfig",
+    "FfsResult",
+    "facing_sensor",
+    "force_field",
+    "make_bodies",
+    "resample",
+    "run_ffs",
+]

@@ -1,5 +1,10 @@
 """FFS's rigid bodies: each keyframe's segments resampled into points with directions and
-masses (FFS Sec. 3.3-3.4)."""
+masses (FFS Sec. 3.3-3.4).
+
+A point's direction is its segment's, and it says which face of the wall was seen: segments
+run with the sensor that saw them on their left (:func:`facing_sensor`). The field then pulls
+only faces seen from the same side together (``simulation.force_field``): the two faces of one
+wall, seen from the rooms on either side a wall's thickness apart, are not one surface."""
 
 from __future__ import annotations
 
@@ -41,6 +46,18 @@ def resample(segments: FloatArray, spacing: float) -> tuple[FloatArray, FloatArr
     points = start[owner] + fraction[:, None] * (end - start)[owner]
     direction = (end - start) / np.maximum(length, 1e-12)[:, None]
     return points, direction[owner], owner
+
+
+def facing_sensor(segments: FloatArray) -> FloatArray:
+    """``segments`` (N, 4), in the frame of the sensor that saw them, each turned to run with
+    the sensor (the origin) on its left: the face that was seen. (A laser's scan order already
+    gives this; fused map segments need not.)"""
+    segments = np.array(segments, dtype=np.float64).reshape(-1, 4)
+    start, end = segments[:, :2], segments[:, 2:]
+    # (end - start) x (origin - start) < 0: the origin lies on the right.
+    right = (end[:, 0] - start[:, 0]) * -start[:, 1] - (end[:, 1] - start[:, 1]) * -start[:, 0] < 0
+    segments[right] = segments[right][:, [2, 3, 0, 1]]
+    return segments
 
 
 def corner_points(

@@ -2,7 +2,14 @@
 (:func:`merge_joint`, FFS Sec. 3.7's pre-alignment, found with no pose information), then
 Force Field Simulation moves every merged keyframe at once to where the walls of all robots
 agree best. The reference robot's keyframes, taken together, hold the ``map`` frame: after
-the simulation the whole map is moved back so that their rigid fit is unchanged."""
+the simulation the whole map is moved back so that their rigid fit is unchanged.
+
+Each update is warm-started from the last (issue 14 item 4; :class:`FfsState` in the result's
+``refinement``): every keyframe starts where the last simulation left it, relative to the joint
+graph's placement (a new keyframe takes the correction of its robot's nearest older one), and
+the cooling goes on where it stopped, so that FFS bounded in time per update settles across
+updates. It starts hot again when the set of merged robots changed (a new robot's keyframes
+may lie far from where the field's narrow end would pull them)."""
 
 from __future__ import annotations
 
@@ -13,14 +20,28 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.ffs.bodies import make_bodies
-from multi_robot_mapper.core.ffs.simulation import FfsResult, run_ffs
+from multi_robot_mapper.core.ffs.bodies import facing_sensor, make_bodies
+from multi_robot_mapper.core.ffs.simulation import ChainSprings, FfsResult, run_ffs
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+@dataclasses.dataclass(frozen=True)
+class FfsState:
+    """What one FFS refinement leaves to the next update (its warm start): per merged robot,
+    its keyframes' indices and ``T_map_keyframe`` before FFS (the joint graph's) and after,
+    and where the cooling stopped."""
+
+    keyframes: dict[str, IntArray]
+    T_map_before: dict[str, FloatArray]  # (K, 3) each
+    T_map_after: dict[str, FloatArray]
+    sigma: float
+    dt: float
 
 
 def merge_ffs(
@@ -31,16 +52,25 @@ def merge_ffs(
     budget: float | None = None,
 ) -> MergeResult:
     """:func:`merge_joint`, then FFS over every merged keyframe (module doc). The result's
-    ``stats`` add ``ffs_iterations`` and ``ffs_converged``, its ``timings`` ``ffs_s``."""
+    ``stats`` add ``ffs_iterations`` and ``ffs_converged``, its ``timings`` ``ffs_s``.
+    ``budget`` 0 (no time limit, offline) lifts FFS's ``time_budget`` too: it runs until it
+    settles or ``max_iterations``."""
     config = config if config is not None else MergeConfig()
     joint = merge_joint(keyframes, config, previous=previous, budget=budget)
-    return refine_with_ffs(joint, config)
+    if budget == 0.0:
+        config = dataclasses.replace(config, ffs=dataclasses.replace(config.ffs, time_budget=0.0))
+    state = None if previous is None else previous.refinement
+    return refine_with_ffs(joint, config, state if isinstance(state, FfsState) else None)
 
 
-def refine_with_ffs(result: MergeResult, config: MergeConfig) -> MergeResult:
+def refine_with_ffs(
+    result: MergeResult, config: MergeConfig, previous: FfsState | None = None
+) -> MergeResult:
     """The merge ``result`` with its keyframes moved by FFS: keyframe poses, the global map
     (each segment moves with the keyframe that owns it) and every robot's frames (by the
-    rigid motion that best carries its keyframes to their new poses)."""
+    rigid motion that best carries its keyframes to their new poses). ``previous``: the last
+    update's state, to warm-start from (module doc); the result's ``refinement`` is this
+    update's."""
     robots = [r for r in result.robots if len(result.keyframe_index.get(r, ())) > 0]
     if len(robots) == 0 or result.segment_keyframe is None:
         return result
@@ -52,10 +82,53 @@ def refine_with_ffs(result: MergeResult, config: MergeConfig) -> MergeResult:
     segments = [views[robot][row][2] for robot, row in owners]
     body_start, segment_sets = body_segments(chunks, start, segments)
     bodies = make_bodies(segment_sets, ffs.spacing, ffs.roi_radius, ffs.roi_mass)
-    simulated = run_ffs(bodies, body_start, ffs)
+    springs = ChainSprings(body_start, robot_chain(chunks, owners), ffs.chain_stiffness)
+    index = {robot: np.asarray(result.keyframe_index[robot], dtype=np.int64) for robot in robots}
+    resume = None
+    warm = body_start
+    if previous is not None:
+        warm = warm_started(previous, owners, index, start)[[members[0] for members in chunks]]
+        if set(previous.keyframes) == set(robots):
+            resume = (previous.sigma, previous.dt)
+    simulated = run_ffs(bodies, warm, ffs, springs=springs, resume=resume)
     poses = moved_with_bodies(chunks, start, body_start, simulated.poses)
     poses = _regauged(poses, start, owners, result.reference)
-    return _moved(result, robots, owners, start, poses, simulated)
+    rows = {robot: [k for k, (owner, _) in enumerate(owners) if owner == robot] for robot in robots}
+    state = FfsState(
+        index,
+        {robot: start[rows[robot]] for robot in robots},
+        {robot: poses[rows[robot]] for robot in robots},
+        simulated.sigma,
+        simulated.dt,
+    )
+    return dataclasses.replace(
+        with_keyframes_moved(result, robots, owners, start, poses, simulated), refinement=state
+    )
+
+
+def warm_started(
+    previous: FfsState,
+    owners: list[tuple[str, int]],
+    index: Mapping[str, IntArray],
+    start: FloatArray,
+) -> FloatArray:
+    """The keyframe poses ``start`` (the joint graph's, one per row of ``owners``), each
+    corrected as the ``previous`` simulation corrected it (or its robot's nearest keyframe,
+    by index, that it held): ``T_after . T_before^-1 . T_start``. A robot it did not hold
+    keeps its poses."""
+    warm = np.array(start, dtype=np.float64)
+    for robot, mine in index.items():
+        held = previous.keyframes.get(robot)
+        if held is None or len(held) == 0:
+            continue
+        rows = [k for k, (owner, _) in enumerate(owners) if owner == robot]
+        # The nearest held keyframe by index: the one at or after, or the one before.
+        after = np.clip(np.searchsorted(held, mine), 0, len(held) - 1)
+        before = np.clip(after - 1, 0, len(held) - 1)
+        nearest = np.where(np.abs(held[before] - mine) < np.abs(held[after] - mine), before, after)
+        T_before_keyframe = se2.between_each(previous.T_map_before[robot][nearest], start[rows])
+        warm[rows] = se2.compose_each(previous.T_map_after[robot][nearest], T_before_keyframe)
+    return warm
 
 
 def body_segments(
@@ -67,8 +140,11 @@ def body_segments(
     segment_sets = []
     for members, T_map_body in zip(chunks, se2.matrices_from_poses(body_start), strict=True):
         T_body_map = se2.invert(T_map_body)
+        # Each keyframe's walls turned to face it (the face it saw), then into the body frame.
         parts = [
-            se2.transform_segments(T_body_map @ se2.matrix_from_pose(*start[k]), segments[k])
+            se2.transform_segments(
+                T_body_map @ se2.matrix_from_pose(*start[k]), facing_sensor(segments[k])
+            )
             for k in members
         ]
         segment_sets.append(np.vstack(parts) if parts else np.zeros((0, 4)))
@@ -116,6 +192,13 @@ def body_chunks(
     return chunks
 
 
+def robot_chain(chunks: list[list[int]], owners: list[tuple[str, int]]) -> NDArray[np.int64]:
+    """(M, 2) pairs of consecutive bodies of the same robot (the springs of FFS's chain)."""
+    robot = [owners[members[0]][0] for members in chunks]
+    pairs = [(b, b + 1) for b in range(len(chunks) - 1) if robot[b] == robot[b + 1]]
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+
+
 def _close_chunk(chunks: list[list[int]], rest: list[int], owners: list[tuple[str, int]]) -> None:
     """A robot's last keyframes, short of a body's wall: into its previous body if it has one."""
     if chunks and owners[chunks[-1][0]][0] == owners[rest[0]][0]:
@@ -140,14 +223,18 @@ def _regauged(
     return np.array([se2.pose_from_matrix(T_fix @ T) for T in moved])
 
 
-def _moved(
+def with_keyframes_moved(
     result: MergeResult,
     robots: list[str],
     owners: list[tuple[str, int]],
     start: FloatArray,
     poses: FloatArray,
-    simulated: FfsResult,
+    simulated: FfsResult | None = None,
 ) -> MergeResult:
+    """``result`` with the keyframes of ``owners`` (rows: (robot, row in its keyframe maps))
+    moved from ``start`` to ``poses`` (both (K, 3) ``T_map_keyframe``): each segment with its
+    keyframe, each robot frame by the rigid fit of its keyframes' motion; ``simulated``'s
+    iterations and time added to the stats when given."""
     keyframe_poses = dict(result.keyframe_poses)
     frames = {robot: dict(pieces) for robot, pieces in result.frames.items()}
     placements = dict(result.placements)
@@ -169,10 +256,11 @@ def _moved(
         local = se2.inverse_transform_segments_each(start[rows][row], segments[mine])
         segments[mine] = se2.transform_segments_each(poses[rows][row], local)
     stats = dict(result.stats)
-    stats.update(ffs_iterations=simulated.iterations, ffs_converged=int(simulated.converged))
     timings = dict(result.timings)
-    timings["ffs_s"] = simulated.seconds
-    timings["total_s"] = timings.get("total_s", 0.0) + simulated.seconds
+    if simulated is not None:
+        stats.update(ffs_iterations=simulated.iterations, ffs_converged=int(simulated.converged))
+        timings["ffs_s"] = simulated.seconds
+        timings["total_s"] = timings.get("total_s", 0.0) + simulated.seconds
     return dataclasses.replace(
         result,
         keyframe_poses=keyframe_poses,

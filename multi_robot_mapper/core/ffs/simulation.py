@@ -19,7 +19,18 @@ Per iteration (Algorithm 1, lines 4-14):
 - **cooling**: Δt shrinks exponentially, σ linearly; the simulation ends once σ has cooled
   and the mean relocation falls below ``stop_relocation`` (line 15, read with ``<``).
 
-Bodies marked ``fixed`` never move (one is enough to hold the map frame still)."""
+Bodies marked ``fixed`` never move (one is enough to hold the map frame still).
+
+**Chain springs** (issue 14 item 2, :class:`ChainSprings`): pairs of bodies (a robot's
+consecutive bodies) are pulled toward their relative pose at rest (the robot's own map, as the
+pre-alignment placed it), each by its partner's prediction of it, with an acceleration of
+``FfsConfig.chain_stiffness`` times its deviation, in the field's units (a body lying fully on
+other bodies' walls is held with stiffness 1). The field then moves a robot's map as a whole
+more freely than it bends it.
+
+**Warm start** (issue 14 item 4): ``resume`` continues the cooling of an earlier run (its
+result's ``sigma`` and ``dt``) from given poses, so that a merger bounded in time per update
+cools across updates instead of starting hot at each."""
 
 from __future__ import annotations
 
@@ -30,11 +41,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.ffs.bodies import Bodies, placed
 from multi_robot_mapper.core.ffs.config import FfsConfig
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,6 +60,8 @@ class FfsResult:
     iterations: int
     converged: bool  # stopped by Algorithm 1 line 15, not by the iteration or time limit
     seconds: float
+    sigma: float  # the field's width (m) and step width the next iteration would have used:
+    dt: float  # where a warm-started run resumes cooling
 
 
 @dataclasses.dataclass(frozen=True)
@@ -81,7 +96,9 @@ def force_field(
     if len(i) == 0:
         return FieldStep(force, torque, 0.0, 0)
     gap = points[j] - points[i]  # from p_i to p_j
-    cos = np.abs(np.einsum("ij,ij->i", directions[i], directions[j]))
+    # Eq. 2's cosine, of faces: walls seen from opposite sides (the two faces of one wall)
+    # pull no more than orthogonal ones (bodies module doc).
+    cos = np.maximum(np.einsum("ij,ij->i", directions[i], directions[j]), 0.0)
     distance2 = np.einsum("ij,ij->i", gap, gap)
     w = bodies.masses[i] * bodies.masses[j] * cos * np.exp(-distance2 / (2 * sigma**2))
     pull = w[:, None] * gap / sigma**2  # on p_i; the opposite on p_j (Eq. 3)
@@ -100,13 +117,18 @@ def run_ffs(
     poses: FloatArray,
     config: FfsConfig | None = None,
     fixed: BoolArray | None = None,
+    springs: ChainSprings | None = None,
+    resume: tuple[float, float] | None = None,
 ) -> FfsResult:
-    """Algorithm 1 from ``poses`` (K, 3): the bodies' poses at the end (module doc)."""
+    """Algorithm 1 from ``poses`` (K, 3): the bodies' poses at the end (module doc).
+    ``springs``: the chain springs between bodies (none by default); ``resume``: (σ, Δt) to
+    continue cooling from (a warm start; default: the config's start values)."""
     config = config or FfsConfig()
     started = time.perf_counter()
     poses = np.array(poses, dtype=np.float64).reshape(-1, 3)
     count = len(poses)
     free = np.ones(count, dtype=bool) if fixed is None else ~np.asarray(fixed, dtype=bool)
+    springs = springs or ChainSprings(poses, None, 0.0)
     # Centre of mass of each body in its own frame; the sensor origin is (0, 0) there.
     mass = np.maximum(np.bincount(bodies.body, bodies.masses, count), 1e-12)
     com_local = np.column_stack(
@@ -118,7 +140,7 @@ def run_ffs(
     radius = np.sqrt(
         np.bincount(bodies.body, bodies.masses * np.sum(bodies.points**2, axis=1), count) / mass
     )
-    sigma, dt = config.sigma_start, config.dt_start
+    sigma, dt = resume or (config.sigma_start, config.dt_start)
     potentials: list[float] = []
     relocations: list[float] = []
     converged = False
@@ -137,6 +159,7 @@ def run_ffs(
             [c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]]
         )
         field = force_field(points, directions, bodies, centres, sigma, config.cutoff)
+        spring = springs.acceleration(poses)
         potentials.append(field.potential)
         # Accelerations (Eq. 6-7): force over mass, torque over moment of inertia, both in
         # units of a body lying fully on another's walls (a point there has the kernel's sum
@@ -160,8 +183,12 @@ def run_ffs(
         ct, st = np.cos(turn), np.sin(turn)
         poses[:, 0] = centres[:, 0] + ct * arm[:, 0] - st * arm[:, 1] + shift[:, 0]
         poses[:, 1] = centres[:, 1] + st * arm[:, 0] + ct * arm[:, 1] + shift[:, 1]
-        poses[:, 2] = np.arctan2(np.sin(poses[:, 2] + turn), np.cos(poses[:, 2] + turn))
-        moved = np.hypot(*shift.T) + np.abs(turn) * radius
+        # The springs pull on the bodies' origins (their prediction is of the whole pose).
+        pulled = step * spring * free[:, None]
+        poses[:, :2] += pulled[:, :2]
+        poses[:, 2] = se2.wrap_angle(poses[:, 2] + turn + pulled[:, 2])
+        # Net motion: where field and springs balance, the body stands still.
+        moved = np.hypot(*(shift + pulled[:, :2]).T) + np.abs(turn + pulled[:, 2]) * radius
         relocation = float(moved[free].mean()) if free.any() else 0.0
         relocations.append(relocation)
         # Cooling (FFS 3.6): sigma linearly, dt exponentially.
@@ -170,6 +197,35 @@ def run_ffs(
         if sigma <= config.sigma_end and relocation < config.stop_relocation:
             converged = True
             break
-    return FfsResult(
-        poses, potentials, relocations, iteration, converged, time.perf_counter() - started
-    )
+    seconds = time.perf_counter() - started
+    return FfsResult(poses, potentials, relocations, iteration, converged, seconds, sigma, dt)
+
+
+class ChainSprings:
+    """The chain springs of :func:`run_ffs` (module doc): ``chain`` (M, 2) pairs of bodies,
+    each held at its relative pose in ``rest`` (K, 3) with ``stiffness``, and every body's
+    spring acceleration at given poses."""
+
+    def __init__(self, rest: FloatArray, chain: IntArray | None, stiffness: float) -> None:
+        pairs = np.zeros((0, 2), dtype=np.int64) if chain is None else np.asarray(chain)
+        rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
+        self.count = len(rest)
+        self.stiffness = stiffness if len(pairs) else 0.0
+        self.first, self.second = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+        self.T_first_second = se2.between_each(rest[self.first], rest[self.second])
+        self.T_second_first = se2.between_each(rest[self.second], rest[self.first])
+
+    def acceleration(self, poses: FloatArray) -> FloatArray:
+        """(K, 3): stiffness times the sum over a body's springs of its partner's prediction
+        of its pose minus its pose (x, y, theta)."""
+        pull = np.zeros((self.count, 3))
+        if self.stiffness == 0.0:
+            return pull
+        for body, partner, T_partner_body in (
+            (self.second, self.first, self.T_first_second),
+            (self.first, self.second, self.T_second_first),
+        ):
+            gap = se2.compose_each(poses[partner], T_partner_body) - poses[body]
+            gap[:, 2] = se2.wrap_angle(gap[:, 2])
+            np.add.at(pull, body, gap)
+        return self.stiffness * pull

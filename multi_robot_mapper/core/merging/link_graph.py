@@ -61,6 +61,8 @@ class MergeResult:
     # consistent links with the verdict on them
     state: object | None = None
     verdicts: dict[object, object] = dataclasses.field(default_factory=dict)
+    # what the next update's refinement after the graph resumes from (ffs: FfsState)
+    refinement: object | None = None
 
     @property
     def unmerged(self) -> list[str]:
