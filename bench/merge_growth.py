@@ -11,10 +11,10 @@ on the machine's speed).
 
 ``--method ffs`` runs the ``ffs`` merging method instead (the joint graph, then FFS, as the
 node does): FFS bounded by ``merge.ffs.time_budget`` per update (the node's), warm-started
-from the previous update's (issue 14 item 4), or started afresh from the joint graph at every
-update with ``--cold`` (FFS before the warm start). Two more columns then: FFS iterations per
-update (median) and the keyframe error at the end (RMSE of every merged keyframe's position
-against the reference after one rigid fit of all; pivot's too).
+from the previous update's where that one was cut short (issue 14 item 4), or started afresh
+from the joint graph at every update with ``--cold``. The last two columns: FFS iterations per
+update (median; ffs only) and the keyframe error at the end (RMSE of every merged keyframe's
+position against the reference after one rigid fit of all).
 
     .venv/bin/python bench/merge_growth.py [--logs intel aces fhw csail] [--robots 2 4 8]
         [--steps 10] [--overlap 40] [--budget 0] [--method pivot|ffs] [--cold]
@@ -132,10 +132,9 @@ def grow(
                 moves += 1
         placed_before, previous_reference = placed_now, result.reference
     assert result is not None
-    extra = ""
-    if method == "ffs":
-        error = keyframe_error(result, frames, keyframes)
-        extra = f" {np.median(iterations):.0f} | {error:.4f} |"
+    error = keyframe_error(result, frames, keyframes)
+    ffs_iterations = f"{np.median(iterations):.0f}" if method == "ffs" else "–"
+    extra = f" {ffs_iterations} | {error:.4f} |"
     print(
         f"| {name} | {robots} | {steps} | {len(placed_before)}/{robots} | {flips} | {wrong} | "
         f"{moves} | {np.median(times):.2f} | {max(times):.2f} |{extra}",
@@ -159,10 +158,9 @@ def main() -> None:
     config = merge_config_of(args)
     header = (
         "| log | robots | updates | placed at the end | flips | wrong placements | moves "
-        "| update median (s) | update max (s) |"
+        "| update median (s) | update max (s) | FFS iterations (median) "
+        "| keyframe error at the end (m) |"
     )
-    if args.method == "ffs":
-        header += " FFS iterations (median) | keyframe error at the end (m) |"
     print(header)
     print("|" + " --- |" * (header.count("|") - 1))
     for name in args.logs:

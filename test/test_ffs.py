@@ -224,10 +224,12 @@ def test_ffs_updates_resume_where_the_last_one_stopped(
     office_recordings: dict[str, list[Any]],
 ) -> None:
     # An update cut short (3 iterations) leaves its poses and cooling to the next, which goes
-    # on cooling from there; once settled, an update with nothing new settles at once.
+    # on cooling from there; once settled, an update with nothing new settles at once, and
+    # one with something new starts afresh from the joint graph.
     from multi_robot_mapper.core.extraction_config import ExtractionConfig
     from multi_robot_mapper.core.ffs.merge import FfsState, merge_ffs
     from multi_robot_mapper.core.merging import MergeConfig
+    from multi_robot_mapper.core.merging.joint import merge_joint
     from multi_robot_mapper.core.pipeline import run_offline
 
     local = run_offline(office_recordings, "local", ExtractionConfig())
@@ -235,6 +237,11 @@ def test_ffs_updates_resume_where_the_last_one_stopped(
     first = merge_ffs(local.keyframes, short, budget=0.0)
     state = first.refinement
     assert isinstance(state, FfsState) and set(state.keyframes) == set(first.robots)
+    # Cut short, its bodies are mid-anneal: the result keeps the joint graph's placement.
+    joint = merge_joint(local.keyframes, short, budget=0.0)
+    assert first.stats["ffs_converged"] == 0 and not state.settled
+    for robot in first.robots:
+        assert np.allclose(first.keyframe_poses[robot], joint.keyframe_poses[robot]), robot
     assert state.sigma == pytest.approx(short.ffs.sigma_start - 3 * short.ffs.sigma_step)
     second = merge_ffs(local.keyframes, short, previous=first, budget=0.0)
     assert isinstance(second.refinement, FfsState)
@@ -246,21 +253,29 @@ def test_ffs_updates_resume_where_the_last_one_stopped(
     for robot in again.robots:
         moved = again.keyframe_poses[robot] - settled.keyframe_poses[robot]
         assert np.abs(moved).max() < 1e-3, robot
+    fewer = {robot: frames[:-1] for robot, frames in local.keyframes.items()}
+    fresh = merge_ffs(fewer, previous=settled, budget=0.0)
+    cooling = (FfsConfig().sigma_start - FfsConfig().sigma_end) / FfsConfig().sigma_step
+    assert fresh.stats["ffs_iterations"] >= cooling
 
 
 def test_a_warm_start_carries_each_keyframe_as_the_last_simulation_corrected_it() -> None:
     from multi_robot_mapper.core.ffs.merge import FfsState, warm_started
 
     before = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.1], [2.0, 0.5, 0.2]])
-    T_fix = se2.matrix_from_pose(0.05, -0.02, 0.01)  # what FFS did to the held keyframes
-    after = np.array([se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in before])
-    state = FfsState({"a": np.array([0, 1, 2])}, {"a": before}, {"a": after}, 0.05, 0.6)
-    # The graph moved keyframe 1 a little and added keyframe 3; robot b is new.
-    start = np.vstack([before, [[3.0, 1.0, 0.3]], [[5.0, 5.0, 1.0]]])
-    start[1] += [0.02, 0.0, 0.0]
+    # What FFS did to each held keyframe, in its own frame.
+    fixes = np.array([[0.01, -0.02, 0.01], [0.03, 0.0, -0.02], [-0.01, 0.02, 0.005]])
+    after = se2.compose_each(before, fixes)
+    state = FfsState({"a": np.array([0, 1, 2])}, {"a": before}, {"a": after}, 0.05, 0.6, False)
+    # Since, the graph re-placed robot a as a whole (T_move) and added its keyframe 3; robot b
+    # is new.
+    T_move = se2.matrix_from_pose(4.0, -2.0, 0.7)
+    moved = np.array([se2.pose_from_matrix(T_move @ se2.matrix_from_pose(*p)) for p in before])
+    start = np.vstack([moved, [[3.0, 1.0, 0.3]], [[5.0, 5.0, 1.0]]])
     owners = [("a", 0), ("a", 1), ("a", 2), ("a", 3), ("b", 0)]
     index = {"a": np.array([0, 1, 2, 3]), "b": np.array([0])}
     warm = warm_started(state, owners, index, start)
-    expected = [se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in start[:4]]
-    assert np.allclose(warm[:4], expected)  # 3 takes the correction of 2, its nearest
+    expected = [se2.pose_from_matrix(T_move @ se2.matrix_from_pose(*p)) for p in after]
+    assert np.allclose(warm[:3], expected)  # each moved with its robot, its correction kept
+    assert np.allclose(warm[3], se2.compose(start[3], fixes[2]))  # 3 takes 2's, its nearest
     assert np.allclose(warm[4], start[4])
