@@ -92,15 +92,15 @@ def refine_with_ffs(
     bodies = make_bodies(segment_sets, ffs.spacing, ffs.roi_radius, ffs.roi_mass)
     springs = ChainSprings(body_start, robot_chain(chunks, owners), ffs.chain_stiffness)
     index = {robot: np.asarray(result.keyframe_index[robot], dtype=np.int64) for robot in robots}
+    rows = robot_rows(owners)
     resume = None
     warm = body_start
-    if previous is not None and _resumes(previous, index, start, owners):
+    if previous is not None and _resumes(previous, index, start, rows):
         warm = warm_started(previous, owners, index, start)[[members[0] for members in chunks]]
         resume = (previous.sigma, previous.dt)
     simulated = run_ffs(bodies, warm, ffs, springs=springs, resume=resume)
     poses = moved_with_bodies(chunks, start, body_start, simulated.poses)
     poses = _regauged(poses, start, owners, result.reference)
-    rows = {robot: [k for k, (owner, _) in enumerate(owners) if owner == robot] for robot in robots}
     state = FfsState(
         index,
         {robot: start[rows[robot]] for robot in robots},
@@ -119,11 +119,19 @@ def refine_with_ffs(
     )
 
 
+def robot_rows(owners: list[tuple[str, int]]) -> dict[str, list[int]]:
+    """Each robot's rows of ``owners`` ((robot, row in its keyframe maps) per keyframe)."""
+    rows: dict[str, list[int]] = {}
+    for k, (robot, _) in enumerate(owners):
+        rows.setdefault(robot, []).append(k)
+    return rows
+
+
 def _resumes(
     previous: FfsState,
     index: Mapping[str, IntArray],
     start: FloatArray,
-    owners: list[tuple[str, int]],
+    rows: Mapping[str, list[int]],
 ) -> bool:
     """Does this update continue ``previous`` (module doc): the same robots, and either its
     cooling was cut short or the joint graph's placement is unchanged?"""
@@ -131,14 +139,11 @@ def _resumes(
         return False
     if not previous.settled:
         return True
-    for robot, mine in index.items():
-        rows = [k for k, (owner, _) in enumerate(owners) if owner == robot]
-        before = previous.T_map_before[robot]
-        if not np.array_equal(previous.keyframes[robot], mine):
-            return False
-        if not np.allclose(before, start[rows], rtol=0.0, atol=1e-9):
-            return False
-    return True
+    return all(
+        np.array_equal(previous.keyframes[robot], mine)
+        and np.allclose(previous.T_map_before[robot], start[rows[robot]], rtol=0.0, atol=1e-9)
+        for robot, mine in index.items()
+    )
 
 
 def warm_started(
@@ -154,11 +159,12 @@ def warm_started(
     keyframes keep their correction; a map-frame correction would turn about ``map``'s
     origin. A robot it did not hold keeps its poses."""
     warm = np.array(start, dtype=np.float64)
+    rows_of = robot_rows(owners)
     for robot, mine in index.items():
         held = previous.keyframes.get(robot)
         if held is None or len(held) == 0:
             continue
-        rows = [k for k, (owner, _) in enumerate(owners) if owner == robot]
+        rows = rows_of[robot]
         # The nearest held keyframe by index: the one at or after, or the one before.
         after = np.clip(np.searchsorted(held, mine), 0, len(held) - 1)
         before = np.clip(after - 1, 0, len(held) - 1)
@@ -279,8 +285,9 @@ def with_keyframes_moved(
     placements = dict(result.placements)
     segments = result.segments.copy()
     assert result.segment_keyframe is not None
+    rows_of = robot_rows(owners)
     for robot in robots:
-        rows = [k for k, (owner, _) in enumerate(owners) if owner == robot]
+        rows = rows_of[robot]
         keyframe_poses[robot] = poses[rows]
         # Every frame of the robot (its pieces) moves with the best fit of its keyframes.
         T_new_old = se2.rigid_fit(start[rows], poses[rows])
