@@ -15,8 +15,9 @@ graph's placement (``refine_with_ffs``). With ``--from-reference`` every merged 
 at its reference pose instead (rigidly aligned to the placement): FFS's own minimum on that
 cut, apart from any merge's start.
 
-Figure: ATE (m) of every placed scan against the reference after one rigid fit of all of them
-(``ate_all_rmse_m`` of ``mrm evaluate``), before FFS (the joint graph's, or the reference
+Figure: ATE (m) of every scan of the merged robots against the reference after one rigid fit
+of all of them (``mrm evaluate``'s ``ate_all_rmse_m`` where every robot is merged; it also
+counts the unmerged robots, in their own frames), before FFS (the joint graph's, or the reference
 placement's) and after, with FFS's iterations and seconds. Prints one Markdown table.
 """
 
@@ -90,7 +91,8 @@ def prepared(case: str, work: Path, fresh: bool) -> tuple[OfflineMap, MergeResul
 
 
 def ate_all(result: MergeResult, local: OfflineMap, references: References) -> float:
-    """RMSE (m) of every placed scan's position after one rigid fit of all to the reference."""
+    """RMSE (m) of every placed scan's position (the merged robots') after one rigid fit of all
+    to the reference."""
     estimated, reference = [], []
     for robot in local.robots:
         anchors = local.anchors.get(robot)
@@ -103,6 +105,8 @@ def ate_all(result: MergeResult, local: OfflineMap, references: References) -> f
         same = np.abs(ref_stamps[row] - stamps) < 1e-6
         estimated.append(poses[same, :2])
         reference.append(ref_poses[row[same], :2])
+    if not estimated:
+        return float("nan")  # no robot merged
     est, ref = np.vstack(estimated), np.vstack(reference)
     error = se2.transform_points(se2.fit_points(est, ref), est) - ref
     return float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
@@ -112,6 +116,8 @@ def at_reference(joint: MergeResult, local: OfflineMap, references: References) 
     """``joint`` with every merged keyframe at its reference pose, rigidly aligned to the joint
     graph's placement (its segments moved with it)."""
     robots = [r for r in joint.robots if len(joint.keyframe_index.get(r, ())) > 0]
+    if not robots:
+        return joint
     owners, start, truth = [], [], []
     for robot in robots:
         stamp = {kf.index: kf.stamp for kf in local.keyframes[robot]}
