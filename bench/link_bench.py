@@ -15,6 +15,10 @@ keyframes. A link is *right* within 0.30 m / 5 deg (the confidence's own toleran
     .venv/bin/python bench/link_bench.py updates [--logs ...] [--robots 2 4 8] [--every 30]
         # the node's regime: growing maps, one update per --every s of log, within the
         # update_budget; prints | case | keyframes | updates | median | p90 | max (s) | placed |
+    .venv/bin/python bench/link_bench.py sources [--logs ...] [--robots 2 4 8] [--set N=V ...]
+        # issue 14 item 3: for every place that could be found on another map, is a right
+        # placement among the correlation's and among Wolter's shape matching's hypotheses
+        # (shape_hypotheses, 4 unless --set), before verification
 
 ``links`` prints, over every candidate of every case: precision and recall of "confidence >=
 t" and of "fit >= t" for a range of thresholds (the curve the ``link_confidence`` and
@@ -30,6 +34,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import dataclasses  # noqa: E402
 import json  # noqa: E402
 import pickle  # noqa: E402
 import subprocess  # noqa: E402
@@ -142,7 +147,7 @@ def right(error: tuple[float, float]) -> bool:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("step", choices=("prepare", "links", "updates"))
+    parser.add_argument("step", choices=("prepare", "links", "updates", "sources"))
     parser.add_argument(
         "--every", type=float, default=30.0, help="updates: seconds of log between updates"
     )
@@ -166,6 +171,8 @@ def main() -> int:
     config = config_from_flat(MergeConfig, overrides)
     if args.step == "updates":
         updates(cases, args, config)
+    elif args.step == "sources":
+        sources(cases, args, config)
     else:
         report(cases, args, config)
     return 0
@@ -223,6 +230,82 @@ def curve(rows: list[dict[str, Any]], key: str) -> list[tuple[float, int, int, f
         precision = good / len(taken) if taken else float("nan")
         out.append((t, len(taken), len(taken) - good, precision, good / right if right else 0.0))
     return out
+
+
+def any_right(rows: np.ndarray, centre: int, robot: str, unit: Any, truth: Truth) -> bool:
+    """Is any placement (rows theta, x, y of keyframe ``centre`` of ``robot`` in ``unit``'s
+    frame) right by the reference, judged from the unit's keyframe nearest to it?"""
+    for theta, x, y in rows:
+        T_unit_centre = se2.matrix_from_pose(x, y, theta)
+        r = int(np.argmin(np.hypot(*(unit.poses[:, :2] - [x, y]).T)))
+        T_keyframe_centre = se2.invert(se2.matrix_from_pose(*unit.poses[r])) @ T_unit_centre
+        error = truth.error(
+            (unit.robot, int(unit.index[r])),
+            (robot, centre),
+            se2.pose_from_matrix(T_keyframe_centre),
+        )
+        if right(error):
+            return True
+    return False
+
+
+def sources(cases: list[tuple[str, int]], args: argparse.Namespace, config: MergeConfig) -> None:
+    """Where each source of placements puts each place before verification (issue 14 item 3):
+    for every place of every map searched on every other map, is a right placement among the
+    map correlation's ``link_hypotheses`` and among the shape matching's ``shape_hypotheses``
+    (4 unless ``--set`` gives it)? Counted over the places whose centre lies within
+    ``place_spacing`` of the other map's keyframes at the reference (a place that could be
+    found there)."""
+    from multi_robot_mapper.core.merging.place_links import Target, placement_hypotheses
+    from multi_robot_mapper.core.merging.places import places_of, units_of
+
+    if not config.shape_hypotheses:
+        config = dataclasses.replace(config, shape_hypotheses=4)
+    print(
+        "| case | places that could be found | right among correlation's | right among shape's "
+        "| right among either | right only among shape's | shape (ms per place, median) |"
+    )
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for name, k in cases:
+        local, reference = load(name, k, args.work)
+        truth = Truth(local, reference)
+        units = units_of(local.keyframes)
+        counts = np.zeros(5, dtype=int)
+        times: list[float] = []
+        for source in units.values():
+            places = places_of(source, config)
+            for target_unit in units.values():
+                if target_unit.robot == source.robot:
+                    continue
+                target = Target.of(target_unit, config)
+                found_at = [truth.poses.get((target_unit.robot, int(i))) for i in target_unit.index]
+                path = np.array([T[:2, 2] for T in found_at if T is not None]).reshape(-1, 2)
+                for place in places:
+                    centre = truth.poses.get((source.robot, place.centre))
+                    if centre is None or not len(path):
+                        continue
+                    if np.min(np.hypot(*(path - centre[:2, 2]).T)) > config.place_spacing:
+                        continue
+                    started = time.perf_counter()
+                    correlated, shaped = placement_hypotheses(place, target, config)
+                    times.append(time.perf_counter() - started)
+
+                    by_correlation = any_right(
+                        correlated, place.centre, source.robot, target_unit, truth
+                    )
+                    by_shape = any_right(shaped, place.centre, source.robot, target_unit, truth)
+                    counts += [
+                        1,
+                        by_correlation,
+                        by_shape,
+                        by_correlation or by_shape,
+                        by_shape and not by_correlation,
+                    ]
+        print(
+            f"| {name} {k} | {counts[0]} | {counts[1]} | {counts[2]} | {counts[3]} | {counts[4]} "
+            f"| {1000 * float(np.median(times)) if times else float('nan'):.0f} |",
+            flush=True,
+        )
 
 
 def overlapping_truth(local: OfflineMap, truth: Truth, minimum: float = 15.0) -> int:

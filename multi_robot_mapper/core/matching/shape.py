@@ -228,6 +228,21 @@ def similarity(reference: _Groups, perceived: _Groups) -> FloatArray:
     return dissimilarity
 
 
+def shared_shape(reference: Shape, perceived: Shape, config: ShapeConfig) -> float:
+    """How much shape two scans share, on shape alone, in [0, 1]: the fraction of the skip
+    penalty of every polyline of both that their first-pass correspondence (Wolter Eq. 4
+    without the alignment term) saves (1: the same shape; 0: nothing shared). Unlike Eq. 5's
+    single most reliable pair, it ranks a view of the same place above a view of some other
+    place with one long intricate polyline; as a fraction, above a view with many polylines
+    of which a few match."""
+    if len(reference) == 0 or len(perceived) == 0:
+        return 0.0
+    groups_1, groups_2 = _groups(reference, config), _groups(perceived, config)
+    total, _ = correspond(similarity(groups_1, groups_2), groups_1, groups_2)
+    skip_all = groups_1.penalty[groups_1.row[1]].sum() + groups_2.penalty[groups_2.row[1]].sum()
+    return float((skip_all - total) / skip_all) if skip_all > 0.0 else 0.0
+
+
 def induced_alignments(reference: _Groups, perceived: _Groups) -> tuple[FloatArray, FloatArray]:
     """For every pair of groups, the rigid motion that fits the perceived group's samples onto
     the reference's at the same arc lengths (closed form): turn (R1, R2) and translation

@@ -302,6 +302,15 @@ class MergeConfig:
         minimum=1,
         maximum=20,
     )
+    shape_hypotheses: int = param(
+        0,
+        unit="",
+        doc="more placements of a place to verify, from Wolter's shape matching of the "
+        "place's synthetic scan on this many of the other map's views (the most reliable on "
+        "shape, Eq. 5); 0: the correlation's placements only (issue 14: measured no gain)",
+        minimum=0,
+        maximum=20,
+    )
     link_min_overlap: float = param(
         0.25,
         unit="",

@@ -38,6 +38,8 @@ from multi_robot_mapper.core.matching.beams import BeamAgreement, Viewpoint
 from multi_robot_mapper.core.matching.confidence import MatchEvidence, confidence
 from multi_robot_mapper.core.matching.integrate import match_evidence
 from multi_robot_mapper.core.matching.refine import match_information
+from multi_robot_mapper.core.matching.shape import Shape
+from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.correlation import (
     CorrelationTarget,
@@ -48,6 +50,7 @@ from multi_robot_mapper.core.merging.correlation import (
 from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.pairwise import MapSignature, draw_map, longest
 from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, thin, viewpoints
+from multi_robot_mapper.core.merging.shape_placements import shape_placements, view_shapes
 
 FloatArray = NDArray[np.float64]
 Pose = tuple[float, float, float]
@@ -90,6 +93,7 @@ class Target:
     correlation: CorrelationTarget
     view_poses: FloatArray  # (V, 3) keyframe poses thinned to view_spacing
     views: MapViews | None  # the free space the robot saw (None: no keyframe poses)
+    shapes: list[Shape]  # Wolter's shape all round from each view pose (shape_hypotheses)
 
     @staticmethod
     def of(unit: MapUnit, config: MergeConfig) -> Target:
@@ -101,7 +105,12 @@ class Target:
         reach = 2.0 * config.place_radius
         prepared = CorrelationTarget.of(drawing, reach, correlation.cell, correlation.blur)
         poses = unit.poses[thin(unit.poses, config.view_spacing)]
-        return Target(unit, MapSignature.of(unit.segments), drawing, prepared, poses, views)
+        shapes = (
+            view_shapes(unit.segments, poses, config.place_radius, ShapeConfig())
+            if config.shape_hypotheses
+            else []
+        )
+        return Target(unit, MapSignature.of(unit.segments), drawing, prepared, poses, views, shapes)
 
 
 def place_drawing(place: Place, config: MergeConfig) -> Drawing:
@@ -117,10 +126,11 @@ def place_config(config: MergeConfig) -> IntegrateConfig:
     """INTEGRATE's settings for verifying placements of places: its matching tolerances,
     every hypothesis given evaluated and refined, no slide along corridors (the correlation
     has tried every translation already)."""
+    tried = config.link_hypotheses + config.shape_hypotheses
     return dataclasses.replace(
         config.integrate,
-        max_hypotheses=max(config.link_hypotheses, 1),
-        refine_candidates=config.link_hypotheses,
+        max_hypotheses=max(tried, 1),
+        refine_candidates=tried,
         slide_range=0.0,
     )
 
@@ -140,14 +150,17 @@ def _verify_views(views: MapViews, config: MergeConfig) -> list[Viewpoint]:
     return viewpoints(kept, config)
 
 
-def match_place(
+def placement_hypotheses(
     place: Place, target: Target, config: MergeConfig, drawing: Drawing | None = None
-) -> list[LinkCandidate]:
-    """The place searched for on the target map: its best placement and best rival as link
-    candidates (none when it lies nowhere there)."""
+) -> tuple[FloatArray, FloatArray]:
+    """Where the place may lie on the target map, before verification: the correlation's
+    ``link_hypotheses`` best distinct placements (none when even the best scores below
+    ``link_min_overlap``), and the shape matching's (:mod:`shape_placements`; only with
+    ``shape_hypotheses``). Rows (theta, x, y) of the place's centre in the target's frame."""
     unit = target.unit
+    nothing = np.zeros((0, 3))
     if len(unit.segments) == 0 or len(place.segments) == 0:
-        return []
+        return nothing, nothing
     drawn = drawing if drawing is not None else place_drawing(place, config)
     correlation = config.correlation()
     rotations = rotation_candidates(unit.segments, place.segments, correlation.rotations)
@@ -155,9 +168,31 @@ def match_place(
         target.drawing, drawn, rotations, correlation, target.correlation
     )
     if len(peaks) == 0 or scores[0] < config.link_min_overlap * place.length:
+        return nothing, nothing
+    correlated = peaks[_distinct(peaks, config.link_hypotheses)]
+    if not config.shape_hypotheses:
+        return correlated, nothing
+    shaped = shape_placements(
+        place.segments,
+        target.view_poses,
+        target.shapes,
+        config.shape_hypotheses,
+        config.place_radius,  # as far as the place's walls reach: the views see the same
+        ShapeConfig(),
+    )
+    return correlated, shaped
+
+
+def match_place(
+    place: Place, target: Target, config: MergeConfig, drawing: Drawing | None = None
+) -> list[LinkCandidate]:
+    """The place searched for on the target map: its best placement and best rival as link
+    candidates (none when it lies nowhere there)."""
+    unit = target.unit
+    correlated, shaped = placement_hypotheses(place, target, config, drawing)
+    if len(correlated) == 0:
         return []
-    chosen = _distinct(peaks, config.link_hypotheses)
-    hypotheses = peaks[chosen]
+    hypotheses = np.vstack((correlated, shaped))
     # The target's walls and viewpoints around every placement tried, in the target's frame.
     crop = longest(
         segments_near(unit.segments, hypotheses[:, 1:], config.place_radius + _CROP_MARGIN),
