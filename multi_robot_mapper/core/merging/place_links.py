@@ -7,7 +7,9 @@ another map with no guess, in two steps:
    scores every translation of the place for each rotation the wall directions allow, walls
    lying in the other robot's free space counting against; the ``link_hypotheses`` best
    distinct placements are kept. The other map is transformed once for all its places
-   (:class:`Target`);
+   (:class:`Target`). With ``shape_hypotheses``, Wolter's shape matching adds placements of
+   its own (:mod:`~multi_robot_mapper.core.merging.shape_placements`, with ``ShapeConfig``'s
+   defaults; off by default: it raised merge success on no shared log);
 2. **verification**: INTEGRATE evaluates and refines those placements on the other map's walls
    around them, with both sides' synthetic beams (:func:`places.viewpoints`), and returns its
    calibrated confidence (:mod:`core.matching.confidence`): the probability that the placement
