@@ -306,8 +306,9 @@ class MergeConfig:
         0,
         unit="",
         doc="more placements of a place to verify, from Wolter's shape matching of the "
-        "place's synthetic scan on this many of the other map's views (the most reliable on "
-        "shape, Eq. 5); 0: the correlation's placements only (issue 14: measured no gain)",
+        "place's synthetic all-round scan on this many of the other map's views (those that "
+        "share the most shape with it); 0: the correlation's placements only (it raised merge "
+        "success on no shared log: README, 'Wolter's shape-based matching')",
         minimum=0,
         maximum=20,
     )
