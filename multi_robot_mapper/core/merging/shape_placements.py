@@ -35,10 +35,11 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.matching.shape import (
     Shape,
     match_shapes,
-    shape_of_points,
+    shape_of_scan,
     shared_shape,
 )
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
+from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import raycast_fans
 
 FloatArray = NDArray[np.float64]
@@ -56,15 +57,20 @@ def view_shapes(
     ranges = raycast_fans(
         segments, np.asarray(poses).reshape(-1, 3), first, step, _BEAMS, max_range
     )
-    bearings = first + step * np.arange(_BEAMS)
-    shapes = []
-    for row in ranges:
-        hit = np.isfinite(row)
-        points = np.column_stack(
-            (row[hit] * np.cos(bearings[hit]), row[hit] * np.sin(bearings[hit]))
+    return [
+        shape_of_scan(
+            LaserScanData(
+                ranges=row,
+                angle_min=first,
+                angle_max=first + step * (_BEAMS - 1),
+                angle_increment=step,
+                range_min=0.0,
+                range_max=max_range,
+            ),
+            config,
         )
-        shapes.append(shape_of_points(points, config))
-    return shapes
+        for row in ranges
+    ]
 
 
 def _twice_round(shape: Shape) -> Shape:
