@@ -102,6 +102,11 @@ def test_ffs_brings_perturbed_views_of_a_room_back() -> None:
     assert result.relocations[-1] < config.stop_relocation
 
 
+def _moved_rigidly(motion: tuple[float, float, float], poses: np.ndarray) -> np.ndarray:
+    """``poses`` (K, 3) carried by the rigid ``motion`` (x, y, theta)."""
+    return se2.compose_each(np.tile(motion, (len(poses), 1)), poses)
+
+
 @settings(max_examples=15, deadline=None)
 @given(
     x=st.floats(-20.0, 20.0),
@@ -118,10 +123,8 @@ def test_moving_the_whole_scene_moves_the_result_the_same_way(
     start = VIEWS + np.column_stack([rng.uniform(-0.05, 0.05, (3, 2)), rng.uniform(-0.03, 0.03, 3)])
     fixed = np.array([True, False, False])
     here = run_ffs(bodies, start, config, fixed=fixed).poses
-    T = se2.matrix_from_pose(x, y, theta)
-    moved_start = np.array([se2.pose_from_matrix(T @ se2.matrix_from_pose(*p)) for p in start])
-    there = run_ffs(bodies, moved_start, config, fixed=fixed).poses
-    expected = np.array([se2.pose_from_matrix(T @ se2.matrix_from_pose(*p)) for p in here])
+    there = run_ffs(bodies, _moved_rigidly((x, y, theta), start), config, fixed=fixed).poses
+    expected = _moved_rigidly((x, y, theta), here)
     assert np.allclose(there[:, :2], expected[:, :2], atol=1e-6)
     assert np.allclose(se2.wrap_angle(there[:, 2] - expected[:, 2]), 0.0, atol=1e-7)
 
@@ -140,8 +143,7 @@ def test_chain_springs_rest_at_the_start_and_under_any_rigid_motion_of_the_chain
     start = np.column_stack([rng.uniform(-10, 10, (4, 2)), rng.uniform(-np.pi, np.pi, 4)])
     springs = ChainSprings(start, np.array([[0, 1], [1, 2], [2, 3]]), 0.7)
     assert np.allclose(springs.acceleration(start), 0.0)
-    T = se2.matrix_from_pose(x, y, theta)
-    moved = np.array([se2.pose_from_matrix(T @ se2.matrix_from_pose(*p)) for p in start])
+    moved = _moved_rigidly((x, y, theta), start)
     assert np.allclose(springs.acceleration(moved), 0.0, atol=1e-9)
     # A body shifted by d: pulled back by -stiffness * d, its partners pulled along by it.
     shifted = start.copy()
