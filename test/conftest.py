@@ -45,3 +45,13 @@ def mrm() -> object:
     from multi_robot_mapper.cli.main import main
 
     return main
+
+
+@pytest.fixture(scope="module")
+def office_drive() -> tuple[object, list[object], object]:
+    """4 s of a simulated UTM-30LX at 40 Hz driving through the office world (stamps, scans,
+    T_world_laser), for the local-mapping tests."""
+    from multi_robot_mapper.core.simulation import LaserModel, simulate_robots
+
+    run = simulate_robots("office", 1, LaserModel(), seed=1, duration=4.0)[0]
+    return run.stamps, run.scans, run.T_world_laser

@@ -1,0 +1,443 @@
+"""Odometry-free local mapping, the back end: loop closures that straighten a biased map,
+and a lost robot's pieces joined again (where it can have driven, through chains of
+losses, with the heading across a loss)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from local_mapping_drives import (
+    ate,
+    biased_integrate,
+    feed,
+    looped_drive,
+    mapped,
+    relative_pose,
+    stranger_scan,
+)
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.local_mapping import (
+    LocalMapper,
+    LocalMapperConfig,
+    LocalUpdate,
+    attempts,
+    loop_closer,
+    mapper,
+    windows,
+)
+from multi_robot_mapper.core.local_mapping import joins as piece_joins
+from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
+from multi_robot_mapper.core.pose_graph import ReachBound
+
+
+def test_a_heading_bias_is_straightened_by_loop_closures(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # Every match the front end accepts turns 1 degree per metre of motion too far: the map
+    # bends by tens of degrees over a lap. Driving the office round twice, the back end (its
+    # local edges and loop closures, matched without the bias) pulls it straight again.
+    stamps, scans, truth = looped_drive(rate=4.0, laps=2.0, seed=3)
+
+    monkeypatch.setattr(attempts, "integrate", biased_integrate)
+    local = mapped(stamps, scans)
+    assert local.pieces_started == 0
+    assert len(local.closures) >= 10
+    times, poses = local.trajectory()
+    truth_at = {
+        float(t): np.asarray(relative_pose(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
+    }
+    assert ate(times, poses, truth_at) < 0.05
+    # Without the back end's edges the same bias bends the map by metres.
+    monkeypatch.setattr(windows, "integrate", biased_integrate)
+    unclosed = LocalMapper(
+        dataclasses.replace(LocalMapperConfig(), loop_candidates=0, local_edges=0)
+    )
+    for t, s in zip(stamps, scans, strict=True):
+        feed(unclosed, float(t), s)
+    assert ate(*unclosed.trajectory(), truth_at) > 0.5
+
+
+def _mapped_losing_the_robot_at(
+    monkeypatch: pytest.MonkeyPatch, stamps: np.ndarray, scans: list, lost_at: set[int]
+) -> tuple[LocalMapper, list[LocalUpdate]]:
+    """The scans mapped by a LocalMapper whose front end fails on the scans ``lost_at`` (a
+    match not confident enough: each starts a new piece from its best match's guess)."""
+    original = mapper.LocalMapper._match
+    count = {"scan": 0}
+
+    def failing(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        chosen, integrated = original(self, *args, **kwargs)
+        return chosen, integrated and count["scan"] not in lost_at
+
+    monkeypatch.setattr(mapper.LocalMapper, "_match", failing)
+    local = LocalMapper()
+    updates = []
+    for k, (t, s) in enumerate(zip(stamps, scans, strict=True)):
+        count["scan"] = k
+        updates.append(feed(local, float(t), s))
+    return local, updates
+
+
+def _ate_of_one_map(local: LocalMapper, stamps: np.ndarray, truth: np.ndarray) -> float:
+    """Every scan in the map's one piece: its ATE against the truth (m)."""
+    assert set(local.backend.map.pieces.tolist()) == {0}
+    times, poses = local.trajectory()
+    np.testing.assert_array_equal(times, stamps)
+    truth_at = {
+        float(t): np.asarray(relative_pose(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
+    }
+    return ate(times, poses, truth_at)
+
+
+def test_a_lost_robot_maps_on_in_a_piece_that_joins_the_map_again(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # The front end fails on two scans (a match not confident enough): each starts a new
+    # piece from its best match's guess. The next keyframes of the piece confirm the guess and
+    # the back end joins the piece to the map; in the end every scan is in one map.
+    stamps, scans, truth = looped_drive(rate=4.0, laps=0.5, seed=4)
+    lost_at = {25, 60}
+    local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, lost_at)
+    assert [u.new_piece for u in updates] == [k in lost_at for k in range(len(stamps))]
+    assert local.pieces_started == 2
+    assert [c.kind for c in local.closures].count("join") == 2
+    assert _ate_of_one_map(local, stamps, truth) < 0.02
+
+
+def test_a_join_bounds_the_robots_motion_across_the_loss(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # The robot is lost once. When its piece joins the map, the loss becomes a bound in the
+    # graph: the piece's first keyframe lies within the robot's reach of its last placed
+    # scan (it does not jump). The truth keeps it.
+    stamps, scans, truth = looped_drive(rate=4.0, laps=0.5, seed=4)
+    lost_at = 25
+    seen: list[piece_joins.LostFrom] = []
+    original_add = loop_closer.LoopCloser.add_keyframe
+
+    def recorded(self, scan, pose, piece, odometry, lost_from=None):  # type: ignore[no-untyped-def]
+        if lost_from is not None:
+            seen.append(lost_from)
+        return original_add(self, scan, pose, piece, odometry, lost_from)
+
+    monkeypatch.setattr(loop_closer.LoopCloser, "add_keyframe", recorded)
+    local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {lost_at})
+    closer = local.backend.closer
+    assert len(seen) == 1 and seen[0].reach is not None
+    lost = seen[0]
+    assert closer.motion_bounds == 1
+    (bound,) = closer.graph.bounds.values()
+    x, y, _ = lost.T_last_keyframe_scan
+    assert bound == ReachBound(
+        lost.last_keyframe, updates[lost_at].piece, (x, y), lost.reach, RIGHT_DISTANCE
+    )
+    assert np.hypot(*relative_pose(truth[lost_at - 1], truth[lost_at])[:2]) < lost.reach
+    assert _ate_of_one_map(local, stamps, truth) < 0.02
+
+
+@pytest.mark.parametrize("search_back", [True, False])
+def test_a_piece_the_robot_left_joins_when_the_robot_comes_back_to_it(
+    monkeypatch, search_back: bool
+) -> None:  # type: ignore[no-untyped-def]
+    # The robot is lost at scan 25 (the second piece starts) and again at scan 200, near the
+    # end of its lap (the third piece); the second piece's own searches never join (made to
+    # fail). The third joins the first through the chain of losses, and the robot drives on
+    # into the second piece's ground: the first piece's new keyframes find it, and the map is
+    # one piece again. Without that search the second piece stays apart.
+    stamps, scans, truth = looped_drive(rate=4.0, laps=1.3, seed=4)
+    second_piece: list[int] = []
+    original_lost = piece_joins.PieceJoins._lost
+    original_join = piece_joins.PieceJoins._join_through_guess
+
+    def lost(self, piece, lost_from):  # type: ignore[no-untyped-def]
+        second_piece.append(piece)
+        return original_lost(self, piece, lost_from)
+
+    def not_the_second(self, index, piece, keyframe, T_other_piece, depth):  # type: ignore[no-untyped-def]
+        if second_piece[0] in (piece, self.keyframes.piece(keyframe)):
+            return []
+        return original_join(self, index, piece, keyframe, T_other_piece, depth)
+
+    monkeypatch.setattr(piece_joins.PieceJoins, "_lost", lost)
+    monkeypatch.setattr(piece_joins.PieceJoins, "_join_through_guess", not_the_second)
+    if not search_back:
+        monkeypatch.setattr(
+            piece_joins.PieceJoins, "_join_pieces_lost_here", lambda self, index, piece: []
+        )
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25, 200})
+    if search_back:
+        assert [c.kind for c in local.closures].count("join") == 2
+        assert local.backend.closer.motion_bounds == 2
+        assert _ate_of_one_map(local, stamps, truth) < 0.03
+    else:
+        assert set(local.backend.map.pieces.tolist()) == {0, second_piece[0]}
+
+
+@pytest.mark.parametrize("turn_limit", [piece_joins._TURN_BETWEEN_SCANS, 2.0 * np.pi])
+def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -> None:  # type: ignore[no-untyped-def]
+    # The robot is lost once; every match between the two pieces is then made the half-turned
+    # look-alike of the right one (the piece turned round about its first scan, consistently,
+    # confidence 0.99): what a symmetric corridor offers. The robot turned far less than a
+    # quarter turn between its last placed scan and the piece's first, so the joins are refused
+    # and the piece stays apart; without the limit (2 pi) the look-alike joins the map.
+    stamps, scans, truth = looped_drive(rate=4.0, laps=0.5, seed=4)
+    original_windows = loop_closer.LoopCloser._match_windows
+
+    def turned_round(self, first, second, predicted, search=True):  # type: ignore[no-untyped-def]
+        result = original_windows(self, first, second, predicted, search)
+        keyframes = self.keyframes
+        if keyframes.piece(first) == keyframes.piece(second):
+            return result
+        theta, x, y = result.T_1_2
+        T_other_second = se2.compose(keyframes.pose(first), (x, y, theta))
+        T_other_piece = se2.compose(T_other_second, se2.between(keyframes.pose(second), (0, 0, 0)))
+        wrong = se2.compose(se2.compose(T_other_piece, (0.0, 0.0, np.pi)), keyframes.pose(second))
+        dx, dy, dtheta = se2.between(keyframes.pose(first), wrong)
+        return dataclasses.replace(result, T_1_2=np.array([dtheta, dx, dy]), confidence=0.99)
+
+    monkeypatch.setattr(loop_closer.LoopCloser, "_match_windows", turned_round)
+    monkeypatch.setattr(piece_joins, "_TURN_BETWEEN_SCANS", turn_limit)
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
+    assert local.pieces_started == 1
+    joins = [c for c in local.closures if c.kind == "join"]
+    if turn_limit < np.pi:
+        assert joins == []
+        assert local.backend.closer.refused["turned round from the robot's last pose (join)"] > 0
+        assert len(set(local.backend.map.pieces.tolist())) == 2
+    else:
+        # The look-alike joined: the map is decimetres off (the right join: under 2 cm, the
+        # test above).
+        assert len(joins) == 1
+        assert _ate_of_one_map(local, stamps, truth) > 0.1
+
+
+def _guessing_wrong(monkeypatch: pytest.MonkeyPatch, reach_known: bool) -> None:
+    """Every loss's guess made 4 m and 30 degrees off (and its reach unknown, unless
+    ``reach_known``)."""
+    original_add = loop_closer.LoopCloser.add_keyframe
+
+    def wrong_guess(self, scan, pose, piece, odometry, lost_from=None):  # type: ignore[no-untyped-def]
+        if lost_from is not None:
+            x, y, theta = lost_from.T_keyframe_piece
+            lost_from = lost_from._replace(
+                T_keyframe_piece=(x + 4.0, y, theta + np.radians(30.0)),
+                reach=lost_from.reach if reach_known else None,
+            )
+        return original_add(self, scan, pose, piece, odometry, lost_from)
+
+    monkeypatch.setattr(loop_closer.LoopCloser, "add_keyframe", wrong_guess)
+
+
+@pytest.mark.parametrize("reach_known", [True, False])
+def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
+    monkeypatch, reach_known: bool
+) -> None:  # type: ignore[no-untyped-def]
+    # The robot is lost once and the front end's guess of the new piece is 4 m and 30 degrees
+    # off, so nothing is found near it. The robot's motion still bounds the piece: its first
+    # scan lies within the robot's reach of its last placed scan. Searched on the ring of the
+    # old piece's keyframes that this allows, two keyframes of the new piece find the same
+    # placement and the piece joins the map where it belongs. Without a known reach (no
+    # speed yet) only the guess is searched, and the piece stays apart.
+    stamps, scans, truth = looped_drive(rate=4.0, laps=0.5, seed=4)
+    _guessing_wrong(monkeypatch, reach_known)
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
+    assert local.pieces_started == 1
+    joins = [c for c in local.closures if c.kind == "join"]
+    if reach_known:
+        assert len(joins) == 1
+        assert _ate_of_one_map(local, stamps, truth) < 0.02
+    else:
+        assert joins == []
+        assert len(set(local.backend.map.pieces.tolist())) == 2
+
+
+def _joining_far_from_the_loss(monkeypatch: pytest.MonkeyPatch, keyframes: int = 40) -> None:
+    """The piece a robot was lost into matches nothing of the piece before it until it has
+    ``keyframes`` keyframes (the place of the loss is hard to match): it joins where the
+    robot comes back, far from the loss."""
+    original = piece_joins.PieceJoins._join_through_guess
+
+    def held(self, index, piece, keyframe, T_other_piece, depth):  # type: ignore[no-untyped-def]
+        if index - piece < keyframes:
+            return []
+        return original(self, index, piece, keyframe, T_other_piece, depth)
+
+    monkeypatch.setattr(piece_joins.PieceJoins, "_join_through_guess", held)
+
+
+@pytest.mark.parametrize("heading", [True, False])
+def test_the_heading_across_a_loss_closes_the_loop_where_the_join_is_far_from_it(
+    monkeypatch, heading: bool
+) -> None:  # type: ignore[no-untyped-def]
+    # Every match the front end accepts turns 1 degree per metre too far. The robot is lost
+    # at scan 25, and its piece joins the map only where it comes back to its start, a lap
+    # later: the loop is open at the loss, where nothing but the reach bound ties the two
+    # sides. The front end's guess across the loss (its best match, not confident enough to
+    # integrate) gives the graph its heading there: an edge with the heading information of
+    # the two scans at the guess and none in position (a wrong guess is mostly a corridor
+    # slid along itself). With it the loop closes and the bias is straightened out.
+    stamps, scans, truth = looped_drive(rate=4.0, laps=1.2, seed=3)
+
+    monkeypatch.setattr(attempts, "integrate", biased_integrate)
+    _joining_far_from_the_loss(monkeypatch)
+    if not heading:
+        monkeypatch.setattr(loop_closer.LoopCloser, "_bridge_headings", lambda self: [])
+    local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
+    closer = local.backend.closer
+    (join,) = [c for c in local.closures if c.kind == "join"]
+    assert join.second - updates[25].piece >= 40  # found where the robot came back
+    if heading:
+        (bridge,) = closer.headings
+        assert (bridge.second, bridge.kind) == (updates[25].piece, "heading")
+        (edge,) = [
+            e
+            for e in closer.graph.edges.values()
+            if (e.first, e.second, e.T_first_second)
+            == (bridge.first, bridge.second, bridge.T_first_second)
+        ]
+        assert np.all(np.diag(edge.information)[:2] <= 1e-6)
+        assert edge.information[2, 2] > 1.0 / np.radians(5.0) ** 2
+        assert _ate_of_one_map(local, stamps, truth) < 0.03
+    else:
+        assert _ate_of_one_map(local, stamps, truth) > 0.04
+
+
+def test_a_heading_across_a_loss_that_disagrees_with_the_joined_map_is_refused(
+    monkeypatch,
+) -> None:  # type: ignore[no-untyped-def]
+    # The guess is 4 m and 30 degrees off; the piece joins a lap later, where the robot comes
+    # back (on the ring its motion allows). The joined map knows the heading across the loss
+    # far better than 30 degrees, so the guess's heading is refused and the map is right.
+    stamps, scans, truth = looped_drive(rate=4.0, laps=1.2, seed=3)
+    _joining_far_from_the_loss(monkeypatch)
+    _guessing_wrong(monkeypatch, reach_known=True)
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
+    closer = local.backend.closer
+    assert [c.kind for c in local.closures].count("join") == 1
+    assert closer.headings == []
+    assert closer.refused["heading far from the graph's (loss)"] == 1
+    assert _ate_of_one_map(local, stamps, truth) < 0.02
+
+
+def test_a_loss_its_join_spans_gets_no_second_heading(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # The piece joins at the loss itself (its first keyframes' window against the window of
+    # the keyframe the robot was lost near): that join's edge already closes the loss, from
+    # the same scans as the guess, so the guess's heading is not added on top.
+    stamps, scans, truth = looped_drive(rate=4.0, laps=0.5, seed=4)
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
+    closer = local.backend.closer
+    assert [c.kind for c in local.closures].count("join") == 1
+    assert closer.headings == []
+    assert closer.refused["loss spanned by its join (heading)"] == 1
+    assert _ate_of_one_map(local, stamps, truth) < 0.02
+
+
+@pytest.mark.parametrize("reach_known", [True, False])
+def test_a_piece_joins_through_a_chain_of_losses_where_the_robot_can_have_driven(
+    monkeypatch, reach_known: bool
+) -> None:  # type: ignore[no-untyped-def]
+    # A person blocks the laser at scan 25 (a piece of one scan that matches nothing) and the
+    # robot is lost again at scan 26; both guesses are 4 m and 30 degrees off, so the third
+    # piece's guess, composed through the second, is 8 m off. The robot's motion still bounds
+    # it: its first scan lies within two reaches, plus the second piece's extent (none), of
+    # the last scan placed in the first piece. Searched there, the third piece joins the first
+    # and the map is whole but for the blocked scan. Without a known reach it stays apart.
+    stamps, scans, truth = looped_drive(rate=4.0, laps=0.5, seed=4)
+    blocked = 25
+    scans = [stranger_scan(k) if k == blocked else s for k, s in enumerate(scans)]
+    _guessing_wrong(monkeypatch, reach_known)
+    local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {blocked, blocked + 1})
+    assert local.pieces_started == 2
+    pieces = local.backend.map.pieces
+    kept = [k for k in range(len(stamps)) if k != blocked]
+    if reach_known:
+        assert [c.kind for c in local.closures].count("join") == 1
+        assert set(pieces.tolist()) == {0, updates[blocked].piece}
+        times, poses = local.trajectory(0)
+        np.testing.assert_array_equal(times, stamps[kept])
+        truth_at = {float(stamps[k]): np.asarray(relative_pose(truth[0], truth[k])) for k in kept}
+        assert ate(times, poses, truth_at) < 0.02
+    else:
+        assert [c.kind for c in local.closures].count("join") == 0
+        assert len(set(pieces.tolist())) == 3
+
+
+def test_closures_of_one_new_keyframe_are_not_each_others_partner() -> None:
+    # Pairwise consistency needs independent matches: the new keyframe's window matched to
+    # two neighbouring old keyframes is one scan's evidence twice (a look-alike place fools
+    # both alike), so neither is the other's partner, however well they agree.
+    local = LocalMapper()
+    closure = loop_closer.Closure(10, 50, (1.0, 0.0, 0.0), 0.99, "loop", True, "", found_by=50)
+    neighbour = dataclasses.replace(closure, first=11, T_first_second=(0.5, 0.0, 0.0))
+    assert local.backend.closer._pairwise(closure, neighbour) is None
+    assert local.backend.closer._pairwise(neighbour, closure) is None
+
+
+def test_two_closures_agree_in_heading_within_the_drift_of_their_cycle(
+    office_drive,  # type: ignore[no-untyped-def]
+) -> None:
+    # Two closures between neighbouring keyframes, consistent with the graph; then one of them
+    # turned. Just inside the correctness tolerance they still agree; beyond it by 0.1 deg per
+    # metre of the cycle's path (about twice the local maps' heading drift) they do not:
+    # metres of path must not buy radians one for one.
+    stamps, scans, _ = office_drive
+    local = mapped(stamps, scans)
+    keyframes = local.backend.closer.keyframes
+    last = len(keyframes.scans) - 1
+    assert last >= 3
+
+    def closure(first: int, second: int, turn: float) -> loop_closer.Closure:
+        x, y, theta = se2.between(keyframes.pose(first), keyframes.pose(second))
+        return loop_closer.Closure(
+            first, second, (x, y, theta + turn), 0.99, "loop", True, "", found_by=second
+        )
+
+    other = closure(1, last - 1, 0.0)
+    path = float(
+        np.hypot(*se2.between(keyframes.pose(0), keyframes.pose(1))[:2])
+        + np.hypot(*se2.between(keyframes.pose(last - 1), keyframes.pose(last))[:2])
+    )
+    assert path > 0.5
+    inside = RIGHT_ANGLE - np.radians(0.5)
+    beyond = RIGHT_ANGLE + np.radians(0.1 * path)
+    assert local.backend.closer._pairwise(closure(0, last, inside), other) is True
+    assert local.backend.closer._pairwise(closure(0, last, beyond), other) is False
+
+
+def test_a_closure_edge_is_the_windows_placement_between_the_members_that_see_most(
+    office_drive,  # type: ignore[no-untyped-def]
+    monkeypatch,  # type: ignore[no-untyped-def]
+) -> None:
+    # Two keyframes' windows agree on a placement; the closure's edge keeps it as it is (the
+    # two scans alone refined it to worse placements on the shared logs), expressed between
+    # one member of each window through their poses in the windows: the pair whose own scans
+    # constrain it most, with the information of their walls.
+    stamps, scans, _ = office_drive
+    local = mapped(stamps, scans)
+    closer = local.backend.closer
+    pose = closer.keyframes.pose
+    last = len(closer.keyframes.scans) - 1
+    first_window, last_window = closer._window_members(0), closer._window_members(last)
+    assert not set(first_window.tolist()) & set(last_window.tolist())
+
+    def no_match(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the closure edge must not match the scans again")
+
+    monkeypatch.setattr(closer, "_match", no_match)
+    # The windows' placement as the graph has it: every member pair's edge is then the graph's
+    # own relative pose of the two members.
+    placement = se2.between(pose(0), pose(last))
+    edge = closer._scan_edge(0, last, placement)
+    assert edge.first in first_window and edge.second in last_window
+    np.testing.assert_allclose(
+        edge.T_first_second, se2.between(pose(edge.first), pose(edge.second)), atol=1e-9
+    )
+    assert edge.robust
+    volume = np.linalg.slogdet(edge.information)[1]
+    for i in first_window.tolist():
+        for j in last_window.tolist():
+            T_i_j = attempts.hypotheses_of([se2.between(pose(i), pose(j))])[0]
+            other = closer._edge(i, j, T_i_j, robust=True)
+            assert np.linalg.slogdet(other.information)[1] <= volume + 1e-9
+    # Walls of both scans overlap there: tighter than the ceiling of an unconstrained edge
+    # (10 m, 1 rad), in every direction; 40 m away nothing overlaps.
+    assert np.all(np.linalg.eigvalsh(edge.information) > 1.0)
+    apart = closer._scan_edge(0, last, (placement[0] + 40.0, placement[1], placement[2]))
+    assert np.linalg.eigvalsh(apart.information).min() < np.linalg.eigvalsh(edge.information).min()
