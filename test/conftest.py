@@ -10,8 +10,14 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from multi_robot_mapper.core.scan import LaserScanData
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 # Deprecated since Jazzy and in conflict with the discovery range above: never inherited.
@@ -48,7 +54,7 @@ def mrm() -> object:
 
 
 @pytest.fixture(scope="module")
-def office_drive() -> tuple[object, list[object], object]:
+def office_drive() -> tuple[np.ndarray, list[LaserScanData], np.ndarray]:
     """4 s of a simulated UTM-30LX at 40 Hz driving through the office world (stamps, scans,
     T_world_laser), for the local-mapping tests."""
     from multi_robot_mapper.core.simulation import LaserModel, simulate_robots

@@ -10,24 +10,17 @@ import numpy as np
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
-from multi_robot_mapper.core.local_mapping import (
-    LocalMapper,
-    LocalUpdate,
-)
+from multi_robot_mapper.core.local_mapping import LocalMapper, LocalUpdate
 from multi_robot_mapper.core.matching import MatchResult, integrate
 from multi_robot_mapper.core.scan import LaserScanData
-from multi_robot_mapper.core.simulation import (
-    LaserModel,
-    drive_path,
-    route_section,
-    simulate_scan,
-)
+from multi_robot_mapper.core.simulation import LaserModel, drive_path, route_section, simulate_scan
 from multi_robot_mapper.core.worlds import ROUTES, WORLDS, box
 
 EXTRACTION = ExtractionConfig()
 
 
 def relative_pose(first: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """``pose`` in the frame of ``first`` (both x, y, theta in one frame)."""
     T = se2.invert(se2.matrix_from_pose(*first)) @ se2.matrix_from_pose(*pose)
     return np.asarray(se2.pose_from_matrix(T))
 
