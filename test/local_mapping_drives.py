@@ -19,12 +19,6 @@ from multi_robot_mapper.core.worlds import ROUTES, WORLDS, box
 EXTRACTION = ExtractionConfig()
 
 
-def relative_pose(first: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """``pose`` in the frame of ``first`` (both x, y, theta in one frame)."""
-    T = se2.invert(se2.matrix_from_pose(*first)) @ se2.matrix_from_pose(*pose)
-    return np.asarray(se2.pose_from_matrix(T))
-
-
 def feed(mapper: LocalMapper, stamp: float, scan: LaserScanData) -> LocalUpdate:
     segments, _ = extract_scan(scan, EXTRACTION)
     return mapper.add_scan(stamp, segments, scan)
@@ -67,14 +61,11 @@ def fake_match(
 
 
 def ate(stamps: np.ndarray, poses: np.ndarray, truth: dict[float, np.ndarray]) -> float:
-    """RMSE of the positions after the best rigid alignment (Umeyama without scale)."""
+    """RMSE of the positions after the best rigid alignment onto the truth (se2.fit_points)."""
     est = poses[:, :2]
     ref = np.array([truth[float(s)][:2] for s in stamps])
-    est_c, ref_c = est - est.mean(axis=0), ref - ref.mean(axis=0)
-    u, _, vt = np.linalg.svd(ref_c.T @ est_c)
-    d = np.sign(np.linalg.det(u @ vt))
-    R = u @ np.diag([1.0, d]) @ vt
-    return float(np.sqrt(np.mean(np.sum((est_c @ R.T - ref_c) ** 2, axis=1))))
+    error = se2.transform_points(se2.fit_points(est, ref), est) - ref
+    return float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
 
 
 def looped_drive(rate: float, laps: float, seed: int) -> tuple[np.ndarray, list, np.ndarray]:

@@ -16,7 +16,6 @@ from local_mapping_drives import (
     fake_match,
     feed,
     looped_drive,
-    relative_pose,
     stranger_scan,
 )
 
@@ -80,7 +79,7 @@ def test_a_simulated_drive_is_tracked_within_centimetres(office_drive) -> None: 
     assert mapper.scans_set_aside == 0 and mapper.pieces_started == 0
     assert all(p is not None for p in poses)
     for pose, true_pose in zip(poses, truth, strict=True):
-        expected = relative_pose(truth[0], true_pose)
+        expected = se2.between(truth[0], true_pose)
         assert pose is not None
         assert np.hypot(pose[0] - expected[0], pose[1] - expected[1]) < 0.05
         assert abs(se2.wrap_angle(pose[2] - expected[2])) < np.radians(1.0)
@@ -165,7 +164,7 @@ def test_a_first_scan_nothing_confirms_stays_in_a_piece_of_its_own(office_drive)
     assert main != 0 and mapper.pieces_started == 1
     trajectory_stamps, poses = mapper.trajectory()
     np.testing.assert_array_equal(trajectory_stamps, stamps[:20])
-    expected = np.array([relative_pose(truth[0], p) for p in truth[:20]])
+    expected = np.array([se2.between(truth[0], p) for p in truth[:20]])
     np.testing.assert_allclose(poses[:, :2], expected[:, :2], atol=0.05)
 
 
@@ -184,7 +183,7 @@ def test_a_person_blocking_the_laser_does_not_break_the_map() -> None:
     times, poses = local.trajectory()
     kept = [k for k in range(len(stamps)) if k not in blocked]
     np.testing.assert_array_equal(times, stamps[kept])
-    truth_at = {float(stamps[k]): np.asarray(relative_pose(truth[0], truth[k])) for k in kept}
+    truth_at = {float(stamps[k]): np.asarray(se2.between(truth[0], truth[k])) for k in kept}
     assert ate(times, poses, truth_at) < 0.02
 
 
@@ -341,7 +340,7 @@ def test_a_cluttered_office_is_tracked_within_centimetres() -> None:
         update = feed(mapper, float(t), s)
         assert update.accepted and update.piece == 0
         assert update.pose is not None
-        expected = relative_pose(run.T_world_laser[0], true_pose)
+        expected = se2.between(run.T_world_laser[0], true_pose)
         assert np.hypot(update.pose[0] - expected[0], update.pose[1] - expected[1]) < 0.05
         assert abs(se2.wrap_angle(update.pose[2] - expected[2])) < np.radians(1.0)
 
@@ -412,7 +411,7 @@ def test_degenerate_scans_let_through_are_never_placed_in_the_map() -> None:
     # them), where the simulator put it.
     np.testing.assert_array_equal(times, stamps)
     truth_at = {
-        float(t): np.asarray(relative_pose(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
+        float(t): np.asarray(se2.between(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
     }
     assert ate(times, poses, truth_at) < 0.02
 

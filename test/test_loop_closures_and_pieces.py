@@ -14,7 +14,6 @@ from local_mapping_drives import (
     feed,
     looped_drive,
     mapped,
-    relative_pose,
     stranger_scan,
 )
 
@@ -45,7 +44,7 @@ def test_a_heading_bias_is_straightened_by_loop_closures(monkeypatch) -> None:  
     assert len(local.closures) >= 10
     times, poses = local.trajectory()
     truth_at = {
-        float(t): np.asarray(relative_pose(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
+        float(t): np.asarray(se2.between(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
     }
     assert ate(times, poses, truth_at) < 0.05
     # Without the back end's edges the same bias bends the map by metres.
@@ -85,7 +84,7 @@ def _ate_of_one_map(local: LocalMapper, stamps: np.ndarray, truth: np.ndarray) -
     times, poses = local.trajectory()
     np.testing.assert_array_equal(times, stamps)
     truth_at = {
-        float(t): np.asarray(relative_pose(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
+        float(t): np.asarray(se2.between(truth[0], p)) for t, p in zip(stamps, truth, strict=True)
     }
     return ate(times, poses, truth_at)
 
@@ -128,7 +127,7 @@ def test_a_join_bounds_the_robots_motion_across_the_loss(monkeypatch) -> None:  
     assert bound == ReachBound(
         lost.last_keyframe, updates[lost_at].piece, (x, y), lost.reach, RIGHT_DISTANCE
     )
-    assert np.hypot(*relative_pose(truth[lost_at - 1], truth[lost_at])[:2]) < lost.reach
+    assert np.hypot(*se2.between(truth[lost_at - 1], truth[lost_at])[:2]) < lost.reach
     assert _ate_of_one_map(local, stamps, truth) < 0.02
 
 
@@ -352,7 +351,7 @@ def test_a_piece_joins_through_a_chain_of_losses_where_the_robot_can_have_driven
         assert set(pieces.tolist()) == {0, updates[blocked].piece}
         times, poses = local.trajectory(0)
         np.testing.assert_array_equal(times, stamps[kept])
-        truth_at = {float(stamps[k]): np.asarray(relative_pose(truth[0], truth[k])) for k in kept}
+        truth_at = {float(stamps[k]): np.asarray(se2.between(truth[0], truth[k])) for k in kept}
         assert ate(times, poses, truth_at) < 0.02
     else:
         assert [c.kind for c in local.closures].count("join") == 0

@@ -25,9 +25,7 @@ RANGE = 6.0  # the place holds walls this far from its centre (place_radius)
 def _placed_right(rows: np.ndarray, truth: np.ndarray) -> bool:
     """Is any row (theta, x, y) within 5 cm / 0.5 deg of the pose ``truth`` (x, y, theta)?"""
     for theta, x, y in rows:
-        error = se2.pose_from_matrix(
-            se2.invert(se2.matrix_from_pose(*truth)) @ se2.matrix_from_pose(x, y, theta)
-        )
+        error = se2.between(truth, (x, y, theta))
         if np.hypot(error[0], error[1]) < 0.05 and abs(error[2]) < np.radians(0.5):
             return True
     return False
@@ -56,7 +54,8 @@ def test_a_place_is_found_on_a_moved_copy_of_its_map_whatever_its_heading(turn_d
     place = se2.transform_segments(
         se2.invert(T_world_centre), clip_to_disk(world, centre[:2], RANGE)
     )
-    T_target_world = se2.matrix_from_pose(3.0, -7.0, 0.8)
+    target_from_world = (3.0, -7.0, 0.8)  # T_target_world as (x, y, theta)
+    T_target_world = se2.matrix_from_pose(*target_from_world)
     target = se2.transform_segments(T_target_world, world)
     spots = [
         (14.0, 9.5, 0.3),
@@ -65,9 +64,7 @@ def test_a_place_is_found_on_a_moved_copy_of_its_map_whatever_its_heading(turn_d
         (13.0, 11.0, -2.0),
         (2.0, 2.5, 0.5),
     ]
-    poses = np.array(
-        [se2.pose_from_matrix(T_target_world @ se2.matrix_from_pose(*spot)) for spot in spots]
-    )
+    poses = se2.compose_each(np.tile(target_from_world, (len(spots), 1)), np.array(spots))
     shapes = view_shapes(target, poses, RANGE, CONFIG)
     rows = shape_placements(place, poses, shapes, 2, RANGE, CONFIG)
     truth = se2.pose_from_matrix(T_target_world @ T_world_centre)
