@@ -32,6 +32,11 @@ CLI_LIMITS: dict[str, tuple[float, float, str]] = {
     "noise": (0.0, 1.0, "m"),
     "duration": (0.1, 3600.0, "s"),
     "clutter": (0.0, 2.0, "objects/m^2"),
+    # simulate --world generated: a building's largest extent, its walking people, and the
+    # driving between kept scans of a sparse run
+    "size": (20.0, 200.0, "m"),
+    "people": (0, 1000, "people"),
+    "sparse": (0.05, 100.0, "m"),
     "overlap_scans": (0, 1_000_000, "scans"),
     "range_max": (0.1, 100_000.0, "m"),
     "max_points": (1, 10_000_000, "points"),

@@ -34,12 +34,25 @@ class LaserModel:
     rate: float = 40.0  # Hz
 
     @property
+    def angles(self) -> FloatArray:
+        """Bearing of each beam in the laser frame, rad."""
+        return self.angle_min + self.angle_increment * np.arange(self.beams, dtype=np.float64)
+
+    @property
     def angle_min(self) -> float:
         return -0.5 * self.field_of_view
 
     @property
     def angle_increment(self) -> float:
         return self.field_of_view / (self.beams - 1)
+
+
+LASERS: dict[str, LaserModel] = {
+    "utm30lx": LaserModel(),
+    # The SICK LMS 200/291 of the CARMEN logs: 181 beams over 180 deg, 1 deg apart, 80 m.
+    "lms": LaserModel(beams=181, field_of_view=np.pi, range_max=80.0, rate=10.0),
+}
+"""The simulated lasers by name (``mrm simulate --laser``); they share the noise model."""
 
 
 def _ray_wall_hits(
@@ -160,6 +173,14 @@ def simulate_scan(
     ranges = raycast_fan(
         walls, pose, laser.angle_min, laser.angle_increment, laser.beams, laser.range_max
     )
+    return scan_from_ranges(ranges, laser, rng)
+
+
+def scan_from_ranges(
+    ranges: FloatArray, laser: LaserModel, rng: np.random.Generator
+) -> LaserScanData:
+    """The laser's noisy scan of exact ``ranges`` (``inf`` where nothing returns): Gaussian
+    range noise, then dropouts (NaN), drawn from ``rng`` in that order."""
     noisy = ranges + rng.normal(0.0, laser.range_noise, size=ranges.shape)
     noisy[rng.random(ranges.shape) < laser.dropout] = np.nan
     noisy[~np.isfinite(ranges)] = np.inf  # no return (REP-117)
@@ -356,20 +377,26 @@ class Clutter:
 
     def walls_at(self, walls: FloatArray, seconds: float) -> FloatArray:
         """The world's walls, the furniture and every person where they are at ``seconds``."""
-        pieces = [walls, self.static]
-        for x1, y1, x2, y2 in self.walkers:
-            length = float(np.hypot(x2 - x1, y2 - y1))
-            # To and fro along the line: position along it, a triangle wave in time.
-            phase = (seconds * _PERSON_SPEED / max(length, 1e-9)) % 2.0
-            share = phase if phase <= 1.0 else 2.0 - phase
-            cx, cy = x1 + share * (x2 - x1), y1 + share * (y2 - y1)
-            nx, ny = -(y2 - y1) / max(length, 1e-9), (x2 - x1) / max(length, 1e-9)
-            stride = 0.15 * np.sin(2.0 * np.pi * seconds)  # legs swing while walking
-            for side in (-1.0, 1.0):
-                lx = cx + side * 0.12 * nx + side * stride * (x2 - x1) / max(length, 1e-9)
-                ly = cy + side * 0.12 * ny + side * stride * (y2 - y1) / max(length, 1e-9)
-                pieces.append(arc((lx, ly), _PERSON_LEG, 0.0, 2 * np.pi, pieces=6))
-        return np.vstack(pieces)
+        return np.vstack([walls, self.static, *people_at(self.walkers, seconds)])
+
+
+def people_at(walkers: FloatArray, seconds: float) -> list[FloatArray]:
+    """The legs of each person walking to and fro along a line of ``walkers`` (W, 4) at
+    ``seconds``: two small arcs per person, person after person."""
+    pieces = []
+    for x1, y1, x2, y2 in walkers:
+        length = float(np.hypot(x2 - x1, y2 - y1))
+        # To and fro along the line: position along it, a triangle wave in time.
+        phase = (seconds * _PERSON_SPEED / max(length, 1e-9)) % 2.0
+        share = phase if phase <= 1.0 else 2.0 - phase
+        cx, cy = x1 + share * (x2 - x1), y1 + share * (y2 - y1)
+        nx, ny = -(y2 - y1) / max(length, 1e-9), (x2 - x1) / max(length, 1e-9)
+        stride = 0.15 * np.sin(2.0 * np.pi * seconds)  # legs swing while walking
+        for side in (-1.0, 1.0):
+            lx = cx + side * 0.12 * nx + side * stride * (x2 - x1) / max(length, 1e-9)
+            ly = cy + side * 0.12 * ny + side * stride * (y2 - y1) / max(length, 1e-9)
+            pieces.append(arc((lx, ly), _PERSON_LEG, 0.0, 2 * np.pi, pieces=6))
+    return pieces
 
 
 def clutter_for(world: str, density: float, seed: int = 0) -> Clutter:
@@ -399,12 +426,8 @@ def clutter_for(world: str, density: float, seed: int = 0) -> Clutter:
             continue
         kind = rng.choice(4, p=[0.4, 0.25, 0.15, 0.2])
         turn = rng.uniform(0.0, np.pi)
-        if kind == 0:  # a chair: four legs on a 0.45 m square
-            static.append(_legs(x, y, 0.45, 0.45, turn))
-        elif kind == 1:  # a table: four legs on a 0.8 x 1.2 m rectangle
-            static.append(_legs(x, y, 0.8, 1.2, turn))
-        elif kind == 2:  # a round pillar
-            static.append(arc((x, y), rng.uniform(0.1, 0.25), 0.0, 2 * np.pi, pieces=8))
+        if kind < 3:
+            static.append(_furniture(int(kind), x, y, turn, rng))
         else:  # a person walking to and fro along 2-4 m
             reach = rng.uniform(1.0, 2.0)
             dx, dy = reach * np.cos(turn), reach * np.sin(turn)
@@ -413,6 +436,21 @@ def clutter_for(world: str, density: float, seed: int = 0) -> Clutter:
         np.vstack(static) if static else np.zeros((0, 4)),
         np.asarray(walkers, dtype=np.float64).reshape(-1, 4),
     )
+
+
+def furniture_piece(rng: np.random.Generator, x: float, y: float) -> FloatArray:
+    """A chair, a table or a round pillar at ``(x, y)``, turned at random (the furniture of
+    :func:`clutter_for`, without its people): segments within 0.75 m of the point."""
+    kind = rng.choice(3, p=[0.5, 0.3, 0.2])
+    return _furniture(int(kind), x, y, rng.uniform(0.0, np.pi), rng)
+
+
+def _furniture(kind: int, x: float, y: float, turn: float, rng: np.random.Generator) -> FloatArray:
+    if kind == 0:  # a chair: four legs on a 0.45 m square
+        return _legs(x, y, 0.45, 0.45, turn)
+    if kind == 1:  # a table: four legs on a 0.8 x 1.2 m rectangle
+        return _legs(x, y, 0.8, 1.2, turn)
+    return arc((x, y), rng.uniform(0.1, 0.25), 0.0, 2 * np.pi, pieces=8)  # a round pillar
 
 
 def _legs(x: float, y: float, width: float, depth: float, turn: float) -> FloatArray:
