@@ -4,6 +4,9 @@ and a target size: the plan's largest extent, in metres (:mod:`core.buildings` f
 Every builder returns a :class:`~core.floor_plans.Layout` and the symmetry it was built with:
 ``"mirror"`` (the plan is its own mirror image about the y axis, x -> -x), ``"rotation_180"``
 or ``"rotation_90"`` (its own copy turned by that angle about the origin), or ``"none"``.
+Every plan marks where its glass would be (glass fronts and back windows of some rooms, a
+stretch of an outer wall); a building without glass has walls there instead, so the same seed
+gives the same plan with and without glass.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ FloatArray = NDArray[np.float64]
 Rng = np.random.Generator
 Span = tuple[float, float, float, float]  # x0, y0, x1, y1
 
-# With glass on, this share of rooms has a glass front, and this share a window at the back.
+# This share of rooms has a glass front, and this share a window in the back wall.
 GLASS_SHARE = 0.35
 _ROOM_WIDTH_M = (3.0, 6.0)  # a room's width along its corridor
 _ROOM_DEPTH_M = (3.0, 6.0)
@@ -47,15 +50,13 @@ class _Style:
     door: float  # m, door width
     corridor: float  # m, corridor width
     depth: float  # m, room depth
-    glass: bool  # glass fronts on some rooms, glass stretches on some outer walls
 
 
-def _style(rng: Rng, glass: bool, corridor: tuple[float, float] = (1.8, 3.0)) -> _Style:
+def _style(rng: Rng, corridor: tuple[float, float] = (1.8, 3.0)) -> _Style:
     return _Style(
         door=float(rng.uniform(*_DOOR_M)),
         corridor=float(rng.uniform(*corridor)),
         depth=float(rng.uniform(*_ROOM_DEPTH_M)),
-        glass=glass,
     )
 
 
@@ -90,9 +91,9 @@ def _rooms(
         middle = a + _JAMB_M + 0.5 * style.door + share * free
         rects.append((a, y0, b, y1))
         doors.append((middle - 0.5 * style.door, front, middle + 0.5 * style.door, front))
-        if style.glass and rng.random() < GLASS_SHARE:  # a glass front onto the corridor
+        if rng.random() < GLASS_SHARE:  # a glass front onto the corridor
             glass.append((a, front, b, front))
-        if style.glass and rng.random() < GLASS_SHARE:  # a window in the back wall
+        if rng.random() < GLASS_SHARE:  # a window in the back wall
             back = front + side * style.depth
             glass.append((a + _JAMB_M, back, b - _JAMB_M, back))
     return layout(rects, [ROOM] * len(rects), doors, glass)
@@ -120,10 +121,10 @@ def _outer_glass(rng: Rng, start: tuple[float, float], stop: tuple[float, float]
     return [(float(a[0]), float(a[1]), float(b[0]), float(b[1]))]
 
 
-def room_row(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
+def room_row(rng: Rng, size: float) -> tuple[Layout, str]:
     """A corridor ``size`` m long with a row of equal rooms on one or both sides, every door
     at the same place in its room (the same view from every doorway)."""
-    style = _style(rng, glass)
+    style = _style(rng)
     half = 0.5 * style.corridor
     edges = _partition(rng, 0.0, size, equal=True)
     door_at = float(rng.random())
@@ -131,15 +132,15 @@ def room_row(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
     parts.append(_rooms(rng, style, edges, half, +1, door_at))
     if rng.random() < 0.6:
         parts.append(_rooms(rng, style, edges, -half, -1, door_at))
-    elif glass and rng.random() < 0.5:  # the bare side, a glass wall in part
+    elif rng.random() < 0.5:  # the bare side, a glass wall in part
         parts.append(layout([], [], glass=_outer_glass(rng, (0.0, -half), (size, -half))))
     return combined(parts), "none"
 
 
-def mirror_wings(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
+def mirror_wings(rng: Rng, size: float) -> tuple[Layout, str]:
     """A wing of rooms of random widths along a corridor, and its mirror image about the y
     axis; in larger plans the wing may end in a cross wing (an H-shaped building)."""
-    style = _style(rng, glass)
+    style = _style(rng)
     half, end = 0.5 * style.corridor, 0.5 * size
     cross_depth = float(rng.uniform(*_ROOM_DEPTH_M))
     cross = size >= 40.0 and rng.random() < 0.5
@@ -162,11 +163,11 @@ def mirror_wings(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
     return combined([base, mirrored(base)]), "mirror"
 
 
-def rotation_wings(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
+def rotation_wings(rng: Rng, size: float) -> tuple[Layout, str]:
     """A square hub with two (180 degree) or four (90 degree) copies of one wing: a corridor
     off the middle of the hub's side (so the plan is not also a mirror image) with rooms of
     random widths along it."""
-    style = _style(rng, glass)
+    style = _style(rng)
     order = 4 if rng.random() < 0.5 else 2
     offset = float(rng.uniform(0.5, 1.5) * rng.choice([-1.0, 1.0]))
     half, end = 0.5 * style.corridor, 0.5 * size
@@ -188,7 +189,7 @@ def rotation_wings(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
     return combined(copies), "rotation_90" if order == 4 else "rotation_180"
 
 
-def bare_corridors(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
+def bare_corridors(rng: Rng, size: float) -> tuple[Layout, str]:
     """Long corridors with few features: an L, a T or a loop, ``size`` m across, with up to
     three cabinets against the walls and nothing else."""
     width = float(rng.uniform(1.5, 3.0))
@@ -208,7 +209,7 @@ def bare_corridors(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
         openings.append((s - w, h - w, s, h - w))
     cabinets = _cabinets(rng, np.asarray(rects), np.asarray(openings), width)
     outer = h if shape == "T" else 0.0  # the first corridor's outer long side
-    panes = _outer_glass(rng, (0.0, outer), (s, outer)) if glass else []
+    panes = _outer_glass(rng, (0.0, outer), (s, outer))
     return layout(rects, [CORRIDOR] * len(rects), openings, panes, cabinets), "none"
 
 
@@ -269,22 +270,20 @@ def _pillars(
     return np.vstack(pieces), (lanes_x, lanes_y)
 
 
-def pillar_hall(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
+def pillar_hall(rng: Rng, size: float) -> tuple[Layout, str]:
     """One open hall ``size`` m long with a regular grid of pillars 5-9 m apart."""
     rect = (0.0, 0.0, size, max(10.0, float(rng.uniform(0.5, 1.0)) * size))
     pillars, lanes = _pillars(rng, rect, (5.0, 9.0))
-    panes: list[Span] = []
-    if glass:
-        corners = [(0.0, 0.0), (rect[2], 0.0), (rect[2], rect[3]), (0.0, rect[3])]
-        k = int(rng.integers(4))
-        panes = _outer_glass(rng, corners[k], corners[(k + 1) % 4])
+    corners = [(0.0, 0.0), (rect[2], 0.0), (rect[2], rect[3]), (0.0, rect[3])]
+    k = int(rng.integers(4))
+    panes = _outer_glass(rng, corners[k], corners[(k + 1) % 4])
     return layout([rect], [HALL], glass=panes, obstacles=pillars, lanes=[lanes]), "none"
 
 
-def mixed(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
+def mixed(rng: Rng, size: float) -> tuple[Layout, str]:
     """A pillared hall, then a corridor with equal rooms on one side and rooms of random
     widths on the other, then a bare corridor that may turn a corner."""
-    style = _style(rng, glass)
+    style = _style(rng)
     half = 0.5 * style.corridor
     hall_x = float(rng.uniform(0.2, 0.3)) * size
     hall_y = max(6.0, float(rng.uniform(0.3, 0.6)) * size)
@@ -309,12 +308,11 @@ def mixed(rng: Rng, size: float, glass: bool) -> tuple[Layout, str]:
         parts.append(
             layout([(size - w, half, size, top)], [CORRIDOR], [(size - w, half, size, half)])
         )
-    if glass:
-        parts.append(layout([], [], glass=_outer_glass(rng, hall[:2], (0.0, hall[3]))))
+    parts.append(layout([], [], glass=_outer_glass(rng, hall[:2], (0.0, hall[3]))))
     return combined(parts), "none"
 
 
-PLAN_KINDS: dict[str, Callable[[Rng, float, bool], tuple[Layout, str]]] = {
+PLAN_KINDS: dict[str, Callable[[Rng, float], tuple[Layout, str]]] = {
     "room_row": room_row,
     "mirror_wings": mirror_wings,
     "rotation_wings": rotation_wings,
@@ -322,4 +320,4 @@ PLAN_KINDS: dict[str, Callable[[Rng, float, bool], tuple[Layout, str]]] = {
     "pillar_hall": pillar_hall,
     "mixed": mixed,
 }
-"""Every plan kind by name: ``builder(rng, size_m, glass) -> (layout, symmetry)``."""
+"""Every plan kind by name: ``builder(rng, size_m) -> (layout, symmetry)``."""

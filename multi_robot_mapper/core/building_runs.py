@@ -117,9 +117,8 @@ def plan_routes(
         if overlap == 0.0:
             own = graph.inner(own, owner)
         if shared.any():
-            walk = graph.walk(
-                int(rng.choice(np.flatnonzero(shared))), shared, overlap * length, rng
-            )
+            first = overlap * length + (spare if overlap == 1.0 else 0.0)
+            walk = graph.walk(int(rng.choice(np.flatnonzero(shared))), shared, first, rng)
             if overlap < 1.0:
                 walk += graph.route(walk[-1], np.flatnonzero(own))[1:]
                 rest = (1.0 - overlap) * length + spare

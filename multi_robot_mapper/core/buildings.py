@@ -62,7 +62,7 @@ class Building:
 
     seed: int
     kind: str  # one of PLAN_KINDS
-    size: float  # m, largest extent of the walls and glass
+    size: float  # m, the size it was drawn at: the walls' largest extent (to rounding)
     # "mirror" (its own mirror image about the y axis), "rotation_180" or "rotation_90"
     # (its own copy turned about the origin), or "none"; walls and glass both have it.
     symmetry: str
@@ -94,12 +94,15 @@ def generate_building(
     clutter: float = 0.0,
     people: int = 0,
 ) -> Building:
-    """The building of ``seed``: a plan of ``kind`` (default: drawn from the seed, each kind
-    equally likely) about ``size`` m across (default: drawn from the seed, log-uniform in
-    20-200 m); with ``glass``, glass fronts on some rooms and a glass stretch of an outer
-    wall; ``clutter`` pieces of furniture (chairs, tables, round pillars) per square metre of
-    room and hall floor, kept off the robots' lanes; ``people`` walking to and fro along
-    waypoint edges. A kind or size given by hand leaves the rest of the draw unchanged.
+    """The building of ``seed``.
+
+    ``kind``: one of :data:`PLAN_KINDS` (default: drawn from the seed, each equally likely).
+    ``size``: the plan's largest extent, m (default: drawn from the seed, log-uniform in
+    20-200 m). ``glass``: glass fronts and back windows on some rooms and a glass stretch
+    of an outer wall (walls there without it: the plan is the same). ``clutter``: pieces of
+    furniture (chairs, tables, round pillars) per square metre of room and hall floor, kept
+    off the robots' lanes. ``people``: people walking to and fro along waypoint edges. A
+    kind or size given by hand leaves the rest of the draw unchanged.
     """
     _check(seed, kind, size, clutter, people)
     draws = _stream(seed, _DRAWS)
@@ -108,7 +111,9 @@ def generate_building(
     drawn_size = float(np.exp(draws.uniform(np.log(MIN_SIZE_M), np.log(MAX_SIZE_M))))
     kind = drawn_kind if kind is None else kind
     target = drawn_size if size is None else float(size)
-    plan, symmetry = PLAN_KINDS[kind](_stream(seed, _PLAN), target, glass)
+    plan, symmetry = PLAN_KINDS[kind](_stream(seed, _PLAN), target)
+    if not glass:  # walls where the panes would be
+        plan = dataclasses.replace(plan, glass=np.zeros((0, 4)))
     walls, panes = walls_and_glass(plan)
     nodes, node_kinds, edges = waypoint_graph(plan)
     edge_segments = np.hstack((nodes[edges[:, 0]], nodes[edges[:, 1]]))
@@ -122,11 +127,10 @@ def generate_building(
     rooms = plan.rects[(plan.kinds == ROOM) | (plan.kinds == HALL)]
     static = _furniture(_stream(seed, _FURNITURE), rooms, clutter, walls, panes, edge_segments)
     walkers = _walkers(_stream(seed, _PEOPLE), edge_segments, people)
-    ends = np.vstack((walls, panes)).reshape(-1, 2)
     return Building(
         seed=seed,
         kind=kind,
-        size=float((ends.max(axis=0) - ends.min(axis=0)).max()),
+        size=target,
         symmetry=symmetry,
         walls=walls,
         glass=panes,
