@@ -499,7 +499,7 @@ def test_mrm_simulate_generated_is_the_core_simulation(
     capsys.readouterr()
     laser = LaserModel(beams=91, rate=10.0)
     runs = simulate_building(
-        generate_building(2, size=30.0), 2, laser, seed=2, duration=2.0, overlap=0.75
+        generate_building(2, size=30.0), 2, laser, seed=2, duration=2.0, overlap=0.6
     )
     recordings = read_recordings(bag)
     for run, rec in zip(runs, recordings.values(), strict=True):

@@ -140,8 +140,9 @@ def register(subparsers: Any) -> None:
     generated.add_argument(
         "--overlap",
         choices=(*OVERLAP_LEVELS, "random"),
-        help="share of each robot's drive on ground the others drive too: none 0 (each robot "
-        "in its own part), small 0.25, large 0.75, random drawn from the seed in [0, 0.9] "
+        help="share of each robot's route driven in a part of the building all robots share: "
+        "none 0 (each robot in its own part), small 0.1, large 0.6 (the ground really shared "
+        "is about 0, 1/3 and 3/4 of a route), random drawn from the seed in [0, 0.9] "
         f"(default {DEFAULT_OVERLAP})",
     )
     generated.add_argument(

@@ -31,6 +31,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from multi_robot_mapper.core.buildings import Building
+from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.segment_grid import SegmentGrid, segment_grid
 from multi_robot_mapper.core.simulation import (
     SIM_START_S,
@@ -46,14 +47,16 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
-OVERLAP_LEVELS = {"none": 0.0, "small": 0.25, "large": 0.75}
-"""Named overlaps (``mrm simulate --overlap``): the share of each drive on shared ground."""
+OVERLAP_LEVELS = {"none": 0.0, "small": 0.1, "large": 0.6}
+"""Named overlaps (``mrm simulate --overlap``): the share of each route driven in the shared
+part. Robots also meet on their way to and from it, so the ground they really share is more:
+over drawn buildings, 3 robots and 80 m routes, a mean of 0 (none), about a third (small) and
+three quarters (large) of each route (``bench/route_overlap.py``)."""
 # The shared part of a building holds this share of one robot's shared driving: each robot
 # then drives all of it, about twice over.
 _SHARED_AREA = 0.5
 _ROUTE_STREAM = 2000
-# With a shared part, the robots' own parts grow from waypoints at most this far from it (or
-# the nearest ones when fewer): robots reach their own part after a short drive.
+# With a shared part, the robots' own parts may grow from any waypoint this close to it.
 _SEED_REACH_M = 8.0
 _PERSON_REACH_M = 0.4  # a walking person's legs stay this close to their line
 
@@ -86,7 +89,8 @@ def plan_routes(
 
     With ``overlap`` > 0, a part of the building round a random waypoint is shared: each
     robot drives ``overlap`` of its length there (starting at a random place in it) and the
-    rest in its own part, next to the shared part; half the robots, drawn at random, drive
+    rest in its own part, next to the shared part where the building allows (a robot whose
+    part lies beyond another's drives through it); half the robots, drawn at random, drive
     their own part first. With ``overlap`` = 0 the parts are those of robots spread as far
     apart as the graph allows, and none includes a waypoint next to another's. Each own part
     is a Voronoi cell of the waypoint graph, driven by a walk that takes the least-driven
@@ -110,26 +114,28 @@ def plan_routes(
     shared = np.zeros(graph.size, dtype=bool)
     if overlap > 0.0:
         shared = graph.ball(int(rng.integers(graph.size)), _SHARED_AREA * overlap * length)
-    owner = graph.territories(robots, shared, rng)
+    owner = graph.territories(robots, shared, (1.0 - overlap) * length, rng)
     paths = []
     for k in range(robots):
         own = owner == k
         if overlap == 0.0:
             own = graph.inner(own, owner)
+        reverse = False
         if shared.any():
-            first = overlap * length + (spare if overlap == 1.0 else 0.0)
-            walk = graph.walk(int(rng.choice(np.flatnonzero(shared))), shared, first, rng)
+            together = overlap * length + (spare if overlap == 1.0 else 0.0)
+            walk = graph.walk(int(rng.choice(np.flatnonzero(shared))), shared, together, rng)
             if overlap < 1.0:
                 walk += graph.route(walk[-1], np.flatnonzero(own))[1:]
                 rest = (1.0 - overlap) * length + spare
                 walk += graph.walk(walk[-1], own, rest, rng)[1:]
-            if rng.random() < 0.5:
-                walk = walk[::-1]
+            reverse = bool(rng.random() < 0.5)
         else:
             walk = graph.walk(int(rng.choice(np.flatnonzero(own))), own, length + spare, rng)
         points = graph.nodes[walk]
         first = float(np.hypot(*(points[1] - points[0]))) if len(points) > 1 else 0.0
-        paths.append(_stretch(points, rng.random() * first, length))
+        path = _stretch(points, rng.random() * first, length)
+        # Reversed after the cut: the robot starts where its own part was cut, ends shared.
+        paths.append(np.ascontiguousarray(path[::-1]) if reverse else path)
     return paths
 
 
@@ -178,27 +184,42 @@ class _Graph:
         """The waypoints nearest ``centre`` (along edges) whose edges among them add up to
         about ``edge_length`` m: at least one edge."""
         distance = dijkstra(self.matrix(), indices=centre)
+        return self.nearest_holding(distance, np.ones(self.size, dtype=bool), edge_length, 2)
+
+    def nearest_holding(
+        self, distance: FloatArray, allowed: BoolArray, edge_length: float, least: int = 1
+    ) -> BoolArray:
+        """The ``allowed`` waypoints of smallest ``distance`` whose edges among them add up
+        to about ``edge_length`` m (at least ``least`` waypoints)."""
         inside = np.zeros(self.size, dtype=bool)
-        total = 0.0
-        for count, node in enumerate(np.argsort(distance, kind="stable").tolist()):
-            if (total >= edge_length and count >= 2) or not np.isfinite(distance[node]):
+        total, count = 0.0, 0
+        for node in np.argsort(distance, kind="stable").tolist():
+            if not allowed[node]:
+                continue
+            if (total >= edge_length and count >= least) or not np.isfinite(distance[node]):
                 break
             inside[node] = True
+            count += 1
             links = zip(self.neighbours[node], self.weights[node], strict=True)
             total += sum(w for j, w in links if inside[j])
         return inside
 
-    def territories(self, count: int, shared: BoolArray, rng: np.random.Generator) -> IntArray:
+    def territories(
+        self, count: int, shared: BoolArray, own_length: float, rng: np.random.Generator
+    ) -> IntArray:
         """Owner (0..count-1, or -1) of each waypoint outside ``shared``: the Voronoi cells
         (along edges, not through the shared part) of ``count`` seeds spread far apart by
-        farthest-point sampling, among the waypoints within _SEED_REACH_M of the shared part
-        when there is one."""
+        farthest-point sampling. With a shared part, the seeds are drawn among the waypoints
+        nearest it that hold every robot's ``own_length`` m of driving (or are within
+        _SEED_REACH_M of it), so each robot's part is near the shared one, yet large enough
+        to drive in where the building allows."""
         free = ~shared if np.count_nonzero(~shared) >= count else np.ones(self.size, bool)
         candidates = np.flatnonzero(free)
         if shared.any():
             to_shared = dijkstra(self.matrix(), indices=np.flatnonzero(shared), min_only=True)
-            reach = max(_SEED_REACH_M, float(np.sort(to_shared[candidates])[count - 1]))
-            candidates = candidates[to_shared[candidates] <= reach]
+            near = self.nearest_holding(to_shared, free, count * own_length, count)
+            near |= free & (to_shared <= _SEED_REACH_M)
+            candidates = np.flatnonzero(near)
         full = self.matrix()
         seeds = [int(rng.choice(candidates))]
         nearest = dijkstra(full, indices=seeds[0])
@@ -354,7 +375,7 @@ class BuildingScanner:
         laser = self.laser
         x, y, _ = pose
         fan = (laser.angle_min, laser.angle_increment, laser.beams, laser.range_max)
-        near = self.solid.segments[self.solid.within(x, y)]
+        near = self.solid.segments[self.solid.near(x, y)]
         ranges = raycast_fan(near, pose, *fan)
         if len(self.walkers):
             w = self.walkers
@@ -362,15 +383,13 @@ class BuildingScanner:
             legs = people_at(w[distance <= laser.range_max + _PERSON_REACH_M], seconds)
             if legs:
                 ranges = np.minimum(ranges, raycast_fan(np.vstack(legs), pose, *fan))
-        panes = self.glass.segments[self.glass.within(x, y)]
+        panes = self.glass.segments[self.glass.near(x, y)]
         if len(panes):
             ranges = np.where(ranges <= raycast_fan(panes, pose, *fan), ranges, np.inf)
         return ranges
 
 
 def _point_to_segments(x: float, y: float, segments: FloatArray) -> FloatArray:
-    from multi_robot_mapper.core.geometry import point_segment_distance
-
     s = segments
     return point_segment_distance(np.asarray(x), np.asarray(y), s[:, 0], s[:, 1], s[:, 2], s[:, 3])
 

@@ -27,6 +27,7 @@ _CELLS_PER_REACH = 3.0
 _MIN_CELL_M = 1.0
 # Slack on the reach so that rounding never drops a segment a beam can just reach.
 _REACH_SLACK_M = 1e-6
+_FEW = 128  # segments listed in a cell: below this, near() skips measuring them
 _NONE = np.zeros(0, dtype=np.int64)
 _NONE.flags.writeable = False
 
@@ -57,6 +58,13 @@ class SegmentGrid:
             return _NONE
         k = i * self.rows + j
         return self.members[self.starts[k] : self.starts[k + 1]]
+
+    def near(self, x: float, y: float) -> IntArray:
+        """Every segment within ``reach`` of ``(x, y)``: :meth:`within` when the cell lists
+        many, the cell's whole list when it lists few (measuring them would cost more than
+        a ray caster spends on the farther ones, which it never hits)."""
+        listed = self.listed(x, y)
+        return listed if listed.size <= _FEW else self.within(x, y)
 
     def within(self, x: float, y: float) -> IntArray:
         """Indices (ascending) of the segments within ``reach`` of ``(x, y)``."""
