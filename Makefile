@@ -48,7 +48,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/merge_speed.py
 	$(BIN)/python bench/live_rate.py --seconds 20
 
-# Rewrite config/robot_mapper.yaml and config/map_merger.yaml from the documented dataclass defaults.
+# Rewrite config/*.yaml and docs/parameters.md from the documented dataclass defaults.
 config: $(STAMP)
 	$(BIN)/python -m multi_robot_mapper.io.config_files config
 
