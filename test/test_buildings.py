@@ -509,6 +509,20 @@ def test_mrm_simulate_generated_is_the_core_simulation(
             np.testing.assert_array_equal(written.scan.ranges, as_sent)
 
 
+def test_mrm_simulate_random_overlap_is_drawn_from_the_seed(
+    mrm, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    said = []
+    for name in ("a", "b"):
+        args = ["--world", "generated", "--seed", "9", "--size", "25", "--overlap", "random"]
+        more = ["--beams", "31", "--rate", "10", "--duration", "1"]
+        assert mrm(["simulate", "--robots", "2", "--out", str(tmp_path / name), *args, *more]) == 0
+        said.append(capsys.readouterr().out)
+    assert said[0].replace("/a ", "/b ") == said[1]
+    drawn = float(said[0].split("overlap random ")[1].split(",")[0])
+    assert 0.0 <= drawn <= 0.9
+
+
 @pytest.mark.parametrize(
     ("extra", "words"),
     [

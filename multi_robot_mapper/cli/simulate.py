@@ -53,9 +53,6 @@ _GENERATED_ONLY = {
 
 def register(subparsers: Any) -> None:
     """Add ``simulate`` to the ``mrm`` sub-command parsers."""
-    from multi_robot_mapper.core.building_kinds import PLAN_KINDS
-    from multi_robot_mapper.core.building_runs import OVERLAP_LEVELS
-
     parser = subparsers.add_parser(
         "simulate",
         help="simulate K robots scanning a built-in world or a generated building and write "
@@ -112,6 +109,18 @@ def register(subparsers: Any) -> None:
         "busy office, 0.5 a crowded hall); in a generated building furniture only, per "
         "square metre of room and hall floor (--people adds people)",
     )
+    _add_generated_options(parser)
+    parser.add_argument(
+        "--storage", choices=("mcap", "sqlite3"), default="mcap", help="bag format (default mcap)"
+    )
+    parser.set_defaults(func=run)
+
+
+def _add_generated_options(parser: argparse.ArgumentParser) -> None:
+    """The options of ``--world generated``, in their own group of the help."""
+    from multi_robot_mapper.core.building_kinds import PLAN_KINDS
+    from multi_robot_mapper.core.building_runs import OVERLAP_LEVELS
+
     generated = parser.add_argument_group(f"generated buildings (--world {GENERATED})")
     generated.add_argument(
         "--kind",
@@ -154,10 +163,6 @@ def register(subparsers: Any) -> None:
         help="keep a scan only every METRES m of driving or 15 deg of turning, as in the "
         f"CARMEN corrected logs (METRES default {DEFAULT_SPARSE_M}; default off: every scan)",
     )
-    parser.add_argument(
-        "--storage", choices=("mcap", "sqlite3"), default="mcap", help="bag format (default mcap)"
-    )
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -100,19 +100,6 @@ def swapped(plan: Layout) -> Layout:
     )
 
 
-def shifted(plan: Layout, dx: float, dy: float) -> Layout:
-    """The layout moved by ``(dx, dy)`` m."""
-    move = np.array([dx, dy, dx, dy])
-    return Layout(
-        plan.rects + move,
-        plan.kinds,
-        plan.openings + move,
-        plan.glass + move,
-        plan.obstacles + move,
-        tuple(None if ln is None else (ln[0] + dx, ln[1] + dy) for ln in plan.lanes),
-    )
-
-
 def rotated(plan: Layout, quarter_turns: int) -> Layout:
     """The layout turned by ``quarter_turns`` x 90 degrees about the origin (exact)."""
     out = plan

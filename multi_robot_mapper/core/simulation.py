@@ -1,5 +1,6 @@
 """A 2-D laser simulator: vectorised ray casting in the built-in worlds (:mod:`core.worlds`),
-robots driving their routes, and clutter (furniture, walking people).
+robots driving their routes, and clutter (furniture, walking people). Generated buildings
+(:mod:`core.buildings`, :mod:`core.building_runs`) reuse its lasers, noise, drives and clutter.
 
 Worlds are ``(W, 4)`` segment sets in the ``world`` frame. A scan is every beam intersected with
 every wall at once (beams x walls arrays), with Gaussian range noise and random dropouts, all
