@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.merging.correlation import (
+from multi_robot_mapper.core.evidence.correlation import (
     CorrelationConfig,
     Drawing,
     correlation_peaks,

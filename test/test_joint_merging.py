@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import pytest
@@ -21,6 +21,8 @@ from hypothesis import strategies as st
 from test_merging import LASER, random_frames, stranger_walls
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.model import FEATURES, JoinModel
+from multi_robot_mapper.core.evidence.placement import PlacementEvidence
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.fusion import fuse
@@ -37,6 +39,7 @@ from multi_robot_mapper.core.merging.consistency import (
 from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.merging.motion import motion_excess, robot_reaches
+from multi_robot_mapper.core.merging.pair_evidence import PairEvidence
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.places import MapUnit, units_of
 from multi_robot_mapper.core.pipeline import TimedLaserScan, run_offline
@@ -332,10 +335,38 @@ def link(
     )
 
 
-def test_an_ambiguous_link_is_accepted_when_consistent_links_support_one_placement() -> None:
+def certain(probability: float = 0.999) -> JoinModel:
+    """A join model that gives every placement ``probability`` (its evidence aside): the
+    tests of sets, cycles and motion below are about links, not the evidence model
+    (test_evidence.py)."""
+    return JoinModel(FEATURES, float(np.log(probability / (1.0 - probability))), (0.0,) * 4, "")
+
+
+def weighed(
+    pair: tuple[tuple[str, int], tuple[str, int]],
+    links: Sequence[LinkCandidate],
+    units: dict[tuple[str, int], MapUnit],
+    seen_through: Callable[[Sequence[LinkCandidate]], tuple[float, float]] | None = None,
+) -> PairVerdict:
+    """The pair's consistent set, weighed by :func:`certain`."""
+    plain = PlacementEvidence(50.0, 0.0, 50.0, np.zeros(3), None)
+    return consistent_set(
+        pair,
+        links,
+        units,
+        CONFIG,
+        seen_through or (lambda _: (0.0, 0.0)),
+        lambda *_: PairEvidence(plain, plain),
+        certain(),
+    )
+
+
+def test_the_consistent_set_is_the_placement_several_places_agree_on() -> None:
     # A corridor: each place of b fits a's corridor at its true place and at another (each
     # placement unsure, confidence 0.4-0.45). The true placements agree with each other; the
-    # rivals agree with nothing (each is off by another amount along the corridor).
+    # rivals agree with nothing (each is off by another amount along the corridor): the
+    # pair's hypothesis is the true placements (whether to believe it is the evidence
+    # model's, test_evidence.py).
     frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.5, 0.2)}
     units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
     right = [link(units, frames, "b", k, "a", k + 3, 0.45) for k in (2, 7, 12)]
@@ -343,39 +374,11 @@ def test_an_ambiguous_link_is_accepted_when_consistent_links_support_one_placeme
         link(units, frames, "b", k, "a", k + 3, 0.4, (shift, 0.0, 0.0), rank=1)
         for k, shift in ((2, 4.0), (7, -6.0), (12, 9.0))
     ]
-    verdict = consistent_set((("a", 0), ("b", 0)), right + rivals, units, CONFIG)
+    verdict = weighed((("a", 0), ("b", 0)), right + rivals, units)
     assert verdict.accepted, verdict.reason
     assert sorted(c.centre for c in verdict.links) == [2, 7, 12]
     assert all(c.rank == 0 for c in verdict.links)
-    # With only two places the unsure links are too few; one unsure place alone, too.
-    two = consistent_set((("a", 0), ("b", 0)), right[:2] + rivals[:2], units, CONFIG)
-    assert not two.accepted and "too few" in two.reason
-    # A confident link alone is not enough either (a look-alike can fit one place well).
-    sure = dataclasses.replace(right[0], confidence=0.99)
-    alone = consistent_set((("a", 0), ("b", 0)), [sure], units, CONFIG)
-    assert not alone.accepted and "too few" in alone.reason
-
-
-def test_a_building_that_fits_two_ways_is_refused() -> None:
-    # Every place of b fits a at the truth and 5 m further along, each set consistent in
-    # itself. Places that each fit both ways alike (INTEGRATE, judging each placement against
-    # the other, is unsure of both: 0.5) weigh the same either way: refused as ambiguous.
-    frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.5, 0.2)}
-    units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
-    pair = (("a", 0), ("b", 0))
-    right = [link(units, frames, "b", k, "a", k + 3, 0.5) for k in (2, 7, 12)]
-    shifted = [
-        link(units, frames, "b", k, "a", k + 3, 0.5, (5.0, 0.0, 0.0), rank=1) for k in (2, 7, 12)
-    ]
-    verdict = consistent_set(pair, right + shifted, units, CONFIG)
-    assert not verdict.accepted and "ambiguous" in verdict.reason
-    assert consistent_set(pair, right, units, CONFIG).accepted
-    # Different places, each sure of its own placement, that put the maps 5 m apart: the two
-    # sets weigh about the same (2.85 and 2.7), refused as ambiguous too.
-    sure = [dataclasses.replace(c, confidence=0.95) for c in right]
-    elsewhere = [link(units, frames, "b", k, "a", k + 3, 0.9, (5.0, 0.0, 0.0)) for k in (4, 9, 14)]
-    verdict = consistent_set(pair, sure + elsewhere, units, CONFIG)
-    assert not verdict.accepted and "ambiguous" in verdict.reason
+    assert verdict.probability == pytest.approx(0.999)
 
 
 def test_a_places_own_rival_placements_do_not_veto_it() -> None:
@@ -394,7 +397,7 @@ def test_a_places_own_rival_placements_do_not_veto_it() -> None:
         link(units, frames, "b", k, "a", k + 3, c, (6.0, 0.0, 0.0), rank=1)
         for k, c in ((2, 0.2), (7, 0.68), (12, 0.74))
     ]
-    verdict = consistent_set((("a", 0), ("b", 0)), right + rivals, units, CONFIG)
+    verdict = weighed((("a", 0), ("b", 0)), right + rivals, units)
     assert verdict.accepted, verdict.reason
     assert sorted((c.centre, c.rank) for c in verdict.links) == [(2, 0), (7, 0), (12, 0)]
     assert verdict.weight > 2.8 and verdict.rival_weight < 0.2
@@ -404,33 +407,11 @@ def test_a_places_own_rival_placements_do_not_veto_it() -> None:
     np.testing.assert_allclose(weights[1:].sum(), (99 + 2.125) / (1 + 99 + 2.125))
 
 
-def test_two_weak_links_agreeing_on_another_offset_do_not_make_a_pair_ambiguous() -> None:
-    # Three places of b link confidently at the truth; two others, unsure (0.64, 0.83), agree
-    # on an offset 0.8 m along the corridor. That rival is no placement the support rule would
-    # believe (two places, no confident link), so it cannot veto the first set, although the
-    # first weighs less than twice as much (what an office of two robots met in a live run).
-    frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.5, 0.2)}
-    units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
-    right = [link(units, frames, "b", k, "a", k + 3, c) for k, c in ((2, 0.97), (7, 0.99))]
-    right.append(link(units, frames, "b", 12, "a", 15, 0.96))
-    weak = [
-        link(units, frames, "b", k, "a", k + 2, c, (0.8, 0.0, 0.0), rank=1)
-        for k, c in ((4, 0.64), (10, 0.83))
-    ]
-    verdict = consistent_set((("a", 0), ("b", 0)), right + weak, units, CONFIG)
-    assert verdict.weight < CONFIG.link_set_uniqueness * verdict.rival_weight
-    assert verdict.accepted, verdict.reason
-    assert sorted(c.centre for c in verdict.links) == [2, 7, 12]
-    # The same rival with a third place is a second way the maps fit: refused as ambiguous.
-    third = link(units, frames, "b", 16, "a", 18, 0.8, (0.8, 0.0, 0.0), rank=1)
-    verdict = consistent_set((("a", 0), ("b", 0)), right + weak + [third], units, CONFIG)
-    assert not verdict.accepted and "ambiguous" in verdict.reason
-
-
-def test_a_placement_that_puts_walls_in_the_other_robots_free_space_is_refused() -> None:
-    # Three confident, mutually consistent links that turn b's corridor a quarter round across
-    # a's (a look-alike that fits a few places): b's walls stand where a's laser saw through
-    # its corridor, and a's where b's did. The right placement leaves none there.
+def test_a_placement_that_puts_walls_in_the_other_robots_free_space_is_measured() -> None:
+    # Three mutually consistent links that turn b's corridor a quarter round across a's (a
+    # look-alike that fits a few places): b's walls stand where a's laser saw through its
+    # corridor, and a's where b's did. The right placement leaves none there. The metres
+    # are a feature of the join model (its conflict).
     frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.0, 0.0)}
     units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
     views = {key: MapViews.of(u.segments, u.poses, CONFIG) for key, u in units.items()}
@@ -440,20 +421,13 @@ def test_a_placement_that_puts_walls_in_the_other_robots_free_space_is_refused()
 
     pair = (("a", 0), ("b", 0))
     right = [link(units, frames, "b", k, "a", k + 3, 0.95) for k in (2, 7, 12)]
-    verdict = consistent_set(pair, right, units, CONFIG, seen_through)
-    assert verdict.accepted and verdict.seen_through == (0.0, 0.0)
+    verdict = weighed(pair, right, units, seen_through)
+    assert verdict.seen_through == (0.0, 0.0) and verdict.conflict == 0.0
     across = {"a": frames["a"], "b": se2.matrix_from_pose(10.0, -10.0, np.pi / 2)}
     wrong = [link(units, across, "b", k, "a", 10, 0.95) for k in (8, 10, 12)]
-    assert consistent_set(pair, wrong, units, CONFIG).accepted  # links alone cannot tell
-    verdict = consistent_set(pair, wrong, units, CONFIG, seen_through)
-    assert not verdict.accepted and "free space" in verdict.reason
+    verdict = weighed(pair, wrong, units, seen_through)
     assert verdict.seen_through[0] > CONFIG.link_max_seen_through
-    # As a rival, that placement must pass the same test: it does not make the right set
-    # ambiguous (without the views, the two weigh the same and both are refused).
-    both = right + wrong
-    assert "ambiguous" in consistent_set(pair, both, units, CONFIG).reason
-    verdict = consistent_set(pair, both, units, CONFIG, seen_through)
-    assert verdict.accepted and sorted(c.centre for c in verdict.links) == [2, 7, 12]
+    assert verdict.conflict >= verdict.seen_through[1] > 0.0
 
 
 def test_a_map_that_bends_between_its_places_keeps_its_walls_out_of_free_space() -> None:
@@ -480,14 +454,12 @@ def test_a_map_that_bends_between_its_places_keeps_its_walls_out_of_free_space()
     units = units_of(keyframes)
     views = {key: MapViews.of(u.segments, u.poses, CONFIG) for key, u in units.items()}
     right = [link(truth, frames, "b", k, "a", k + 3, 0.97) for k in (2, 6, 12, 15)]
-    verdict = consistent_set(
+    verdict = weighed(
         (("a", 0), ("b", 0)),
         right,
         units,
-        CONFIG,
         lambda links: seen_through_near(links, units, views.get, CONFIG),
     )
-    assert verdict.accepted, verdict.reason
     assert len(verdict.links) == 4
     near, whole = verdict.seen_through
     assert near == 0.0
@@ -509,19 +481,19 @@ def test_a_link_that_breaks_a_cycle_is_refused() -> None:
             for k in (3, 9)
         ]
         pair = ((target, 0), (source, 0))
-        return consistent_set(pair, links, units, CONFIG)
+        return weighed(pair, links, units)
 
     ab, bc = verdict("b", "a", 1.9, 0.0), verdict("c", "b", 1.9, 0.0)
-    wrong = verdict("c", "a", 1.8, 2.0)
+    wrong = dataclasses.replace(verdict("c", "a", 1.8, 2.0), probability=0.995)
     assert ab.accepted and bc.accepted and wrong.accepted  # each pair alone believes its set
-    accepted = accept_pairs([ab, bc, wrong], units, CONFIG)
+    accepted = accept_pairs([ab, bc, wrong], units, CONFIG, certain())
     assert [v.pair for v in accepted.pairs] == [ab.pair, bc.pair]
     assert [v.pair for v in accepted.refused] == [wrong.pair]
     assert accepted.refused[0].reason == "breaks a cycle"
     assert accepted.groups == [[("a", 0), ("b", 0), ("c", 0)]]
     # The right a-c link closes the cycle and is taken.
     right = verdict("c", "a", 1.8, 0.0)
-    closed = accept_pairs([ab, bc, right], units, CONFIG)
+    closed = accept_pairs([ab, bc, right], units, CONFIG, certain())
     assert len(closed.pairs) == 3 and closed.refused == []
 
 
@@ -638,41 +610,16 @@ def test_a_piece_placed_where_its_robot_cannot_have_driven_is_refused() -> None:
 
     def verdict(piece: tuple[str, int], keyframes: Sequence[int], shift: float) -> PairVerdict:
         links = [piece_link(units, frames, b, k, piece, k, shift) for k in keyframes]
-        return consistent_set((piece, b), links, units, CONFIG)
+        return weighed((piece, b), links, units)
 
     right = verdict(a0, range(10), 0.0)
     look_alike = verdict(a10, (11, 14, 17), 8.0)
     assert right.accepted and look_alike.accepted  # each pair alone believes its set
     reaches = robot_reaches(units, CONFIG.max_speed)
-    accepted = accept_pairs([right, look_alike], units, CONFIG, reaches)
+    model = certain()
+    accepted = accept_pairs([right, look_alike], units, CONFIG, model, reaches)
     assert [v.pair for v in accepted.pairs] == [right.pair]
     assert [v.pair for v in accepted.refused] == [look_alike.pair]
-    assert len(accept_pairs([right, look_alike], units, CONFIG).pairs) == 2
-    both = accept_pairs([right, verdict(a10, (11, 14, 17), 0.0)], units, CONFIG, reaches)
+    assert len(accept_pairs([right, look_alike], units, CONFIG, model).pairs) == 2
+    both = accept_pairs([right, verdict(a10, (11, 14, 17), 0.0)], units, CONFIG, model, reaches)
     assert len(both.pairs) == 2 and both.refused == [] and both.groups == [[a0, a10, b]]
-
-
-def test_sets_no_heavier_than_a_proven_look_alike_are_refused() -> None:
-    # The look-alike above, refused by motion, weighs 2.85: a wrong set that heavy exists
-    # here, so a set must outweigh it link_set_uniqueness (2) times, as a pair's set must
-    # outweigh its rival. The right set of four places (3.8) is refused with it; one of ten
-    # places (9.5) is taken. Without motion nothing proves the look-alike wrong: both taken.
-    units, frames = lost_once()
-    a0, a10, b = ("a", 0), ("a", 10), ("b", 0)
-    reaches = robot_reaches(units, CONFIG.max_speed)
-
-    def verdict(piece: tuple[str, int], keyframes: Sequence[int], shift: float) -> PairVerdict:
-        links = [piece_link(units, frames, b, k, piece, k, shift) for k in keyframes]
-        return consistent_set((piece, b), links, units, CONFIG)
-
-    look_alike = verdict(a10, (11, 14, 17), 8.0)
-    four = verdict(a0, (2, 4, 6, 8), 0.0)
-    assert look_alike.weight < four.weight < CONFIG.link_set_uniqueness * look_alike.weight
-    accepted = accept_pairs([four, look_alike], units, CONFIG, reaches)
-    assert accepted.pairs == [] and len(accepted.refused) == 2
-    assert all("look-alike" in v.reason for v in accepted.refused)
-    assert len(accept_pairs([four, look_alike], units, CONFIG).pairs) == 2
-    ten = verdict(a0, range(10), 0.0)
-    assert [v.pair for v in accept_pairs([ten, look_alike], units, CONFIG, reaches).pairs] == [
-        ten.pair
-    ]

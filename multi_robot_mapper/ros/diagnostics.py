@@ -125,6 +125,7 @@ class MergerRobotHealth:
     stale_timeout: float
     session_of: str | None = None  # an earlier session of this robot, kept (not updated)
     why_unmerged: str = ""  # the joint merger's verdict on its best pair ("": none known)
+    probability: float | None = None  # that its placement is right (None: not placed)
 
 
 def merger_status(health: MergerRobotHealth) -> DiagnosticStatus:
@@ -147,18 +148,27 @@ def merger_status(health: MergerRobotHealth) -> DiagnosticStatus:
     elif health.reference:
         level, message = OK, "merged (reference: its map frame is the global map frame)"
     elif merged:
-        level, message = OK, f"merged (link value {_number(health.link_value, 'm')})"
+        level, message = (
+            OK,
+            (
+                f"merged (P right {_probability(health.probability)}, link value "
+                f"{_number(health.link_value, 'm')})"
+            ),
+        )
     else:
         level = WARN
-        message = f"unmerged: no valid link yet (best pair value {health.best_value:.1f} m)"
-        if health.why_unmerged:
-            message += f": {health.why_unmerged}"
+        message = (
+            f"unmerged: {health.why_unmerged}"
+            if health.why_unmerged
+            else (f"unmerged: no valid link yet (best pair value {health.best_value:.1f} m)")
+        )
     placement = (
         "unmerged" if health.placement is None else " ".join(f"{v:.3f}" for v in health.placement)
     )
     values = [
         ("merged", "yes" if merged else "no"),
         ("placement x y theta (m m rad)", placement),
+        ("placement probability", _probability(health.probability)),
         ("merge score: link value (m)", _number(health.link_value)),
         ("merge score: best pair value (m)", f"{health.best_value:.2f}"),
         ("pose rate (Hz)", _number(health.pose_rate)),
@@ -199,12 +209,13 @@ def merge_status(
 
 
 def unmerged_reasons(result: MergeResult | None) -> dict[str, str]:
-    """Per unmerged robot, why its best pair of maps (most matched wall) placed it nowhere,
-    as the joint merger's verdict says: the pair's own reason when it was refused ("too few
-    consistent places", "ambiguous: ..."), else that the accepted pair did not join it to
-    the reference's group. Empty without verdicts (the whole-map merger)."""
+    """Per unmerged robot, why it is not placed: the joint merger's own reason
+    (``MergeResult.unmerged_reasons``), else (a result without them) why its best pair of
+    maps (most matched wall) placed it nowhere, as the pair's verdict says."""
     if result is None:
         return {}
+    if result.unmerged_reasons:
+        return dict(result.unmerged_reasons)
     best: dict[str, tuple[float, str]] = {}
     for pair, verdict in result.verdicts.items():
         robots = {key[0] for key in pair}  # keys are (robot, piece) units
@@ -261,6 +272,13 @@ def _status(
         hardware_id=hardware_id,
         values=[KeyValue(key=k, value=v) for k, v in values],
     )
+
+
+def _probability(value: float | None) -> str:
+    """A probability near 1 with the digits that tell it apart (0.9993, not 1.00)."""
+    if value is None or not math.isfinite(value):
+        return "-"
+    return f"{value:.4f}" if value < 0.9999 else f"1 - {1.0 - value:.1e}"
 
 
 def _number(value: float | None, unit: str = "") -> str:

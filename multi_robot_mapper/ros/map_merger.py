@@ -16,6 +16,11 @@ Topics (the merger's own are relative to its namespace):
   pub ``robot_frames/<ns>``   geometry_msgs/PoseStamped: T_map_robotmap, the robot's map frame
                               in ``map_frame``, for merged robots only (an unmerged robot gets
                               nothing, and a throttled log line); reliable, transient local
+  pub ``robot_frames/<ns>/probability``  std_msgs/Float64: the probability that the robot's
+                              placement is right (the product of its joins' probabilities, the
+                              join model's), with every placement; 0 once a robot placed before
+                              is placed no more (its last ``robot_frames`` pose is withdrawn);
+                              reliable, transient local
   pub ``robot_poses/<ns>``    geometry_msgs/PoseStamped: the robot's newest pose moved into
                               ``map_frame`` (T_map_laser), one per pose it sends while merged,
                               stamped with that pose's stamp
@@ -62,6 +67,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -166,6 +172,7 @@ class MapMerger(SavedMapServices, Node):
             diagnostics.DiagnosticArray, diagnostics.TOPIC, 10
         )
         self._frame_pubs: dict[str, Publisher] = {}
+        self._probability_pubs: dict[str, Publisher] = {}
         self._tf = StaticTransformBroadcaster(self) if StaticTransformBroadcaster else None
         self._transforms: dict[str, TransformStamped] = {}
         self._piece_transforms: dict[str, TransformStamped] = {}
@@ -355,10 +362,10 @@ class MapMerger(SavedMapServices, Node):
                 self._grid_pub.publish(occupancy_grid_msg(self.grid, map_stamp, config.map_frame))
             self._publish_frames(result, map_stamp, inputs.frames)
         for robot in result.unmerged:
+            why = result.unmerged_reasons.get(robot, "its map has no valid link to the reference")
             self.notes.warn(
                 f"unmerged:{robot}",
-                f"robot '{robot}' is unmerged: its map has no valid link to the reference "
-                f"'{result.reference}' yet (nothing published for it)",
+                f"robot '{robot}' is unmerged: {why} (nothing published for it)",
             )
         return merged
 
@@ -466,12 +473,19 @@ class MapMerger(SavedMapServices, Node):
             pose = result.placements.get(robot)
             if pose is None:
                 self._transforms.pop(robot, None)  # no longer placed: out of TF from now on
+                if robot in self._probability_pubs:  # placed before: withdrawn
+                    self._probability_pubs[robot].publish(Float64(data=0.0))
                 continue
             publisher = self._frame_pubs.get(robot)
             if publisher is None:
                 publisher = self.create_publisher(PoseStamped, f"robot_frames/{robot}", LATCHED_QOS)
                 self._frame_pubs[robot] = publisher
+                self._probability_pubs[robot] = self.create_publisher(
+                    Float64, f"robot_frames/{robot}/probability", LATCHED_QOS
+                )
             publisher.publish(pose_stamped(pose, stamp, map_frame))
+            probability = result.probabilities.get(robot, 1.0 if robot == result.reference else 0.0)
+            self._probability_pubs[robot].publish(Float64(data=float(probability)))
             child = frames.get(robot) or f"{robot}/map"
             self._transforms[robot] = frame_transform(pose, stamp, map_frame, child)
         # The other pieces of robots' maps that the merge placed (their own frames).

@@ -312,6 +312,7 @@ def robot_statuses(
             stale_timeout=stale_timeout,
             session_of=state.session_of,
             why_unmerged=reasons.get(state.name, ""),
+            probability=None if result is None else result.probabilities.get(state.name),
         )
         statuses.append(diagnostics.merger_status(health))
     return statuses

@@ -8,9 +8,9 @@ import math
 import numpy as np
 
 from multi_robot_mapper.core.config import param, validate
+from multi_robot_mapper.core.evidence.correlation import CorrelationConfig
 from multi_robot_mapper.core.ffs.config import FfsConfig
 from multi_robot_mapper.core.matching import IntegrateConfig
-from multi_robot_mapper.core.merging.correlation import CorrelationConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -362,6 +362,17 @@ class MergeConfig:
         "look-alike of another building",
         minimum=1,
         maximum=1000,
+    )
+    join_probability: float = param(
+        0.99,
+        unit="",
+        doc="the probability that a placement is right (the join model's, fitted on generated "
+        "buildings and shared logs: docs/decisions_model.md) that joining two maps needs, and "
+        "that a robot's placement (the product over its joins to the reference) needs to be "
+        "published; below it a robot is unmerged, with the reason. The one threshold of "
+        "every merge decision: lower it to merge sooner at more risk of a wrong map",
+        minimum=0.5,
+        maximum=0.999999,
     )
     link_set_uniqueness: float = param(
         2.0,

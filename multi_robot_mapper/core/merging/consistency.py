@@ -1,5 +1,5 @@
-"""Which links between robots to believe: pairwise consistency within each pair of maps
-(PCM), and cycles over the pairs.
+"""Which links between robots to believe: the consistent set of each pair of maps (PCM), the
+probability that its placement is right from the evidence model, and the joins of groups.
 
 **Pairs of maps** (:func:`consistent_set`). Two links of the same two maps A and B agree when
 the cycle link 1, B's map from link 1's end to link 2's, link 2 backwards, A's map back to
@@ -8,36 +8,24 @@ link 1's start closes: within the correctness tolerance (0.30 m, 5 deg) plus
 two maps (their own drift). In the manner of pairwise consistency maximisation (Mangelson et
 al. 2018), the largest consistent set (by weight: the sum over its links of the probability
 that each is its place's right placement, :func:`placement_weights`) is kept, found by
-growing a clique from each link in turn. It is accepted when
+growing a clique from each link in turn: the pair's hypothesis. Whether to believe it is not
+a matter of counting its places (places along one corridor see the same walls, and a
+corridor turned round fits at all of them): its placement is weighed by the evidence model
+(:mod:`~multi_robot_mapper.core.evidence.placement`, both ways: each map's walls near the
+linked places against their best rival placement on the whole other map) and by the walls it
+puts in the free space the other robot saw (:func:`seen_through_near`); the join model
+(:mod:`~multi_robot_mapper.core.evidence.model`) turns these into the probability that the
+placement is right. The pair is a candidate join when that reaches ``join_probability``.
 
-- it holds a *confident* link (``link_confidence``) and links ``link_confident_support``
-  distinct places (one place that fits well may be a look-alike), or links
-  ``link_min_support`` distinct places: an ambiguous link (a corridor that fits at two
-  places, each of low confidence) is accepted when enough of the pair's other places agree
-  with one of its placements (the aces corridors), and
-- it is *unique*: it weighs ``link_set_uniqueness`` times as much as the best set of links that
-  contradicts it, when that set itself passes the tests here (support, and free space below)
-  (a building that fits two ways is refused, however well it fits; two weak links agreeing
-  on another offset are not a second way).
-- its placement puts at most ``link_max_seen_through`` metres for every ``link_min_support``
-  places it links (at least that) of either map's walls near its
-  places (within twice ``place_radius`` of the linked keyframes, each wall placed by the
-  link nearest to it) in free space the other robot saw, and, the two maps as rigid bodies
-  at its best-fitting link, of all their walls at most that or
-  ``link_max_seen_through_fraction`` of the set's matched wall (:func:`seen_through_near`):
-  a look-alike that fits a few places along a corridor leaves the maps side by side, with
-  walls across each other's corridors around them or further off.
-
-**Cycles over pairs** (:func:`accept_pairs`). Pairs are taken by weight, best first (Kruskal).
-A pair joining two groups of maps joins them; a pair whose maps are already joined closes a
-cycle, and is accepted only when the cycle through its best link and the best links of the
-chain joining its maps closes within the same tolerance (per metre of the maps the cycle runs
-through): a link that breaks a cycle is refused. Three robots that see each other check each
-other. A pair joining two groups is refused when the joined group would need one robot to
-drive faster than ``max_speed`` between two of its pieces
-(:mod:`~multi_robot_mapper.core.merging.motion`): the cycle a robot's own motion closes.
-Such a refusal proves a look-alike at least as heavy as the refused set; the pairs are then
-taken again with only the sets that outweigh it ``link_set_uniqueness`` times.
+**Joins** (:func:`accept_pairs`). Candidate pairs are taken most probable first (Kruskal). A
+pair joining two groups of maps is weighed again against every map of both groups: the walls
+the joined group puts in free space any of its robots saw replace the pair's own in the join
+model, and the join is made only when its probability still reaches ``join_probability`` and
+no robot would have to drive faster than ``max_speed`` between two of its pieces
+(:mod:`~multi_robot_mapper.core.merging.motion`). A pair whose maps are already joined closes
+a cycle, and is accepted only when the cycle through its best link and the best links of the
+chain joining its maps closes within the same tolerance: a link that breaks a cycle is
+refused. Three robots that see each other check each other.
 """
 
 from __future__ import annotations
@@ -49,15 +37,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.model import JoinModel
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import (
     MapViews,
     free_space_conflict,
-    seen_through_allowance,
     seen_through_length,
 )
 from multi_robot_mapper.core.merging.motion import RobotReach, motion_excess
+from multi_robot_mapper.core.merging.pair_evidence import PairEvidence
 from multi_robot_mapper.core.merging.place_links import LinkCandidate, segments_near
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
 
@@ -67,6 +56,8 @@ Pair = tuple[UnitKey, UnitKey]  # sorted
 ViewsOf = Callable[[UnitKey], "MapViews | None"]  # a map's free space, as its robot saw it
 # metres of wall a consistent set's placement puts in free space (seen_through_near)
 SeenThrough = Callable[[Sequence[LinkCandidate]], tuple[float, float]]
+# the evidence of a consistent set's placement T_first_second (pair_evidence)
+EvidenceOf = Callable[[Sequence[LinkCandidate], FloatArray], PairEvidence]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,6 +103,9 @@ class PairVerdict:
     reason: str  # why refused ("" when accepted)
     # m of wall in the other's free space: near its places, of the whole maps
     seen_through: tuple[float, float] = (0.0, 0.0)
+    evidence: PairEvidence | None = None  # the set's placement against its rivals
+    probability: float = 0.0  # that its placement is right (join model); of the join once taken
+    conflict: float = 0.0  # m of wall in free space weighed: the pair's, or its join's groups'
 
 
 def _poses(unit: MapUnit, keyframes: Sequence[int]) -> FloatArray:
@@ -187,12 +181,14 @@ def consistent_set(
     candidates: Sequence[LinkCandidate],
     units: Mapping[UnitKey, MapUnit],
     config: MergeConfig,
-    seen_through: SeenThrough | None = None,
+    seen_through: SeenThrough,
+    evidence_of: EvidenceOf,
+    model: JoinModel,
 ) -> PairVerdict:
-    """The pair's heaviest consistent set of links and whether to accept it (module doc);
-    with ``seen_through`` (:func:`seen_through_near` over the robots' views), an accepted set
-    (and a rival that would make it ambiguous) must also keep its maps' walls out of the free
-    space the other robot saw (:func:`_free_space_shortfall`)."""
+    """The pair's heaviest consistent set of links, its evidence and the probability that its
+    placement is right (module doc): a candidate join when that reaches ``join_probability``.
+    ``seen_through``: :func:`seen_through_near` over the robots' views; ``evidence_of``: the
+    evidence model of a set's placement (:func:`~core.merging.pair_evidence.pair_evidence`)."""
     usable = [c for c in candidates if c.fit >= config.link_fit and c.value >= config.link_min_wall]
     if not usable:
         return PairVerdict(pair, [], 0.0, 0.0, 0, False, "no link fits")
@@ -202,57 +198,40 @@ def consistent_set(
     chosen = heaviest_clique(agree, weights)
     members = [usable[i] for i in chosen]
     weight = float(weights[chosen].sum())
-    # Rivals: links that contradict some member; their heaviest consistent set. It makes the
-    # pair ambiguous only if it is itself a placement the support rule would believe: a
-    # second way the maps fit needs the same evidence as the first (two weak links that
-    # agree on an offset along a corridor are not a second building).
+    # The heaviest set contradicting it, for the record (the evidence model searches every
+    # placement of the linked walls for rivals, not only those some place's match found).
     contradicting = np.asarray(~agree[chosen].all(axis=0), dtype=bool)
     rival = heaviest_clique(agree, weights, contradicting)
-    rival_members = [usable[i] for i in rival]
     rival_weight = float(weights[rival].sum()) if rival else 0.0
-    reason = _support_shortfall(members, config)
-    through = (0.0, 0.0)
-    if not reason and seen_through is not None:
-        through = seen_through(members)
-        reason = _free_space_shortfall(members, through, config)
-    if not reason and weight < config.link_set_uniqueness * rival_weight:
-        # The rival must pass the same tests as the set itself, free space included: in the
-        # bringup test's office a robot's first places (beyond the other's map) fit 6 m
-        # along the corridor, confidently, and that placement puts 1.6 m of wall where the
-        # other robot saw through its doors.
-        rival_believable = not _support_shortfall(rival_members, config) and (
-            seen_through is None
-            or not _free_space_shortfall(rival_members, seen_through(rival_members), config)
-        )
-        if rival_believable:
-            reason = "ambiguous: a contradicting set of links weighs about as much"
-    places = _places(members)
-    return PairVerdict(pair, members, weight, rival_weight, places, not reason, reason, through)
+    through = seen_through(members)
+    evidence = evidence_of(members, _link_placement(_best_of(members, pair[0]), units))
+    conflict = max(evidence.conflict, through[1])
+    probability = model.probability(evidence.features(conflict))
+    reason = doubt(probability, evidence, conflict, config)
+    return PairVerdict(
+        pair,
+        members,
+        weight,
+        rival_weight,
+        _places(members),
+        not reason,
+        reason,
+        through,
+        evidence,
+        probability,
+        conflict,
+    )
 
 
-def _free_space_shortfall(
-    links: Sequence[LinkCandidate], through: tuple[float, float], config: MergeConfig
-) -> str:
-    """Why a set's placement is refused by the other robot's free space ("" when it is not):
-    more than ``link_max_seen_through`` of the walls near its places for every
-    ``link_min_support`` places it links (at least that), or of all the walls more than that
-    or ``link_max_seen_through_fraction`` of the set's matched wall
-    (:func:`seen_through_near`). The walls near the places grow with the places, and so does
-    what two maps that drift a little put in each other's free space even where they are
-    placed right: intel cut into 2 robots, the two maps 0.11 and 0.08 m from the reference,
-    is linked by a set of 52 links at 28 places (weight 49.5, its rival's 1.6) that puts
-    2.0 m there; a look-alike fits a few places (1.8 m for the test's look-alike building)."""
-    near, whole = through
-    allowed_near = config.link_max_seen_through * max(1.0, _places(links) / config.link_min_support)
-    if near > allowed_near:
-        return (
-            f"walls in the other robot's free space ({near:.1f} m near the places, "
-            f"{allowed_near:.1f} m allowed)"
-        )
-    allowed = seen_through_allowance(sum(c.value for c in links), config)
-    if whole > allowed:
-        return f"walls in the other robot's free space ({whole:.1f} m, {allowed:.1f} m allowed)"
-    return ""
+def doubt(probability: float, evidence: PairEvidence, conflict: float, config: MergeConfig) -> str:
+    """Why a placement is not believed ("" when it is): its probability, and the evidence
+    behind it (the wall no rival explains, the walls in free space)."""
+    if probability >= config.join_probability:
+        return ""
+    return (
+        f"P {probability:.3f} < {config.join_probability:g}: {evidence.margin:.1f} m of wall "
+        f"no rival placement explains (of {evidence.score:.1f} m), {conflict:.1f} m in free space"
+    )
 
 
 def seen_through_near(
@@ -370,20 +349,6 @@ def _places(links: Sequence[LinkCandidate]) -> int:
     return max((len(centres) for centres in per_side.values()), default=0)
 
 
-def _support_shortfall(links: Sequence[LinkCandidate], config: MergeConfig) -> str:
-    """Why a consistent set of links is too little evidence for a placement ("" when it is
-    enough): ``link_confident_support`` places with a confident link, else
-    ``link_min_support``."""
-    if not links:
-        return "no link fits"
-    places = _places(links)
-    if any(c.confidence >= config.link_confidence for c in links):
-        return "" if places >= config.link_confident_support else "too few consistent places"
-    if places >= config.link_min_support:
-        return ""
-    return "too few consistent places and no confident link"
-
-
 def cycle_error(
     chain: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit]
 ) -> tuple[float, float, float]:
@@ -424,52 +389,37 @@ class Accepted:
 
 # Why a pair was refused over the groups (the start of PairVerdict.reason).
 TOO_FAST = "a robot would drive"
-LOOK_ALIKE = "no heavier than a look-alike here"
+GROUP_DOUBT = "joined with every map of both groups"
+# metres of wall a join puts in free space: (every map of the joined group placed in the
+# root's frame, the maps of one side, those of the other) -> metres
+GroupConflict = Callable[
+    [Mapping[UnitKey, FloatArray], Sequence[UnitKey], Sequence[UnitKey]], float
+]
 
 
 def accept_pairs(
     verdicts: Sequence[PairVerdict],
     units: Mapping[UnitKey, MapUnit],
     config: MergeConfig,
+    model: JoinModel,
     reaches: Mapping[str, RobotReach] | None = None,
+    group_conflict: GroupConflict | None = None,
 ) -> Accepted:
-    """Pairs by weight, best first: a pair joining two groups joins them, one inside a group
-    must close the cycle through the group's tree (module doc). With ``reaches``
+    """Candidate pairs, most probable first: a pair joining two groups joins them, one inside
+    a group must close the cycle through the group's tree (module doc). With ``reaches``
     (:mod:`~multi_robot_mapper.core.merging.motion`) a join is refused when the joined group
-    would need a robot to drive faster than ``max_speed`` between two of its pieces.
-
-    Such a refusal proves that a wrong set at least as heavy as the refused one is among the
-    pairs (the refused set, or one of the heavier sets that placed its maps): a look-alike
-    here reaches that weight. Every set is then a rival of it, and as a pair's set must
-    outweigh its rival ``link_set_uniqueness`` times, the pairs are taken again with only the
-    sets that outweigh the heaviest set so refused as much (until no heavier one is)."""
-    accepted = _take_pairs(verdicts, units, config, reaches, 0.0)
-    proven = 0.0
-    while True:
-        refused = [v.weight for v in accepted.refused if v.reason.startswith(TOO_FAST)]
-        if max(refused, default=0.0) <= proven:
-            return accepted
-        proven = max(refused)
-        floor = config.link_set_uniqueness * proven
-        accepted = _take_pairs(verdicts, units, config, reaches, floor)
-
-
-def _take_pairs(
-    verdicts: Sequence[PairVerdict],
-    units: Mapping[UnitKey, MapUnit],
-    config: MergeConfig,
-    reaches: Mapping[str, RobotReach] | None,
-    floor: float,
-) -> Accepted:
-    """One pass of :func:`accept_pairs`: sets lighter than ``floor`` are refused."""
-    order = sorted((v for v in verdicts if v.accepted), key=lambda v: (-v.weight, v.pair))
+    would need a robot to drive faster than ``max_speed`` between two of its pieces; with
+    ``group_conflict`` (:func:`group_free_space`), a join of groups is weighed again with the
+    walls it puts in the free space of every map of both."""
+    order = sorted(
+        (v for v in verdicts if v.accepted), key=lambda v: (-v.probability, -v.weight, v.pair)
+    )
     parent: dict[UnitKey, UnitKey] = {key: key for key in units}
     # Each group's maps placed rigidly in its root's frame along the tree's best links.
     placed: dict[UnitKey, dict[UnitKey, FloatArray]] = {key: {key: np.eye(3)} for key in units}
     tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]] = {key: [] for key in units}
     taken: list[PairVerdict] = []
     refused: list[PairVerdict] = []
-    slack = config.link_pair_slack
 
     def root(key: UnitKey) -> UnitKey:
         while parent[key] != key:
@@ -477,34 +427,40 @@ def _take_pairs(
             key = parent[key]
         return key
 
-    def refuse(verdict: PairVerdict, reason: str) -> None:
-        refused.append(dataclasses.replace(verdict, accepted=False, reason=reason))
-
     for verdict in order:
         a, b = verdict.pair
-        if verdict.weight < floor:
-            refuse(verdict, f"{LOOK_ALIKE} ({floor:.2f} needed)")
-            continue
         if root(a) == root(b):
             chain = _tree_path(tree, b, a)  # b ... a through the tree, then the new link a -> b
             if closes([_best(v, x) for x, v in chain] + [_best(verdict, a)], units, config):
                 taken.append(verdict)
             else:
-                refuse(verdict, "breaks a cycle")
+                refused.append(
+                    dataclasses.replace(verdict, accepted=False, reason="breaks a cycle")
+                )
             continue
         group_a, group_b = placed[root(a)], placed[root(b)]
         T_ra_rb = group_a[a] @ placement(verdict, a, units) @ se2.invert(group_b[b])
         joined = {**group_a, **{key: T_ra_rb @ T for key, T in group_b.items()}}
-        excess = 0.0 if reaches is None else motion_excess(joined, units, reaches, slack)
-        if excess > 0.0:
-            refuse(verdict, f"{TOO_FAST} {excess:.1f} m beyond max_speed")
+        judged = _judge_join(
+            verdict,
+            joined,
+            list(group_a),
+            list(group_b),
+            units,
+            config,
+            model,
+            reaches,
+            group_conflict,
+        )
+        if not judged.accepted:
+            refused.append(judged)
             continue
         del placed[root(b)]
         placed[root(a)] = joined
         parent[root(b)] = root(a)
-        tree[a].append((b, verdict))
-        tree[b].append((a, verdict))
-        taken.append(verdict)
+        tree[a].append((b, judged))
+        tree[b].append((a, judged))
+        taken.append(judged)
     groups: dict[UnitKey, list[UnitKey]] = {}
     for key in units:
         groups.setdefault(root(key), []).append(key)
@@ -515,9 +471,94 @@ def _take_pairs(
     return Accepted(taken, refused, ordered, tree)
 
 
+def _judge_join(
+    verdict: PairVerdict,
+    joined: Mapping[UnitKey, FloatArray],
+    side_a: Sequence[UnitKey],
+    side_b: Sequence[UnitKey],
+    units: Mapping[UnitKey, MapUnit],
+    config: MergeConfig,
+    model: JoinModel,
+    reaches: Mapping[str, RobotReach] | None,
+    group_conflict: GroupConflict | None,
+) -> PairVerdict:
+    """The pair's verdict as a join of its two groups (:func:`accept_pairs`): refused when a
+    robot would have to drive too fast, or when the walls in the joined group's free space
+    bring its probability below ``join_probability``."""
+    excess = (
+        0.0 if reaches is None else motion_excess(joined, units, reaches, config.link_pair_slack)
+    )
+    if excess > 0.0:
+        reason = f"{TOO_FAST} {excess:.1f} m beyond max_speed"
+        return dataclasses.replace(verdict, accepted=False, reason=reason)
+    if group_conflict is None or verdict.evidence is None or len(side_a) + len(side_b) <= 2:
+        return verdict  # two maps alone: the pair's own probability
+    conflict = max(verdict.conflict, group_conflict(joined, side_a, side_b))
+    probability = model.probability(verdict.evidence.features(conflict))
+    doubted = doubt(probability, verdict.evidence, conflict, config)
+    return dataclasses.replace(
+        verdict,
+        accepted=not doubted,
+        reason=f"{GROUP_DOUBT}: {doubted}" if doubted else "",
+        probability=probability,
+        conflict=conflict,
+    )
+
+
+def group_free_space(
+    units: Mapping[UnitKey, MapUnit], views_of: ViewsOf, config: MergeConfig
+) -> GroupConflict:
+    """:data:`GroupConflict` over the robots' views: the most wall any map of one side puts
+    in the free space of any map of the other, or takes from it, every map of the joined
+    group at its placement (maps whose walls lie too far apart to be seen are skipped)."""
+
+    def conflict(
+        joined: Mapping[UnitKey, FloatArray], side_a: Sequence[UnitKey], side_b: Sequence[UnitKey]
+    ) -> float:
+        worst = 0.0
+        boxes = {
+            key: _box(se2.transform_segments(joined[key], units[key].segments))
+            for key in (*side_a, *side_b)
+        }
+        for x in side_a:
+            for y in side_b:
+                if not _boxes_meet(boxes[x], boxes[y], config.view_range):
+                    continue
+                T_x_y = se2.invert(joined[x]) @ joined[y]
+                through = free_space_conflict(
+                    units[x].segments, views_of(x), units[y].segments, views_of(y), T_x_y, config
+                )
+                worst = max(worst, through)
+        return worst
+
+    return conflict
+
+
+def _box(segments: FloatArray) -> FloatArray:
+    """(4,) x0, y0, x1, y1 of the segments' ends (empty: an empty box)."""
+    if len(segments) == 0:
+        return np.array([np.inf, np.inf, -np.inf, -np.inf])
+    ends = segments.reshape(-1, 2)
+    return np.concatenate((ends.min(axis=0), ends.max(axis=0)))
+
+
+def _boxes_meet(a: FloatArray, b: FloatArray, margin: float) -> bool:
+    return bool(
+        a[0] - margin <= b[2]
+        and b[0] - margin <= a[2]
+        and a[1] - margin <= b[3]
+        and b[1] - margin <= a[3]
+    )
+
+
 def _best(verdict: PairVerdict, first: UnitKey) -> OrientedLink:
     """The set's best-fitting link, read from map ``first``."""
-    return oriented(max(verdict.links, key=lambda c: c.fit), first)
+    return _best_of(verdict.links, first)
+
+
+def _best_of(links: Sequence[LinkCandidate], first: UnitKey) -> OrientedLink:
+    """The best-fitting of ``links``, read from map ``first``."""
+    return oriented(max(links, key=lambda c: c.fit), first)
 
 
 def placement(verdict: PairVerdict, first: UnitKey, units: Mapping[UnitKey, MapUnit]) -> FloatArray:

@@ -47,15 +47,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.model import JoinModel, installed_model
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.consistency import (
-    LOOK_ALIKE,
+    GROUP_DOUBT,
     TOO_FAST,
     Accepted,
     PairVerdict,
     accept_pairs,
     consistent_set,
+    group_free_space,
     placement,
     seen_through_near,
 )
@@ -63,6 +65,7 @@ from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.global_map import fuse_keyframes
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.motion import robot_reaches
+from multi_robot_mapper.core.merging.pair_evidence import PairEvidence, pair_evidence
 from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.place_matching import (
@@ -74,6 +77,7 @@ from multi_robot_mapper.core.merging.place_matching import (
     target_of,
 )
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey, units_of
+from multi_robot_mapper.core.merging.unmerged import unmerged_reason
 from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
 
 FloatArray = NDArray[np.float64]
@@ -83,7 +87,9 @@ Pose = tuple[float, float, float]
 
 @dataclasses.dataclass
 class JointState:
-    """What one update leaves to the next: every place match made so far."""
+    """What one update leaves to the next: every place match made so far, and what was
+    derived from maps that may not have changed (each kept per content, so that an update
+    that changed one robot's map recomputes only what involves it)."""
 
     matches: dict[MatchKey, MatchRecord] = dataclasses.field(default_factory=dict)
     links: list[LinkCandidate] = dataclasses.field(default_factory=list)  # in the graph
@@ -91,18 +97,15 @@ class JointState:
     # changed, and every map's content then: what the next update's matching leaves room for.
     rest_s: float = 0.0
     contents: dict[UnitKey, str] = dataclasses.field(default_factory=dict)
-
-
-# Each map's edges, and seen_through_near of a pair's set, kept per content (place_matching.cached).
-_INTRA: OrderedDict[tuple[UnitKey, str, MergeConfig], Any] = OrderedDict()
-_SEEN: OrderedDict[Any, tuple[float, float]] = OrderedDict()
-# The last update's verdict of every pair, keyed by what it was made from: most updates change
-# one robot's map, and the pairs without it (21 of 28 with 8 robots) keep their verdicts.
-_LAST_VERDICTS: dict[Any, PairVerdict] = {}
-# The last update's graph solution and what it was solved from: an update that brought no
-# change to the maps joined or their links (a place matched again to the same result, the
-# node's retries) solves the same graph and gets the same poses.
-_LAST_SOLUTION: tuple[Any, _Solution] | None = None
+    # Each pair's verdict, keyed by what it was made from: most updates change one robot's
+    # map, and the pairs without it (21 of 28 with 8 robots) keep their verdicts.
+    verdicts: dict[Any, PairVerdict] = dataclasses.field(default_factory=dict)
+    # The graph's solution and what it was solved from: an update that brought no change to
+    # the maps joined or their links (the node's retries) gets the same poses.
+    solution: tuple[Any, _Solution] | None = None
+    # Each map's intra-map edges and each set's walls in free space, per content.
+    intra: OrderedDict[Any, Any] = dataclasses.field(default_factory=OrderedDict)
+    seen: OrderedDict[Any, tuple[float, float]] = dataclasses.field(default_factory=OrderedDict)
 
 
 def merge_joint(
@@ -111,12 +114,14 @@ def merge_joint(
     previous: MergeResult | None = None,
     reference: str | None = None,
     budget: float | None = None,
+    model: JoinModel | None = None,
 ) -> MergeResult:
     """Merge the robots' keyframe maps (module doc). ``budget``: seconds the update may take
     (default ``config.update_budget``; 0 or None with a config of 0: every place is matched);
     place matching gets what the rest of the last update left (:func:`_matching_budget`).
     ``reference`` (or ``config.reference``) names the robot whose map frame is ``map``; by
-    default the previous update's is kept while it is in the largest group."""
+    default the previous update's is kept while it is in the largest group. ``model``: the
+    join model (default the installed one, :func:`~core.evidence.model.installed_model`)."""
     config = config if config is not None else MergeConfig()
     started = time.perf_counter()
     robots = sorted(str(r) for r in keyframes)
@@ -134,22 +139,34 @@ def merge_joint(
         _matching_budget(config.update_budget if budget is None else budget, state),
     )
     matched = time.perf_counter()
-    verdicts = _verdicts(units, matches, config)
+    model = model if model is not None else installed_model()
+    new_state = JointState(matches)
+    if state is not None:
+        new_state.intra, new_state.seen = state.intra, state.seen
+    verdicts = _verdicts(units, matches, config, model, state, new_state)
     accepted = accept_pairs(
-        list(verdicts.values()), units, config, robot_reaches(units, config.max_speed)
+        list(verdicts.values()),
+        units,
+        config,
+        model,
+        robot_reaches(units, config.max_speed),
+        group_free_space(units, lambda key: target_of(units[key], config).views, config),
     )
     checked = time.perf_counter()
     previous_reference = None if previous is None else previous.reference
     group, ref_unit = _reference(accepted, units, chosen, previous_reference)
-    solved = _solved(units, group, ref_unit, accepted, config)
+    chains = _chain_probabilities(ref_unit, accepted)
+    group = [key for key in group if chains.get(key, 0.0) >= config.join_probability]
+    solved = _solved(units, group, ref_unit, accepted, config, state, new_state)
     optimised = time.perf_counter()
-    result = _result(robots, units, accepted, verdicts, solved, ref_unit, config)
+    result = _result(robots, units, accepted, verdicts, solved, ref_unit, chains, config)
     finished = time.perf_counter()
     contents = {key: content_digest(unit) for key, unit in units.items()}
     rest = finished - matched
     if state is not None and state.contents == contents:
         rest = state.rest_s  # nothing changed: this update says nothing of a changing one
-    result.state = JointState(matches, solved.accepted, rest, contents)
+    new_state.links, new_state.rest_s, new_state.contents = solved.accepted, rest, contents
+    result.state = new_state
     result.timings = {
         "matching_s": matched - started,
         "consistency_s": checked - matched,
@@ -179,9 +196,13 @@ def _verdicts(
     units: Mapping[UnitKey, MapUnit],
     records: Mapping[MatchKey, MatchRecord],
     config: MergeConfig,
+    model: JoinModel,
+    state: JointState | None,
+    new_state: JointState,
 ) -> dict[tuple[UnitKey, UnitKey], PairVerdict]:
     """Every pair of maps' consistent set of links (candidates of keyframes that still
-    exist)."""
+    exist), weighed (:func:`~core.merging.consistency.consistent_set`); a pair whose maps and
+    candidates are those of the last update keeps its verdict (``state``)."""
     by_pair: dict[tuple[UnitKey, UnitKey], list[LinkCandidate]] = {}
     for (source, _, target), record in records.items():
         if source not in units or target not in units:
@@ -206,20 +227,30 @@ def _verdicts(
         key = (maps, tuple(content_digest(units[m]) for m in maps), members, config)
         return cast(
             tuple[float, float],
-            cached(_SEEN, key, lambda: seen_through_near(links, units, views_of, config)),
+            cached(new_state.seen, key, lambda: seen_through_near(links, units, views_of, config)),
         )
 
-    global _LAST_VERDICTS
+    def evidence_of(links: Sequence[LinkCandidate], T_first_second: FloatArray) -> PairEvidence:
+        maps = (min(links[0].source, links[0].target), max(links[0].source, links[0].target))
+        targets = {key: target_of(units[key], config) for key in maps}
+        return pair_evidence(maps, links, T_first_second, units, targets, config)
+
     digests = {key: content_digest(unit) for key, unit in units.items()}
+    last = state.verdicts if state is not None else {}
     verdicts: dict[tuple[UnitKey, UnitKey], PairVerdict] = {}
-    kept: dict[Any, PairVerdict] = {}
     for pair, found in by_pair.items():
-        key = (pair, digests[pair[0]], digests[pair[1]], tuple(map(_identity, found)), config)
-        verdict = _LAST_VERDICTS.get(key)
+        key = (
+            pair,
+            digests[pair[0]],
+            digests[pair[1]],
+            tuple(map(_identity, found)),
+            config,
+            model,
+        )
+        verdict = last.get(key)
         if verdict is None:
-            verdict = consistent_set(pair, found, units, config, seen_through)
-        verdicts[pair] = kept[key] = verdict
-    _LAST_VERDICTS = kept
+            verdict = consistent_set(pair, found, units, config, seen_through, evidence_of, model)
+        verdicts[pair] = new_state.verdicts[key] = verdict
     return verdicts
 
 
@@ -281,6 +312,23 @@ def _reference(
     return group, max(pool, key=lambda key: (units[key].length, [-ord(c) for c in key[0]]))
 
 
+def _chain_probabilities(ref_unit: UnitKey | None, accepted: Accepted) -> dict[UnitKey, float]:
+    """The probability that each map joined to the reference is placed right: the product of
+    the join probabilities along the tree from the reference (each join's evidence is its
+    own). A map below ``join_probability`` is not placed (nor what hangs from it)."""
+    if ref_unit is None:
+        return {}
+    chains = {ref_unit: 1.0}
+    queue = [ref_unit]
+    while queue:
+        key = queue.pop(0)
+        for other, verdict in accepted.tree[key]:
+            if other not in chains:
+                chains[other] = chains[key] * verdict.probability
+                queue.append(other)
+    return chains
+
+
 @dataclasses.dataclass
 class _Solution:
     """Optimised keyframe poses and fitted frames of the maps placed in ``map``."""
@@ -300,9 +348,10 @@ def _solved(
     ref_unit: UnitKey | None,
     accepted: Accepted,
     config: MergeConfig,
+    state: JointState | None,
+    new_state: JointState,
 ) -> _Solution:
     """:func:`_solve`, or the last update's solution where the graph is the same."""
-    global _LAST_SOLUTION
     key = (
         tuple((k, content_digest(units[k])) for k in sorted(group)),
         ref_unit,
@@ -310,10 +359,12 @@ def _solved(
         tuple((k, tuple((o, v.pair) for o, v in accepted.tree[k])) for k in sorted(accepted.tree)),
         config,
     )
-    if _LAST_SOLUTION is not None and _LAST_SOLUTION[0] == key:
-        return _LAST_SOLUTION[1]
-    solution = _solve(units, group, ref_unit, accepted, config)
-    _LAST_SOLUTION = (key, solution)
+    last = state.solution if state is not None else None
+    if last is not None and last[0] == key:
+        new_state.solution = last
+        return last[1]
+    solution = _solve(units, group, ref_unit, accepted, config, new_state.intra)
+    new_state.solution = (key, solution)
     return solution
 
 
@@ -323,6 +374,7 @@ def _solve(
     ref_unit: UnitKey | None,
     accepted: Accepted,
     config: MergeConfig,
+    intra: OrderedDict[Any, Any],
 ) -> _Solution:
     """The graph of every keyframe of the maps joined to ``ref_unit``, solved (module doc)
     from the maps placed rigidly along the accepted pairs: never from the previous update's
@@ -330,7 +382,7 @@ def _solve(
     on the same maps puts every robot in the same place)."""
     if ref_unit is None:
         return _Solution({}, {}, [])
-    rigid = _rigid_placements(ref_unit, accepted, units)
+    rigid = _rigid_placements(ref_unit, accepted, units, set(group))
     order = list(rigid)
     offsets: dict[UnitKey, int] = {}
     total = 0
@@ -345,7 +397,7 @@ def _solve(
             anchored = key == ref_unit and row == 0
             x, y, theta = (float(v) for v in placed)
             graph.add_node(offsets[key] + row, (x, y, theta), anchored=anchored)
-        for edge in _intra_edges(unit, offsets[key], config):
+        for edge in _intra_edges(unit, offsets[key], config, intra):
             graph.add_edge(edge)
     accepted_links: list[LinkCandidate] = []
     placed_units = set(order)
@@ -382,16 +434,19 @@ def _solve(
 
 
 def _rigid_placements(
-    ref_unit: UnitKey, accepted: Accepted, units: Mapping[UnitKey, MapUnit]
+    ref_unit: UnitKey,
+    accepted: Accepted,
+    units: Mapping[UnitKey, MapUnit],
+    members: set[UnitKey],
 ) -> dict[UnitKey, FloatArray]:
-    """Each map joined to the reference placed rigidly through the accepted pairs' best links
-    (breadth first: the placing order)."""
+    """Each map of ``members`` joined to the reference placed rigidly through the accepted
+    pairs' best links (breadth first: the placing order)."""
     placed: dict[UnitKey, FloatArray] = {ref_unit: np.eye(3)}
     queue = [ref_unit]
     while queue:
         key = queue.pop(0)
         for other, verdict in sorted(accepted.tree[key], key=lambda item: item[0]):
-            if other in placed:
+            if other in placed or other not in members:
                 continue
             placed[other] = placed[key] @ placement(verdict, key, units)
             queue.append(other)
@@ -412,7 +467,9 @@ def _intra_pairs(unit: MapUnit, radius: float) -> list[tuple[int, int]]:
     return pairs
 
 
-def _intra_edges(unit: MapUnit, offset: int, config: MergeConfig) -> list[Edge]:
+def _intra_edges(
+    unit: MapUnit, offset: int, config: MergeConfig, kept: OrderedDict[Any, Any]
+) -> list[Edge]:
     """The edges between keyframes of one map (:func:`_intra_pairs`), from their published
     poses, with a standard deviation growing with the distance between them; the same map
     seen again (most maps, most updates) reuses them."""
@@ -420,7 +477,7 @@ def _intra_edges(unit: MapUnit, offset: int, config: MergeConfig) -> list[Edge]:
     key = (unit.key, content, config)
     pairs, relative, information = cast(
         tuple[IntArray, FloatArray, FloatArray],
-        cached(_INTRA, key, lambda: _intra_arrays(unit, config)),
+        cached(kept, key, lambda: _intra_arrays(unit, config)),
     )
     return [
         Edge(offset + int(a), offset + int(b), (x, y, t), info, robust=False)
@@ -452,9 +509,11 @@ def _result(
     verdicts: Mapping[tuple[UnitKey, UnitKey], PairVerdict],
     solved: _Solution,
     ref_unit: UnitKey | None,
+    chains: Mapping[UnitKey, float],
     config: MergeConfig,
 ) -> MergeResult:
-    """The merge as a :class:`MergeResult`: frames, keyframe poses, links, global map."""
+    """The merge as a :class:`MergeResult`: frames, keyframe poses, links, global map, and
+    each robot's probability of being placed right or why it is not placed."""
     frames: dict[str, dict[int, Pose]] = {}
     for key, T in solved.frames.items():
         frames.setdefault(key[0], {})[key[1]] = se2.pose_from_matrix(T)
@@ -491,8 +550,9 @@ def _result(
             # joins that would make a robot drive faster than max_speed, and sets refused as
             # no heavier than such a proven look-alike (consistency.accept_pairs)
             "pairs_too_fast": sum(v.reason.startswith(TOO_FAST) for v in accepted.refused),
-            "pairs_like_a_look_alike": sum(
-                v.reason.startswith(LOOK_ALIKE) for v in accepted.refused
+            # joins whose probability fell short once weighed with every map of both groups
+            "pairs_doubted_by_groups": sum(
+                v.reason.startswith(GROUP_DOUBT) for v in accepted.refused
             ),
             "links_accepted": len(solved.accepted),
             "link_candidates": sum(len(v.links) for v in verdicts.values()),
@@ -506,6 +566,14 @@ def _result(
         segment_keyframe=owner_keyframe,
     )
     result.verdicts = dict(verdicts)
+    result.probabilities = {
+        robot: chains[(robot, 0)] for robot in robots if placements[robot] is not None
+    }
+    result.unmerged_reasons = {
+        robot: unmerged_reason(robot, units, verdicts, accepted, chains, ref_unit, config)
+        for robot in robots
+        if placements[robot] is None
+    }
     return result
 
 

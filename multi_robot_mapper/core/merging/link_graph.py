@@ -10,9 +10,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.correlation import Drawing
 from multi_robot_mapper.core.merging.compose import as_map, fuse_maps
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.correlation import Drawing
 from multi_robot_mapper.core.merging.free_space import (
     ViewSource,
     free_space_conflict,
@@ -63,6 +63,10 @@ class MergeResult:
     verdicts: dict[object, object] = dataclasses.field(default_factory=dict)
     # what the next update's refinement after the graph resumes from (ffs: FfsState)
     refinement: object | None = None
+    # robot -> the probability that its placement is right (placed robots; joint graph), and
+    # robot -> why it is not placed (unmerged robots)
+    probabilities: dict[str, float] = dataclasses.field(default_factory=dict)
+    unmerged_reasons: dict[str, str] = dataclasses.field(default_factory=dict)
 
     @property
     def unmerged(self) -> list[str]:

@@ -9,6 +9,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.correlation import (
+    Drawing,
+    correlation_peaks,
+    placement_scores,
+    rotation_candidates,
+)
 from multi_robot_mapper.core.geometry import lines_of
 from multi_robot_mapper.core.matching import (
     MatchResult,
@@ -18,12 +24,6 @@ from multi_robot_mapper.core.matching import (
     score_pairs,
 )
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.correlation import (
-    Drawing,
-    correlation_peaks,
-    placement_scores,
-    rotation_candidates,
-)
 from multi_robot_mapper.core.merging.free_space import (
     MapViews,
     free_space_conflict,
@@ -132,8 +132,8 @@ def match_maps(
     1. Candidates: INTEGRATE's own hypotheses (Amigoni Alg. 2: equal angles between pairs of
        the ``hypothesis_segments`` longest segments, ranked on the ``coarse_segments`` longest)
        and the ``correlation_candidates`` best placements of the map correlation
-       (:mod:`multi_robot_mapper.core.merging.correlation`: every translation, for each rotation the
-       wall directions allow; with the robots' views, walls in the other's free space count
+       (:mod:`~multi_robot_mapper.core.evidence.correlation`: every translation, for each rotation
+       the wall directions allow; with the robots' views, walls in the other's free space count
        against). On large maps landmarks miss the true placement of a small overlap, and on
        self-similar buildings a corridor slid along itself overlaps more than it.
     2. The best ``_REFINED`` distinct places are refined (Cox, on the ``judge_segments``

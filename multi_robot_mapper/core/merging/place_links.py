@@ -3,7 +3,7 @@
 A place (:class:`~multi_robot_mapper.core.merging.places.Place`) is searched for on the whole of
 another map with no guess, in two steps:
 
-1. **search**: the map correlation (:mod:`~multi_robot_mapper.core.merging.correlation`)
+1. **search**: the map correlation (:mod:`~multi_robot_mapper.core.evidence.correlation`)
    scores every translation of the place for each rotation the wall directions allow, walls
    lying in the other robot's free space counting against; the ``link_hypotheses`` best
    distinct placements are kept. The other map is transformed once for all its places
@@ -34,6 +34,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.correlation import (
+    CorrelationTarget,
+    Drawing,
+    correlation_peaks,
+    rotation_candidates,
+)
 from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.matching import IntegrateConfig, MatchResult, integrate
 from multi_robot_mapper.core.matching.beams import BeamAgreement, Viewpoint
@@ -43,12 +49,6 @@ from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.matching.shape import Shape
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.correlation import (
-    CorrelationTarget,
-    Drawing,
-    correlation_peaks,
-    rotation_candidates,
-)
 from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.pairwise import MapSignature, draw_map, longest
 from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, thin, viewpoints

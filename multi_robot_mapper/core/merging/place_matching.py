@@ -17,8 +17,8 @@ from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, cast
 
+from multi_robot_mapper.core.evidence.correlation import Drawing
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.correlation import Drawing
 from multi_robot_mapper.core.merging.pairwise import MapSignature
 from multi_robot_mapper.core.merging.place_links import (
     LinkCandidate,

@@ -135,6 +135,35 @@ class _Grid:
             ndimage.map_coordinates(raster, self.coordinates(points), order=order, cval=0.0)
         )
 
+    def nearest(self, raster: FloatArray, points: FloatArray) -> FloatArray:
+        """``raster`` at the points' nearest cells (0 outside the grid)."""
+        u = np.rint(self.coordinates(points)).astype(np.int64)
+        inside = (u[0] >= 0) & (u[1] >= 0) & (u[0] < self.shape[0]) & (u[1] < self.shape[1])
+        out = np.zeros(len(points))
+        out[inside] = raster[u[0, inside], u[1, inside]]
+        return out
+
+    def bilinear(self, layers: FloatArray, points: FloatArray) -> FloatArray:
+        """(C, P) each of the (H, W, C) ``layers`` at the points, interpolated between the four
+        cells around each (a cell outside the grid reads 0): every layer from one gather."""
+        u = self.coordinates(points)
+        low = np.floor(u).astype(np.int64)
+        frac = u - low
+        height, width = self.shape
+        flat = layers.reshape(height * width, -1)
+        out = np.zeros((len(points), flat.shape[1]))
+        for di in (0, 1):
+            i = low[0] + di
+            share_i = frac[0] if di else 1.0 - frac[0]
+            inside_i = (i >= 0) & (i < height)
+            for dj in (0, 1):
+                j = low[1] + dj
+                share = share_i * (frac[1] if dj else 1.0 - frac[1])
+                share = share * (inside_i & (j >= 0) & (j < width))
+                index = np.clip(i, 0, height - 1) * width + np.clip(j, 0, width - 1)
+                out += np.take(flat, index, axis=0) * share[:, None]
+        return np.asarray(out.T)
+
 
 def _channel_weights(direction: FloatArray) -> FloatArray:
     """(C, P) weights of each wall point in each direction channel."""
@@ -168,11 +197,17 @@ def wall_directions(segments: FloatArray) -> FloatArray:
     """Length-weighted histogram of wall directions over [0, pi), blurred by one bin."""
     if len(segments) == 0:
         return np.zeros(_HISTOGRAM_BINS)
-    direction = np.mod(
-        np.arctan2(segments[:, 3] - segments[:, 1], segments[:, 2] - segments[:, 0]), np.pi
-    )
-    bins = np.minimum((direction / np.pi * _HISTOGRAM_BINS).astype(np.int64), _HISTOGRAM_BINS - 1)
-    histogram = np.bincount(bins, weights=lines_of(segments).length, minlength=_HISTOGRAM_BINS)
+    direction = np.arctan2(segments[:, 3] - segments[:, 1], segments[:, 2] - segments[:, 0])
+    return _histogram(direction, lines_of(segments).length)
+
+
+def _histogram(direction: FloatArray, weight: FloatArray) -> FloatArray:
+    """Weighted histogram of directions (rad, any) over [0, pi), blurred by one bin."""
+    if len(direction) == 0:
+        return np.zeros(_HISTOGRAM_BINS)
+    folded = np.mod(direction, np.pi)
+    bins = np.minimum((folded / np.pi * _HISTOGRAM_BINS).astype(np.int64), _HISTOGRAM_BINS - 1)
+    histogram = np.bincount(bins, weights=weight, minlength=_HISTOGRAM_BINS)
     return np.asarray(ndimage.gaussian_filter1d(histogram, 1.0, mode="wrap"))
 
 
@@ -181,7 +216,11 @@ def rotation_candidates(map_a: FloatArray, map_b: FloatArray, count: int) -> Flo
     (at least a fifth of the highest) of the circular cross-correlation of the two direction
     histograms, refined by a parabola through each peak, each also turned by pi (walls have no
     direction)."""
-    ha, hb = wall_directions(map_a), wall_directions(map_b)
+    return _rotation_peaks(wall_directions(map_a), wall_directions(map_b), count)
+
+
+def _rotation_peaks(ha: FloatArray, hb: FloatArray, count: int) -> FloatArray:
+    """:func:`rotation_candidates` from the two direction histograms."""
     spectrum = np.real(np.fft.ifft(np.fft.fft(ha) * np.conj(np.fft.fft(hb))))
     before, after = np.roll(spectrum, 1), np.roll(spectrum, -1)
     peaks = np.flatnonzero(
@@ -324,28 +363,115 @@ def target_reach(target: CorrelationTarget, cell: float) -> float:
     return 0.5 * (spare - 2) * cell
 
 
+@dataclasses.dataclass(frozen=True)
+class ScoringRasters:
+    """A drawing's rasters for scoring placements directly: its grid, its blurred wall
+    channels (None when only its free space is read) and its free cells."""
+
+    grid: _Grid
+    walls: FloatArray | None  # (H, W, C)
+    free: FloatArray  # (H, W)
+
+
+def scorer_rasters(
+    drawing: Drawing, config: CorrelationConfig, walls: bool = True
+) -> ScoringRasters:
+    """The rasters :func:`score_placements` reads of a drawing (``walls``: its wall channels
+    too, for the drawing others are placed on)."""
+    grid = _Grid.around(drawing, config.cell)
+    channels = (
+        np.ascontiguousarray(np.moveaxis(_walls(drawing, grid, config.blur), 0, -1))
+        if walls
+        else None
+    )
+    return ScoringRasters(grid, channels, grid.mark(drawing.free))
+
+
+def score_placements(
+    a: Drawing,
+    b: Drawing,
+    transforms: FloatArray,
+    config: CorrelationConfig,
+    rasters_a: ScoringRasters,
+    rasters_b: ScoringRasters,
+) -> FloatArray:
+    """:func:`placement_scores` from rasters made once, every placement in one pass."""
+    matched, through = score_parts(a, b, transforms, config, rasters_a, rasters_b)
+    return np.asarray(matched - config.free_space_weight * through)
+
+
+def score_parts(
+    a: Drawing,
+    b: Drawing,
+    transforms: FloatArray,
+    config: CorrelationConfig,
+    rasters_a: ScoringRasters,
+    rasters_b: ScoringRasters,
+    walls_a: tuple[FloatArray, FloatArray] | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """The two parts of each placement's score: (N,) metres of wall matched and (N,) metres
+    of wall in the other's free space, either way (b's points under every transform sampled
+    together). ``walls_a``: the (points, weights) of a's walls that can reach b's free space
+    under these placements (default all of them)."""
+    rows = np.asarray(transforms, dtype=np.float64).reshape(-1, 3)
+    if len(rows) == 0:
+        return np.zeros(0), np.zeros(0)
+    assert rasters_a.walls is not None
+    # A wall point on a drawn wall of its direction reads 1 / sqrt(2 pi (blur^2 + 1/12 +
+    # 1/6)) of the wall's metres per cell (blur, drawing, reading): that, times the channels'
+    # 1/2, is one metre per metre.
+    blur, cell = config.blur, config.cell
+    scale = np.sqrt(2.0 * np.pi * (blur**2 + _DRAWN + _READ)) / (0.5 * cell)
+    T = se2.matrices_from_poses(rows[:, [1, 2, 0]])  # (N, 3, 3) T_a_b
+    on_a = np.matmul(b.walls[None, :, :], T[:, :2, :2].transpose(0, 2, 1)) + T[:, None, :2, 2]
+    flat = on_a.reshape(-1, 2)
+    read = rasters_a.grid.bilinear(rasters_a.walls, flat)
+    matched = _turned_channel_sum(read.reshape(_CHANNELS, len(rows), -1), b, rows[:, 0]) * scale
+    through = rasters_a.grid.nearest(rasters_a.free, flat).reshape(len(rows), -1) @ b.weight
+    points_a, weight_a = (a.walls, a.weight) if walls_a is None else walls_a
+    if len(points_a):
+        T_b_a = np.linalg.inv(T)
+        on_b = np.matmul(points_a[None, :, :], T_b_a[:, :2, :2].transpose(0, 2, 1))
+        on_b = on_b + T_b_a[:, None, :2, 2]
+        seen = rasters_b.grid.nearest(rasters_b.free, on_b.reshape(-1, 2))
+        through = through + seen.reshape(len(rows), -1) @ weight_a
+    return np.asarray(matched), np.asarray(through)
+
+
+def _turned_channel_sum(read: FloatArray, b: Drawing, theta: FloatArray) -> FloatArray:
+    """(N,) sum over channels and points of ``read`` (C, N, P) times each point's channel
+    weight with b turned by ``theta`` (N,), times its metres. The weights 2/3 cos^2(phi +
+    theta - k pi/3) are 1/3 (1 + cos 2(phi - k pi/3) cos 2 theta - sin 2(phi - k pi/3) sin 2
+    theta): three sums per channel instead of a cosine per point and placement."""
+    k = np.arange(_CHANNELS)[:, None] * (np.pi / _CHANNELS)
+    double = 2.0 * (b.direction[None, :] - k)  # (C, P)
+    weighted = read * b.weight[None, None, :]  # (C, N, P)
+    plain = weighted.sum(axis=2)  # (C, N)
+    cosine = np.einsum("cnp,cp->cn", weighted, np.cos(double))
+    sine = np.einsum("cnp,cp->cn", weighted, np.sin(double))
+    c, s = np.cos(2.0 * theta), np.sin(2.0 * theta)
+    return np.asarray((plain + cosine * c[None, :] - sine * s[None, :]).sum(axis=0) / _CHANNELS)
+
+
 def placement_scores(
     a: Drawing, b: Drawing, transforms: FloatArray, config: CorrelationConfig
 ) -> FloatArray:
     """The correlation score (metres) of each ``(theta, tx, ty)`` placement of b on a,
     evaluated directly (b's wall points looked up in a's blurred walls and free space, a's
     wall points in b's free space): for placements found elsewhere, e.g. refined ones."""
-    cell, blur = config.cell, config.blur
-    grid_a, grid_b = _Grid.around(a, cell), _Grid.around(b, cell)
-    walls_a, free_a, free_b = _walls(a, grid_a, blur), grid_a.mark(a.free), grid_b.mark(b.free)
-    # A wall point on a drawn wall of its direction reads 1 / sqrt(2 pi (blur^2 + 1/12 +
-    # 1/6)) of the wall's metres per cell (blur, drawing, reading): that, times the channels'
-    # 1/2, is one metre per metre.
-    scale = np.sqrt(2.0 * np.pi * (blur**2 + _DRAWN + _READ)) / (0.5 * cell)
-    out = np.zeros(len(transforms))
-    for n, (theta, tx, ty) in enumerate(np.asarray(transforms, dtype=np.float64).reshape(-1, 3)):
-        T_a_b = se2.matrix_from_pose(float(tx), float(ty), float(theta))
-        on_a = se2.transform_points(T_a_b, b.walls)
-        weights = _channel_weights(b.direction + theta) * b.weight[None, :]
-        read = np.stack([grid_a.sample(channel, on_a, 1) for channel in walls_a])
-        matched = float((read * weights).sum() * scale)
-        through = float((grid_a.sample(free_a, on_a, 0) * b.weight).sum())
-        on_b = se2.transform_points(se2.invert(T_a_b), a.walls)
-        through += float((grid_b.sample(free_b, on_b, 0) * a.weight).sum())
-        out[n] = matched - config.free_space_weight * through
-    return out
+    return score_placements(
+        a,
+        b,
+        transforms,
+        config,
+        scorer_rasters(a, config),
+        scorer_rasters(b, config, walls=False),
+    )
+
+
+def rotation_candidates_of_drawings(a: Drawing, b: Drawing, count: int) -> FloatArray:
+    """:func:`rotation_candidates` of two drawings (their wall points' directions, weighted
+    by the metres each stands for)."""
+    return _rotation_peaks(
+        _histogram(a.direction, a.weight), _histogram(b.direction, b.weight), count
+    )

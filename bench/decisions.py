@@ -1,0 +1,590 @@
+"""The wrong-decision benchmark (issue 46): how often the merger publishes a robot placed
+wrong, how many overlapping robots it merges, how soon, and how often local mapping accepts
+a wrong closure or join -- over many scenarios, live and at the end.
+
+    .venv/bin/python bench/decisions.py collect --source generated --first 0 --count 200
+        [--maps truth own] [--updates 8] [--jobs 2] [--work bench_output/decisions]
+    .venv/bin/python bench/decisions.py collect --source carmen --logs intel aces ...
+        --robots 2 4 8 [--maps truth own]
+    .venv/bin/python bench/decisions.py judge [--work ...] [--set NAME=VALUE ...]
+    .venv/bin/python bench/decisions.py table [--work ...]
+
+``collect`` builds each scenario (``bench/scenarios.py``), its robots' partial maps as they
+grow (truth maps and/or own maps), and runs the merger as the node does (``merge_joint``,
+``--updates`` updates evenly over the robots' time, each warm from the last; every place matched:
+``budget`` 0, so that a result does not depend on this machine's speed). Each update's maps
+and place matches are kept (``WORK/cases/NAME.pkl``), and each decision is judged against the
+truth into ``WORK/records/NAME.json``. ``judge`` re-runs every kept update's decisions with
+today's code from the kept place matches (no matching: minutes, not hours) and judges them
+again: the way to try a decision rule. ``table`` prints the figures of every record.
+
+What is counted (the truth is never seen by the merger):
+
+- **placements**: every map (a robot's piece) the merger places in ``map`` at an update, and
+  whether it is *wrong*: where its keyframes lie within 5 m of another placed map's keyframes
+  at the truth, their relative poses in ``map`` differ from the truth's by more than 0.30 m or
+  5 deg (the median over such pairs); a map with no such neighbour is judged by its frame
+  against the reference's. *Ever*: every update's publication counts; *end*: the last update.
+- **merged**: of the robots in the largest group that overlap at the truth (``OVERLAP_WALL``
+  of shared wall, ``bench/scenarios.py``), those whose main map is placed right at the end.
+- **time to merge**: from the first update at which a robot overlaps the placed group at the
+  truth to the first at which it is placed (s of the robots' time).
+- **decisions**: every pair of maps' consistent set of links, with its evidence
+  (``PairVerdict.evidence``) and whether its placement is right (the median over its links of
+  the error of the placement at the linked keyframes): the data the join model is fitted on.
+- **closures and joins** (own maps): every one the local mapper accepted, wrong beyond 0.30 m
+  or 5 deg of the truth's relative pose of its two keyframes.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import dataclasses  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import pickle  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from scenarios import (  # noqa: E402
+    Scenario,
+    TruthTable,
+    carmen_scenario,
+    overlap_component,
+    own_snapshots,
+    truth_snapshots,
+    update_times,
+    world_scenario,
+    world_walls,
+)
+
+from multi_robot_mapper.core import se2  # noqa: E402
+from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
+from multi_robot_mapper.core.local_mapping import Keyframe  # noqa: E402
+from multi_robot_mapper.core.merging import MergeConfig, MergeResult  # noqa: E402
+from multi_robot_mapper.core.merging.consistency import PairVerdict, oriented, placement  # noqa: E402
+from multi_robot_mapper.core.merging.joint import JointState, merge_joint  # noqa: E402
+from multi_robot_mapper.core.merging.places import MapUnit, UnitKey, units_of  # noqa: E402
+
+RIGHT_DISTANCE = 0.30  # m
+RIGHT_ANGLE = math.radians(5.0)
+NEIGHBOURS = 5.0  # m: keyframes of two maps this close at the truth judge each other
+
+
+# --- judging --------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class Truth:
+    """Each map's keyframes' true poses in ``world``, by unit and keyframe index."""
+
+    poses: dict[UnitKey, dict[int, np.ndarray]]  # 3x3 T_world_keyframe
+
+    @staticmethod
+    def of(scenario: TruthTable, units: dict[UnitKey, MapUnit]) -> Truth:
+        poses: dict[UnitKey, dict[int, np.ndarray]] = {}
+        for key, unit in units.items():
+            world = scenario.truth_of(key[0], unit.stamps)
+            poses[key] = {
+                int(i): se2.matrix_from_pose(*p) for i, p in zip(unit.index, world, strict=True)
+            }
+        return Truth(poses)
+
+
+def _error(T_estimate: np.ndarray, T_truth: np.ndarray) -> tuple[float, float]:
+    dx, dy, dt = se2.pose_from_matrix(se2.invert(T_truth) @ T_estimate)
+    return math.hypot(dx, dy), abs(dt)
+
+
+def _wrong(error: tuple[float, float]) -> bool:
+    return error[0] > RIGHT_DISTANCE or error[1] > RIGHT_ANGLE
+
+
+def judge_placements(
+    result: MergeResult, units: dict[UnitKey, MapUnit], truth: Truth
+) -> dict[str, dict[str, Any]]:
+    """Every placed map's verdict (module doc): ``unit name -> {wrong, error_m, error_deg,
+    neighbours}``."""
+    placed: dict[UnitKey, dict[int, np.ndarray]] = {}
+    for robot, index in result.keyframe_index.items():
+        for i, pose in zip(index, result.keyframe_poses[robot], strict=True):
+            for key in units:
+                if key[0] == robot and int(i) in truth.poses[key]:
+                    placed.setdefault(key, {})[int(i)] = se2.matrix_from_pose(*pose)
+    out: dict[str, dict[str, Any]] = {}
+    for key, mine in placed.items():
+        errors = []
+        for other, theirs in placed.items():
+            if other == key:
+                continue
+            errors += _neighbour_errors(mine, theirs, truth.poses[key], truth.poses[other])
+        if not errors:
+            errors = [_frame_error(result, key, units, truth)]
+        distance = float(np.median([e[0] for e in errors]))
+        angle = float(np.median([e[1] for e in errors]))
+        out[f"{key[0]}/{key[1]}"] = {
+            "wrong": _wrong((distance, angle)),
+            "error_m": round(distance, 3),
+            "error_deg": round(math.degrees(angle), 2),
+            "neighbours": len(errors),
+            "reference": key[0] == result.reference,
+        }
+    return out
+
+
+def _neighbour_errors(
+    mine: dict[int, np.ndarray],
+    theirs: dict[int, np.ndarray],
+    truth_mine: dict[int, np.ndarray],
+    truth_theirs: dict[int, np.ndarray],
+) -> list[tuple[float, float]]:
+    """Relative poses in ``map`` of keyframe pairs (one of each map) within NEIGHBOURS of
+    each other at the truth, against the truth's."""
+    a = sorted(mine)
+    b = sorted(theirs)
+    pa = np.array([truth_mine[i][:2, 2] for i in a])
+    pb = np.array([truth_theirs[j][:2, 2] for j in b])
+    gap = np.hypot(pa[:, None, 0] - pb[None, :, 0], pa[:, None, 1] - pb[None, :, 1])
+    rows, cols = np.nonzero(gap <= NEIGHBOURS)
+    if len(rows) > 200:  # a sample is as good a median
+        pick = np.linspace(0, len(rows) - 1, 200).astype(int)
+        rows, cols = rows[pick], cols[pick]
+    out = []
+    for r, c in zip(rows, cols, strict=True):
+        i, j = a[r], b[c]
+        estimate = se2.invert(mine[i]) @ theirs[j]
+        real = se2.invert(truth_mine[i]) @ truth_theirs[j]
+        out.append(_error(estimate, real))
+    return out
+
+
+def _frame_error(
+    result: MergeResult, key: UnitKey, units: dict[UnitKey, MapUnit], truth: Truth
+) -> tuple[float, float]:
+    """A map's frame in ``map`` against the truth, relative to the reference's (each map's
+    true frame the rigid fit of its keyframes' true poses), at the map's keyframes' middle."""
+    assert result.reference is not None
+    ref = (result.reference, 0)
+
+    def frame_in_world(k: UnitKey) -> np.ndarray:
+        unit = units[k]
+        world = np.array([se2.pose_from_matrix(truth.poses[k][int(i)]) for i in unit.index])
+        return se2.rigid_fit(unit.poses, world)
+
+    T_map_key = se2.matrix_from_pose(*result.frames[key[0]][key[1]])
+    T_map_ref = se2.matrix_from_pose(*result.frames[ref[0]].get(ref[1], (0.0, 0.0, 0.0)))
+    T_world_map = frame_in_world(ref) @ se2.invert(T_map_ref)
+    middle = se2.matrix_from_pose(*units[key].poses[:, :2].mean(axis=0), 0.0)
+    return _error(T_world_map @ T_map_key @ middle, frame_in_world(key) @ middle)
+
+
+def judge_verdict(
+    verdict: PairVerdict, units: dict[UnitKey, MapUnit], truth: Truth
+) -> tuple[float, float]:
+    """The median error of a consistent set's placement at its linked keyframes (m, rad)."""
+    a, b = verdict.pair
+    T_a_b = placement(verdict, a, units)
+    errors = []
+    for candidate in verdict.links:
+        link = oriented(candidate, a)
+        pa = se2.matrix_from_pose(*units[a].poses[units[a].row(link.k_first)])
+        pb = se2.matrix_from_pose(*units[b].poses[units[b].row(link.k_second)])
+        estimate = se2.invert(pa) @ T_a_b @ pb
+        real = se2.invert(truth.poses[a][link.k_first]) @ truth.poses[b][link.k_second]
+        errors.append(_error(estimate, real))
+    return float(np.median([e[0] for e in errors])), float(np.median([e[1] for e in errors]))
+
+
+def verdict_record(
+    verdict: PairVerdict, units: dict[UnitKey, MapUnit], truth: Truth
+) -> dict[str, Any]:
+    """A pair's consistent set: its evidence and its truth (module doc)."""
+    error = judge_verdict(verdict, units, truth)
+    record: dict[str, Any] = {
+        "pair": [f"{k[0]}/{k[1]}" for k in verdict.pair],
+        "places": verdict.places,
+        "links": len(verdict.links),
+        "weight": round(verdict.weight, 4),
+        "rival_weight": round(verdict.rival_weight, 4),
+        "max_confidence": round(max(c.confidence for c in verdict.links), 4),
+        "accepted": verdict.accepted,
+        "reason": verdict.reason,
+        "seen_through": [round(v, 3) for v in verdict.seen_through],
+        "error_m": round(error[0], 3),
+        "error_deg": round(math.degrees(error[1]), 2),
+        "right": not _wrong(error),
+    }
+    if verdict.evidence is not None:
+        for name, ev in (("b_on_a", verdict.evidence.b_on_a), ("a_on_b", verdict.evidence.a_on_b)):
+            record[name] = {
+                "score": round(ev.score, 3),
+                "rival": round(ev.rival, 3),
+                "wall": round(ev.wall, 3),
+                "conflict": round(ev.conflict, 3),
+            }
+        record["probability"] = verdict.probability
+    return record
+
+
+# --- one scenario ---------------------------------------------------------------------------
+
+
+def snapshots_of(
+    scenario: Scenario, kind: str, times: list[float]
+) -> tuple[dict[str, list[list[Keyframe]]], list[dict[str, Any]]]:
+    """Every robot's partial map at each update time (``kind``: truth or own), and the own
+    maps' closures and joins judged (none for truth maps)."""
+    snapshots: dict[str, list[list[Keyframe]]] = {}
+    closures: list[dict[str, Any]] = []
+    for robot, drive in scenario.drives.items():
+        if kind == "truth":
+            snapshots[robot] = truth_snapshots(drive, times)
+            continue
+        own = own_snapshots(drive, times)
+        snapshots[robot] = own.snapshots
+        for closure in own.closures:
+            first, second = own.keyframe_stamps[[closure.first, closure.second]]
+            world = scenario.truth().truth_of(robot, np.array([first, second]))
+            real = se2.between(tuple(world[0]), tuple(world[1]))
+            error = _error(
+                se2.matrix_from_pose(*closure.T_first_second), se2.matrix_from_pose(*real)
+            )
+            closures.append(
+                {
+                    "robot": robot,
+                    "kind": closure.kind,
+                    "first": closure.first,
+                    "second": closure.second,
+                    "confidence": round(closure.confidence, 4),
+                    "error_m": round(error[0], 3),
+                    "error_deg": round(math.degrees(error[1]), 2),
+                    "wrong": _wrong(error),
+                }
+            )
+    return snapshots, closures
+
+
+def run_updates(
+    scenario: TruthTable,
+    times: list[float],
+    snapshots: dict[str, list[list[Keyframe]]],
+    config: MergeConfig,
+    kept: list[Any] | None,
+) -> tuple[list[dict[str, Any]], list[Any]]:
+    """The merger's updates (module doc), each judged; and what each update matched (kept for
+    ``judge``). With ``kept`` (an earlier run's matches), no place is matched again."""
+    previous: MergeResult | None = None
+    records: list[dict[str, Any]] = []
+    matches: list[Any] = []
+    walls_truth: dict[str, np.ndarray] = {}
+    for step, clock in enumerate(times):
+        held = {r: s[step] for r, s in snapshots.items() if s[step]}
+        if not held:
+            matches.append({})
+            continue
+        if kept is not None:
+            previous = _with_matches(previous, kept[step])
+        started = time.perf_counter()
+        result = merge_joint(held, config, previous=previous, budget=0.0)
+        seconds = time.perf_counter() - started
+        previous = result
+        assert isinstance(result.state, JointState)
+        matches.append(result.state.matches)
+        units = units_of(held)
+        truth = Truth.of(scenario, units)
+        for robot, frames in held.items():
+            walls_truth[robot] = world_walls(frames, scenario.truth_of(robot, _stamps(frames)))
+        records.append(
+            {
+                "time": round(clock, 3),
+                "seconds": round(seconds, 3),
+                "reference": result.reference,
+                "placements": judge_placements(result, units, truth),
+                "overlapping": sorted(overlap_component(walls_truth)),
+                "verdicts": [
+                    verdict_record(v, units, truth)
+                    for v in result.verdicts.values()
+                    if isinstance(v, PairVerdict) and v.links
+                ],
+            }
+        )
+    return records, matches
+
+
+def _with_matches(previous: MergeResult | None, matches: dict[Any, Any]) -> MergeResult:
+    """A previous result carrying ``matches`` (a kept update's): the next update matches no
+    place again whose map is unchanged."""
+    state = JointState(matches=dict(matches))
+    if previous is None:
+        return MergeResult(
+            [], {}, None, [], {}, np.zeros((0, 4)), np.zeros(0, np.int64), {}, {}, state=state
+        )
+    return dataclasses.replace(previous, state=state)
+
+
+def _stamps(frames: list[Keyframe]) -> np.ndarray:
+    return np.array([kf.stamp for kf in frames], dtype=np.float64)
+
+
+def scenario_of(name: str) -> Scenario | None:
+    """A scenario by name: ``generated:SEED``, ``world:WORLD:K:SEED``, ``carmen:LOG:K``."""
+    kind, *rest = name.split(":")
+    if kind == "generated":
+        from scenarios import generated_scenario
+
+        return generated_scenario(int(rest[0]))
+    if kind == "world":
+        return world_scenario(rest[0], int(rest[1]), int(rest[2]))
+    if kind == "carmen":
+        return carmen_scenario(rest[0], int(rest[1]))
+    raise ValueError(f"unknown scenario {name!r}")
+
+
+def collect_one(name: str, kinds: list[str], updates: int, work: str) -> str:
+    """Build, merge and judge one scenario (module doc); returns a line for the log."""
+    started = time.perf_counter()
+    scenario = scenario_of(name)
+    if scenario is None:
+        return f"{name}: skipped (its data is absent)"
+    times = update_times(scenario, updates)
+    config = MergeConfig()
+    lines = []
+    for kind in kinds:
+        stem = f"{name.replace(':', '_')}_{kind}"
+        snapshots, closures = snapshots_of(scenario, kind, times)
+        truth = scenario.truth()
+        records, matches = run_updates(truth, times, snapshots, config, None)
+        kept = {"times": times, "snapshots": snapshots, "matches": matches, "truth": truth}
+        with open(Path(work) / "cases" / f"{stem}.pkl", "wb") as handle:
+            pickle.dump(kept, handle)
+        _write_records(work, stem, name, kind, scenario.description, records, closures)
+        last = records[-1]["placements"] if records else {}
+        wrong = sum(p["wrong"] for p in last.values())
+        lines.append(f"{kind}: {len(last)} placed, {wrong} wrong at the end")
+    return f"{name}: {'; '.join(lines)} ({time.perf_counter() - started:.0f} s)"
+
+
+def _write_records(
+    work: str,
+    stem: str,
+    name: str,
+    kind: str,
+    description: dict[str, Any],
+    records: list[dict[str, Any]],
+    closures: list[dict[str, Any]],
+) -> None:
+    out = {
+        "scenario": name,
+        "maps": kind,
+        "description": description,
+        "updates": records,
+        "closures": closures,
+    }
+    (Path(work) / "records" / f"{stem}.json").write_text(json.dumps(out))
+
+
+def judge_one(stem: str, work: str, overrides: dict[str, Any]) -> str:
+    """Re-run one kept scenario's decisions with today's code (module doc)."""
+    with open(Path(work) / "cases" / f"{stem}.pkl", "rb") as handle:
+        kept = pickle.load(handle)
+    old = json.loads((Path(work) / "records" / f"{stem}.json").read_text())
+    config = config_from_flat(MergeConfig, overrides)
+    records, _ = run_updates(
+        kept["truth"], kept["times"], kept["snapshots"], config, kept["matches"]
+    )
+    _write_records(
+        work, stem, old["scenario"], old["maps"], old["description"], records, old["closures"]
+    )
+    return stem
+
+
+# --- the figures ----------------------------------------------------------------------------
+
+
+def figures(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """The benchmark's figures over a set of scenario records (module doc)."""
+    published = wrong_ever = end_placed = end_wrong = 0
+    overlapping = merged = 0
+    delays: list[float] = []
+    closures = wrong_closures = joins = wrong_joins = 0
+    decisions = accepted_wrong = accepted = 0
+    robots_ever_wrong = 0
+    for case in records:
+        updates = case["updates"]
+        ever_wrong: set[str] = set()
+        for update in updates:
+            for name, p in update["placements"].items():
+                published += 1
+                if p["wrong"]:
+                    wrong_ever += 1
+                    ever_wrong.add(name.split("/")[0])
+            for v in update["verdicts"]:
+                decisions += 1
+                accepted += v["accepted"]
+                accepted_wrong += v["accepted"] and not v["right"]
+        robots_ever_wrong += len(ever_wrong)
+        if updates:
+            last = updates[-1]
+            end_placed += len(last["placements"])
+            end_wrong += sum(p["wrong"] for p in last["placements"].values())
+            for robot in last["overlapping"]:
+                overlapping += 1
+                if _placed_right(last, robot):
+                    merged += 1
+                    delays.append(_delay(updates, robot))
+        for c in case["closures"]:
+            if c["kind"] == "join":
+                joins += 1
+                wrong_joins += c["wrong"]
+            else:
+                closures += 1
+                wrong_closures += c["wrong"]
+    return {
+        "scenarios": len(records),
+        "published": published,
+        "wrong_ever": wrong_ever,
+        "robots_ever_wrong": robots_ever_wrong,
+        "end_placed": end_placed,
+        "end_wrong": end_wrong,
+        "overlapping": overlapping,
+        "merged": merged,
+        "delay_median_s": float(np.median(delays)) if delays else float("nan"),
+        "delay_p90_s": float(np.percentile(delays, 90)) if delays else float("nan"),
+        "closures": closures,
+        "wrong_closures": wrong_closures,
+        "joins": joins,
+        "wrong_joins": wrong_joins,
+        "decisions": decisions,
+        "accepted": accepted,
+        "accepted_wrong": accepted_wrong,
+    }
+
+
+def _main_unit(update: dict[str, Any], robot: str) -> str | None:
+    mine = [n for n in update["placements"] if n.split("/")[0] == robot]
+    return f"{robot}/0" if f"{robot}/0" in mine else (mine[0] if mine else None)
+
+
+def _placed_right(update: dict[str, Any], robot: str) -> bool:
+    unit = _main_unit(update, robot)
+    return unit is not None and not update["placements"][unit]["wrong"]
+
+
+def _delay(updates: list[dict[str, Any]], robot: str) -> float:
+    """Seconds from the first update at which the robot overlaps at the truth to the first at
+    which it is placed right (and stays so)."""
+    start = next((u["time"] for u in updates if robot in u["overlapping"]), updates[-1]["time"])
+    placed = updates[-1]["time"]
+    for update in reversed(updates):
+        if not _placed_right(update, robot):
+            break
+        placed = update["time"]
+    return max(0.0, placed - start)
+
+
+def _rate(wrong: int, total: int) -> str:
+    return f"{wrong} / {total} ({1000.0 * wrong / total:.1f} per 1000)" if total else "0 / 0"
+
+
+def print_table(work: str) -> None:
+    cases = [json.loads(p.read_text()) for p in sorted((Path(work) / "records").glob("*.json"))]
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for case in cases:
+        source = str(case["description"].get("source", "?"))
+        groups.setdefault((source, case["maps"]), []).append(case)
+    print(
+        "| source | maps | scenarios | published wrong, ever | robots ever wrong | wrong at "
+        "the end | overlapping robots merged | time to merge, median / p90 (s) | closures "
+        "wrong | joins wrong | sets accepted wrong |"
+    )
+    print("|" + " --- |" * 11)
+    for (source, maps), members in sorted(groups.items()):
+        f = figures(members)
+        share = f"{f['merged']} / {f['overlapping']}"
+        if f["overlapping"]:
+            share += f" ({100.0 * f['merged'] / f['overlapping']:.1f} %)"
+        print(
+            f"| {source} | {maps} | {f['scenarios']} | {_rate(f['wrong_ever'], f['published'])} "
+            f"| {f['robots_ever_wrong']} | {_rate(f['end_wrong'], f['end_placed'])} | {share} | "
+            f"{f['delay_median_s']:.0f} / {f['delay_p90_s']:.0f} | "
+            f"{_rate(f['wrong_closures'], f['closures'])} | {_rate(f['wrong_joins'], f['joins'])} "
+            f"| {_rate(f['accepted_wrong'], f['accepted'])} |"
+        )
+
+
+def _names(args: argparse.Namespace) -> list[str]:
+    if args.source == "generated":
+        return [f"generated:{seed}" for seed in range(args.first, args.first + args.count)]
+    if args.source == "carmen":
+        return [f"carmen:{log}:{k}" for log in args.logs for k in args.robots]
+    return [f"world:{w}:{k}:{args.first}" for w in args.worlds for k in args.robots]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    collect = sub.add_parser("collect")
+    collect.add_argument("--source", choices=("generated", "carmen", "world"), required=True)
+    collect.add_argument("--first", type=int, default=0)
+    collect.add_argument("--count", type=int, default=200)
+    collect.add_argument(
+        "--logs", nargs="*", default=["intel", "aces", "fhw", "csail", "freiburg-079", "edmonton"]
+    )
+    collect.add_argument("--worlds", nargs="*", default=["office", "corridors", "rooms"])
+    collect.add_argument("--robots", type=int, nargs="*", default=[2, 4, 8])
+    collect.add_argument("--maps", nargs="*", choices=("truth", "own"), default=["truth"])
+    collect.add_argument("--updates", type=int, default=8, help="merger updates per scenario")
+    collect.add_argument("--jobs", type=int, default=1)
+    collect.add_argument("--work", default="bench_output/decisions")
+    judge = sub.add_parser("judge")
+    judge.add_argument("--work", default="bench_output/decisions")
+    judge.add_argument("--jobs", type=int, default=1)
+    judge.add_argument("--only", default="", help="stems containing this")
+    judge.add_argument("--set", dest="overrides", action="append", default=[])
+    table = sub.add_parser("table")
+    table.add_argument("--work", default="bench_output/decisions")
+    args = parser.parse_args()
+    if args.command == "table":
+        print_table(args.work)
+        return
+    for folder in ("cases", "records"):
+        (Path(args.work) / folder).mkdir(parents=True, exist_ok=True)
+    if args.command == "collect":
+        jobs = [(name, args.maps, args.updates, args.work) for name in _names(args)]
+        _run(collect_one, jobs, args.jobs)
+    else:
+        overrides = dict(parse_override(o) for o in args.overrides)
+        stems = [p.stem for p in sorted((Path(args.work) / "cases").glob("*.pkl"))]
+        _run(judge_one, [(s, args.work, overrides) for s in stems if args.only in s], args.jobs)
+    print_table(args.work)
+
+
+def _run(function: Any, jobs: list[tuple[Any, ...]], workers: int) -> None:
+    if workers <= 1:
+        for job in jobs:
+            print(function(*job), flush=True)
+        return
+    with ProcessPoolExecutor(workers) as pool:
+        for line in pool.map(_star, [(function, job) for job in jobs]):
+            print(line, flush=True)
+
+
+def _star(item: tuple[Any, tuple[Any, ...]]) -> Any:
+    function, job = item
+    return function(*job)
+
+
+if __name__ == "__main__":
+    main()

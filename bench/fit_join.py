@@ -1,0 +1,232 @@
+"""Fit and check the join model (issue 46): the probability that a placement of one map on
+another is right, from its evidence (``core/evidence/model.py``).
+
+    .venv/bin/python bench/fit_join.py [--work bench_output/decisions ...] [--write]
+        [--figure docs/figures/join_reliability.png]
+
+Reads every pair of maps' consistent set that ``bench/decisions.py collect`` (or ``judge``)
+recorded, each with its evidence and whether its placement is right by the truth; a set seen
+at several updates with the same evidence counts once. Fits a logistic model (L2 penalty on
+standardised features, the penalty chosen by held-out log loss) and checks it **held out by
+building**: each scenario's sets are predicted by the fit on the other scenarios (ten folds
+of whole scenarios). Prints, held out: the reliability table (predicted against observed, in
+bins), and at ``join_probability`` 0.99 (and a few other thresholds) how many sets are
+accepted and how many of those are wrong, per source. ``--write`` writes the fit on every
+set to ``multi_robot_mapper/core/evidence/join_model.json``; ``--figure`` draws the
+reliability diagram.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import sys
+from datetime import date
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.optimize import minimize
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from multi_robot_mapper.core.evidence.model import (  # noqa: E402
+    FEATURES,
+    MODEL_FILE,
+    JoinModel,
+    join_features,
+)
+
+L2_GRID = (1e-4, 1e-3, 1e-2)
+FOLDS = 10
+THRESHOLDS = (0.5, 0.9, 0.99, 0.999)
+
+
+def features_of(record: dict[str, Any]) -> list[float] | None:
+    """The model's features of a recorded set (evidence.model.join_features, as the merger
+    computes them: PairEvidence.features), None without evidence."""
+    ways = [record.get("b_on_a"), record.get("a_on_b")]
+    if any(w is None for w in ways):
+        return None
+    margin = min(w["score"] - max(w["rival"], 0.0) for w in ways)
+    score = min(w["score"] for w in ways)
+    ratio = max((max(w["rival"], 0.0) / w["score"]) if w["score"] > 0 else 1.0 for w in ways)
+    conflict = max([w.get("conflict", 0.0) for w in ways] + [record["seen_through"][1]])
+    values = join_features(margin, score, ratio, conflict)
+    return [values[name] for name in FEATURES]
+
+
+def load(works: list[str]) -> tuple[np.ndarray, np.ndarray, list[str], list[str]]:
+    """(features, right, scenario of each set, source of each set), each set once."""
+    rows, labels, groups, sources = [], [], [], []
+    seen: set[tuple[Any, ...]] = set()
+    for work in works:
+        for path in sorted((Path(work) / "records").glob("*.json")):
+            case = json.loads(path.read_text())
+            source = f"{case['description'].get('source', '?')}/{case['maps']}"
+            for update in case["updates"]:
+                for record in update["verdicts"]:
+                    values = features_of(record)
+                    if values is None:
+                        continue
+                    key = (path.stem, tuple(record["pair"]), tuple(np.round(values, 3)))
+                    if key in seen:
+                        continue
+                    seen.add(key)
+                    rows.append(values)
+                    labels.append(bool(record["right"]))
+                    groups.append(case["scenario"])
+                    sources.append(source)
+    return np.array(rows, dtype=np.float64), np.array(labels), groups, sources
+
+
+def fit(x: np.ndarray, y: np.ndarray, l2: float) -> tuple[float, np.ndarray]:
+    """Maximum-likelihood logistic regression, L2 penalty on standardised features:
+    (intercept, weights) on the raw features."""
+    mean, scale = x.mean(axis=0), x.std(axis=0) + 1e-9
+    design = np.column_stack((np.ones(len(x)), (x - mean) / scale))
+    target = y.astype(float)
+
+    def loss(w: np.ndarray) -> tuple[float, np.ndarray]:
+        logits = design @ w
+        p = 1.0 / (1.0 + np.exp(-np.clip(logits, -50, 50)))
+        nll = np.sum(np.logaddexp(0.0, logits) - target * logits)
+        penalty = 0.5 * l2 * len(y) * np.sum(w[1:] ** 2)
+        grad = design.T @ (p - target) + l2 * len(y) * np.concatenate(([0.0], w[1:]))
+        return float(nll + penalty), grad
+
+    w = minimize(loss, np.zeros(design.shape[1]), jac=True, method="L-BFGS-B").x
+    weights = w[1:] / scale
+    return float(w[0] - weights @ mean), weights
+
+
+def predict(model: tuple[float, np.ndarray], x: np.ndarray) -> np.ndarray:
+    z = model[0] + x @ model[1]
+    return np.asarray(1.0 / (1.0 + np.exp(-np.clip(z, -50, 50))))
+
+
+def held_out(x: np.ndarray, y: np.ndarray, groups: list[str], l2: float) -> np.ndarray:
+    """Each set's probability from the fit on the folds without its scenario."""
+    names = sorted(set(groups))
+    rng = np.random.default_rng(0)
+    fold_of = {
+        name: int(k) for name, k in zip(names, rng.permutation(len(names)) % FOLDS, strict=True)
+    }
+    fold = np.array([fold_of[g] for g in groups])
+    out = np.zeros(len(y))
+    for k in range(FOLDS):
+        test = fold == k
+        if not test.any():
+            continue
+        train = ~test
+        if y[train].all() or not y[train].any():
+            out[test] = float(y[train].mean())
+            continue
+        out[test] = predict(fit(x[train], y[train], l2), x[test])
+    return out
+
+
+def log_loss(p: np.ndarray, y: np.ndarray) -> float:
+    p = np.clip(p, 1e-12, 1 - 1e-12)
+    return float(-np.mean(y * np.log(p) + (1 - y) * np.log(1 - p)))
+
+
+def reliability(p: np.ndarray, y: np.ndarray) -> list[tuple[float, float, float, int]]:
+    """(bin low, bin high, mean predicted, observed share right, count) over probability bins."""
+    edges = [0.0, 0.1, 0.3, 0.5, 0.7, 0.9, 0.99, 0.999, 1.0 + 1e-9]
+    out = []
+    for lo, hi in itertools.pairwise(edges):
+        inside = (p >= lo) & (p < hi)
+        if inside.any():
+            out.append(
+                (
+                    lo,
+                    min(hi, 1.0),
+                    float(p[inside].mean()),
+                    float(y[inside].mean()),
+                    int(inside.sum()),
+                )
+            )
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", nargs="*", default=["bench_output/decisions"])
+    parser.add_argument("--write", action="store_true")
+    parser.add_argument("--figure", default="")
+    args = parser.parse_args()
+    x, y, groups, sources = load(args.work)
+    if len(y) == 0:
+        raise SystemExit("no recorded sets: run bench/decisions.py collect first")
+    print(
+        f"{len(y)} sets ({int(y.sum())} right, {int((~y).sum())} wrong) from "
+        f"{len(set(groups))} scenarios"
+    )
+    losses = {l2: log_loss(held_out(x, y, groups, l2), y) for l2 in L2_GRID}
+    l2 = min(losses, key=losses.__getitem__)
+    print(
+        "held-out log loss by penalty: " + ", ".join(f"{k:g}: {v:.4f}" for k, v in losses.items())
+    )
+    p = held_out(x, y, groups, l2)
+    print("\n| predicted | mean predicted | observed right | sets |\n| --- | --- | --- | --- |")
+    for lo, hi, mean, observed, count in reliability(p, y):
+        print(f"| {lo:g}-{hi:g} | {mean:.4f} | {observed:.4f} | {count} |")
+    print(
+        "\n| source | threshold | accepted | wrong among accepted | right sets accepted (recall) |"
+    )
+    print("| --- | --- | --- | --- | --- |")
+    for source in [*sorted(set(sources)), "all"]:
+        mine = np.array([s == source or source == "all" for s in sources])
+        for threshold in THRESHOLDS:
+            accepted = mine & (p >= threshold)
+            wrong = int((accepted & ~y).sum())
+            recall = (accepted & y).sum() / max(1, (mine & y).sum())
+            print(f"| {source} | {threshold:g} | {int(accepted.sum())} | {wrong} | {recall:.3f} |")
+    intercept, weights = fit(x, y, l2)
+    print(
+        "\nfit on every set: intercept "
+        + f"{intercept:.5g}, "
+        + ", ".join(f"{n} {w:.5g}" for n, w in zip(FEATURES, weights, strict=True))
+    )
+    if args.write:
+        model = JoinModel(
+            FEATURES,
+            round(intercept, 6),
+            tuple(round(float(w), 6) for w in weights),
+            f"bench/fit_join.py on {date.today().isoformat()}: {len(y)} sets of "
+            f"{len(set(groups))} scenarios ({', '.join(sorted(set(sources)))}), L2 {l2:g}",
+        )
+        path = REPO / "multi_robot_mapper" / "core" / "evidence" / MODEL_FILE
+        path.write_text(model.dumps())
+        print(f"wrote {path}")
+    if args.figure:
+        draw(p, y, args.figure)
+
+
+def draw(p: np.ndarray, y: np.ndarray, path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    bins = reliability(p, y)
+    fig, ax = plt.subplots(figsize=(5, 5))
+    ax.plot([0, 1], [0, 1], color="grey", lw=0.8)
+    ax.plot([b[2] for b in bins], [b[3] for b in bins], "o-")
+    for b in bins:
+        ax.annotate(
+            str(b[4]), (b[2], b[3]), textcoords="offset points", xytext=(4, -10), fontsize=7
+        )
+    ax.set_xlabel("predicted P(right), held out by scenario")
+    ax.set_ylabel("observed share right")
+    ax.set_title("join model reliability")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

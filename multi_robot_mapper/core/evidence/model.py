@@ -1,0 +1,78 @@
+"""The probability that a decision to place one map on another is right, from its evidence
+(:mod:`~multi_robot_mapper.core.evidence.placement`): a logistic model fitted on the decisions
+of generated buildings and shared logs, whose truth is known, and checked held out by
+building (``bench/fit_join.py``, docs/decisions_model.md).
+
+The coefficients are data (``join_model.json`` beside this module, written by the fit), not
+code: a refit changes no line of the merger.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Mapping
+from importlib import resources
+
+MODEL_FILE = "join_model.json"
+
+# The features, in the model's order (each a number of the decision's evidence):
+FEATURES = (
+    "margin",  # m of wall the placement explains and its best rival does not (weaker way)
+    "log_score",  # log(1 + m of wall the placement explains, weaker way)
+    "rival_ratio",  # the larger share of the placement's score a rival reaches (0-1+)
+    "conflict",  # m of wall the placement puts in free space the robots saw, either way
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class JoinModel:
+    """P(right) = 1 / (1 + exp(-(intercept + sum(weights * features))))."""
+
+    features: tuple[str, ...]
+    intercept: float
+    weights: tuple[float, ...]
+    fitted: str  # how and on what it was fitted (the fit's own words)
+
+    def probability(self, values: Mapping[str, float]) -> float:
+        z = self.intercept + sum(
+            w * float(values[name]) for name, w in zip(self.features, self.weights, strict=True)
+        )
+        return 1.0 / (1.0 + math.exp(-max(-50.0, min(50.0, z))))
+
+    @staticmethod
+    def load(text: str) -> JoinModel:
+        data = json.loads(text)
+        features = tuple(str(f) for f in data["features"])
+        unknown = set(features) - set(FEATURES)
+        if unknown:
+            raise ValueError(f"{MODEL_FILE}: unknown features {sorted(unknown)}")
+        weights = tuple(float(w) for w in data["weights"])
+        if len(weights) != len(features):
+            raise ValueError(f"{MODEL_FILE}: {len(features)} features, {len(weights)} weights")
+        return JoinModel(features, float(data["intercept"]), weights, str(data.get("fitted", "")))
+
+    def dumps(self) -> str:
+        return json.dumps(dataclasses.asdict(self), indent=2) + "\n"
+
+
+def installed_model() -> JoinModel:
+    """The model shipped with the package."""
+    text = resources.files(__package__).joinpath(MODEL_FILE).read_text(encoding="utf-8")
+    return JoinModel.load(text)
+
+
+def join_features(
+    margin: float, score: float, rival_ratio: float, conflict: float
+) -> dict[str, float]:
+    """The model's features of a decision from its evidence (:mod:`.placement`; the weaker
+    way where it is measured both ways): ``margin`` and ``score`` (m), ``rival_ratio``, and
+    ``conflict``, the metres of wall the decision puts in free space (of the maps it
+    places; of every map of the groups a join makes)."""
+    return {
+        "margin": margin,
+        "log_score": math.log1p(max(score, 0.0)),
+        "rival_ratio": rival_ratio,
+        "conflict": conflict,
+    }

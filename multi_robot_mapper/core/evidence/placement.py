@@ -1,0 +1,238 @@
+"""How sure a placement of one map on another is: the evidence of every place match
+(issue 46).
+
+A decision to place one map on another -- a consistent set of place links between two robots,
+a join of two pieces of one robot, a loop closure -- rests on the places it links. Counting
+those places as independent evidence is what let look-alikes through: places along one
+corridor see the same walls, and a corridor turned 180 degrees fits at every one of them.
+Here the evidence is measured once for the whole decision:
+
+1. **The patch**: the placed map's walls (and the free space its robot saw) within
+   ``radius`` of the keyframes the decision links -- the union of its places, each wall
+   counted once however many places see it (:func:`patch_of`).
+2. **The placement's score**: the patch on the other map at the decision's placement,
+   refined locally, scored as the map correlation scores (metres of wall on a wall of the
+   same direction, minus ``free_space_weight`` times the metres of wall either map puts in
+   the other's free space; :class:`PlacementScorer`).
+3. **The best rival**: the same patch searched on the *whole* other map (every translation,
+   for the rotations the wall directions allow and for the placement's own rotation turned by
+   0, 90, 180 and 270 degrees: symmetric corridors and wings), each peak refined the same
+   way; the best placement distinct from the decision's (more than 1 m or 10 degrees away)
+   is its rival.
+
+What the rival cannot explain -- the *margin*, score minus rival score, in metres of wall --
+is the evidence that tells a placement from its look-alikes; a building that fits two ways
+has none. :class:`PlacementEvidence` carries the figures; the probability that the decision
+is right is fitted on them (:mod:`~multi_robot_mapper.core.evidence.model`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.correlation import (
+    CorrelationConfig,
+    CorrelationTarget,
+    Drawing,
+    ScoringRasters,
+    correlation_peaks,
+    reach_of,
+    rotation_candidates_of_drawings,
+    score_parts,
+    scorer_rasters,
+)
+
+FloatArray = NDArray[np.float64]
+
+# Placements farther apart than this (or turned more) are different answers: rivals. The
+# same as a place's rivals (place_links).
+DISTINCT_SHIFT = 1.0  # m
+DISTINCT_TURN = float(np.radians(10.0))
+# Rival peaks refined and scored, best first: the correlation's peak values are at cell
+# resolution and rank a rival below a refined placement by up to a cell's blur. A peak below
+# _RIVAL_FLOOR of the placement's score keeps its raw value: refining moves a score by a few
+# tenths of it, and a rival that far below leaves a margin the model reads as certain anyway.
+_RIVALS_REFINED = 6
+_RIVAL_FLOOR = 0.5
+# Rotations searched: the wall-direction histograms' best peaks (each also turned by pi), and
+# the placement's own rotation turned by 0, 90, 180 and 270 degrees (symmetric wings).
+_HISTOGRAM_TURNS = 2
+# Local refinement: a pattern search from half a cell and 1 degree, halved when no step helps.
+_REFINE_ROUNDS = 6
+_REFINE_TURN = float(np.radians(1.0))
+
+
+@dataclasses.dataclass(frozen=True)
+class PlacementEvidence:
+    """A patch placed on a map, against its best rival placement on that map."""
+
+    score: float  # m: the placement's correlation score, refined
+    rival: float  # m: the best distinct rival's (0 when the patch fits nowhere else)
+    wall: float  # m of wall in the patch
+    placement: FloatArray  # (theta, tx, ty) the refined placement, T_target_patch
+    rival_placement: FloatArray | None  # (theta, tx, ty) of the rival
+    conflict: float = 0.0  # m of wall in the other's free space at the placement, either way
+
+    @property
+    def margin(self) -> float:
+        """Metres of wall the placement explains and its best rival does not."""
+        return self.score - max(self.rival, 0.0)
+
+    @property
+    def rival_ratio(self) -> float:
+        """The share of the placement's score its best rival reaches (1 when it scores
+        nothing)."""
+        return max(self.rival, 0.0) / self.score if self.score > 0.0 else 1.0
+
+    @staticmethod
+    def nothing() -> PlacementEvidence:
+        return PlacementEvidence(0.0, 0.0, 0.0, np.zeros(3), None)
+
+
+def patch_of(drawing: Drawing, centres: FloatArray, radius: float) -> Drawing:
+    """The part of a map's drawing (walls and free space) within ``radius`` of any of
+    ``centres`` (K, 2): the union of the places a decision links, each wall point once."""
+    centres = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+
+    def near(points: FloatArray) -> NDArray[np.bool_]:
+        if len(points) == 0 or len(centres) == 0:
+            return np.zeros(len(points), dtype=bool)
+        gap = np.hypot(
+            points[:, None, 0] - centres[None, :, 0], points[:, None, 1] - centres[None, :, 1]
+        )
+        return np.asarray((gap <= radius).any(axis=1))
+
+    walls, free = near(drawing.walls), near(drawing.free)
+    return Drawing(
+        drawing.walls[walls], drawing.direction[walls], drawing.weight[walls], drawing.free[free]
+    )
+
+
+class PlacementScorer:
+    """Correlation scores (metres) of placements ``(theta, tx, ty)`` of drawing b on drawing
+    a, evaluated directly and many at once; a's rasters are made once (``rasters``: those of
+    :func:`scorer_rasters`, to share between patches of one map)."""
+
+    def __init__(
+        self,
+        a: Drawing,
+        b: Drawing,
+        config: CorrelationConfig,
+        rasters: ScoringRasters | None = None,
+    ) -> None:
+        self.a, self.b, self.config = a, b, config
+        self.rasters_a = rasters if rasters is not None else scorer_rasters(a, config)
+        self.rasters_b = scorer_rasters(b, config, walls=False)
+        # a's walls that can land in b's free space lie within b's reach of where b's middle
+        # lands: looked up per placement instead of moving all of a's walls every time.
+        self.middle = b.centre() if len(b.walls) or len(b.free) else np.zeros(2)
+        self.reach = reach_of(b) + config.cell
+        self.tree = cKDTree(a.walls) if len(a.walls) else None
+
+    def scores(self, rows: FloatArray) -> FloatArray:
+        """(N,) scores of the (N, 3) placements (near each other: a's walls looked up once
+        for all, around the first's)."""
+        matched, through = self.parts(rows)
+        return np.asarray(matched - self.config.free_space_weight * through)
+
+    def parts(self, rows: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(N,) metres of wall matched and (N,) metres of wall in the other's free space of
+        the (N, 3) placements."""
+        rows = np.asarray(rows, dtype=np.float64).reshape(-1, 3)
+        near = np.zeros(0, dtype=np.int64)
+        if self.tree is not None and len(rows):
+            T = se2.matrices_from_poses(rows[:, [1, 2, 0]])
+            landed = T[:, :2, :2] @ self.middle + T[:, :2, 2]  # b's middle on a, (N, 2)
+            spread = float(np.hypot(*(landed - landed[0]).T).max())
+            near = np.asarray(self.tree.query_ball_point(landed[0], self.reach + spread), np.int64)
+        walls_a = (self.a.walls[near], self.a.weight[near])
+        return score_parts(
+            self.a, self.b, rows, self.config, self.rasters_a, self.rasters_b, walls_a
+        )
+
+    def refine(self, row: FloatArray) -> tuple[FloatArray, float]:
+        """The best placement near ``row`` (a pattern search: half a cell and one degree
+        steps, halved when none helps) and its score."""
+        best = np.asarray(row, dtype=np.float64).copy()
+        score = float(self.scores(best)[0])
+        step, turn = 0.5 * self.config.cell, _REFINE_TURN
+        for _ in range(_REFINE_ROUNDS):
+            moves = np.array(
+                [
+                    (turn, 0.0, 0.0),
+                    (-turn, 0.0, 0.0),
+                    (0.0, step, 0.0),
+                    (0.0, -step, 0.0),
+                    (0.0, 0.0, step),
+                    (0.0, 0.0, -step),
+                ]
+            )
+            tried = best[None, :] + moves
+            values = self.scores(tried)
+            k = int(np.argmax(values))
+            if values[k] > score + 1e-9:
+                best, score = tried[k], float(values[k])
+            else:
+                step, turn = 0.5 * step, 0.5 * turn
+        return best, score
+
+
+def distinct(row: FloatArray, other: FloatArray) -> bool:
+    """Are two placements (theta, tx, ty) different answers?"""
+    shift = float(np.hypot(row[1] - other[1], row[2] - other[2]))
+    turn = abs(float(se2.wrap_angle(row[0] - other[0])))
+    return shift > DISTINCT_SHIFT or turn > DISTINCT_TURN
+
+
+def placement_evidence(
+    target: Drawing,
+    patch: Drawing,
+    T_target_patch: FloatArray,
+    config: CorrelationConfig,
+    prepared: CorrelationTarget | None = None,
+    rasters: ScoringRasters | None = None,
+) -> PlacementEvidence:
+    """The patch at ``T_target_patch`` (3x3) on the target map, against its best rival
+    anywhere on the target map (module doc). ``prepared``/``rasters``: the target's
+    correlation transform and scoring rasters, when the caller keeps them."""
+    if len(patch.walls) == 0 or len(target.walls) == 0:
+        return PlacementEvidence.nothing()
+    x, y, theta = se2.pose_from_matrix(T_target_patch)
+    scorer = PlacementScorer(target, patch, config, rasters)
+    placed, score = scorer.refine(np.array([theta, x, y]))
+    turns = se2.wrap_angle(placed[0] + np.array([0.0, 0.5 * np.pi, np.pi, -0.5 * np.pi]))
+    rotations = np.concatenate(
+        (rotation_candidates_of_drawings(target, patch, _HISTOGRAM_TURNS), turns)
+    )
+    peaks, values = correlation_peaks(target, patch, _unique_turns(rotations), config, prepared)
+    rival, rival_row = 0.0, None
+    refined = 0
+    for row, raw in zip(peaks, values, strict=True):
+        if refined == _RIVALS_REFINED:
+            break
+        if not distinct(row, placed):
+            continue
+        if raw < _RIVAL_FLOOR * score:
+            if rival_row is None or raw > rival:
+                rival, rival_row = float(raw), row
+            break  # the peaks come best first: the rest are lower still
+        refined += 1
+        moved, value = scorer.refine(row)
+        if distinct(moved, placed) and (rival_row is None or value > rival):
+            rival, rival_row = value, moved
+    conflict = float(scorer.parts(placed)[1][0])
+    return PlacementEvidence(score, rival, float(patch.weight.sum()), placed, rival_row, conflict)
+
+
+def _unique_turns(turns: FloatArray, tolerance: float = float(np.radians(2.0))) -> FloatArray:
+    """The rotations, those within ``tolerance`` of one kept earlier dropped."""
+    kept: list[float] = []
+    for turn in np.asarray(turns, dtype=np.float64):
+        if all(abs(float(se2.wrap_angle(turn - k))) > tolerance for k in kept):
+            kept.append(float(turn))
+    return np.asarray(kept)

@@ -1,0 +1,91 @@
+"""The evidence for placing one map on another through a consistent set of place links
+(:mod:`~multi_robot_mapper.core.evidence.placement`), measured both ways.
+
+A set of links between maps A and B places B on A. Its patch on B -- B's walls and free space
+within ``place_radius`` of B's linked keyframes -- is placed on the whole of A and set against
+its best rival there; and A's patch likewise on the whole of B. A look-alike fails one way or
+the other: B's corridor fits A turned round (a rival as good as the placement), or A's room
+fits B at another door.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.model import join_features
+from multi_robot_mapper.core.evidence.placement import (
+    PlacementEvidence,
+    patch_of,
+    placement_evidence,
+)
+from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.place_links import LinkCandidate, Target
+from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
+
+
+@dataclasses.dataclass(frozen=True)
+class PairEvidence:
+    """A set's placement of B on A, each way: B's patch on A, and A's patch on B."""
+
+    b_on_a: PlacementEvidence
+    a_on_b: PlacementEvidence
+
+    @property
+    def margin(self) -> float:
+        """The weaker way's margin (metres of wall no rival explains)."""
+        return min(self.b_on_a.margin, self.a_on_b.margin)
+
+    @property
+    def score(self) -> float:
+        """The weaker way's score (m)."""
+        return min(self.b_on_a.score, self.a_on_b.score)
+
+    @property
+    def rival_ratio(self) -> float:
+        """The larger share of its placement's score a rival reaches, either way."""
+        return max(self.b_on_a.rival_ratio, self.a_on_b.rival_ratio)
+
+    @property
+    def conflict(self) -> float:
+        """Metres of wall the placement puts in free space near the places, the larger way."""
+        return max(self.b_on_a.conflict, self.a_on_b.conflict)
+
+    def features(self, conflict: float = 0.0) -> dict[str, float]:
+        """The join model's features, the conflict the larger of the patches' and
+        ``conflict`` (walls in free space measured over more of the maps)."""
+        return join_features(
+            self.margin, self.score, self.rival_ratio, max(self.conflict, conflict)
+        )
+
+
+def pair_evidence(
+    pair: tuple[UnitKey, UnitKey],
+    links: Sequence[LinkCandidate],
+    T_a_b: np.ndarray,
+    units: Mapping[UnitKey, MapUnit],
+    targets: Mapping[UnitKey, Target],
+    config: MergeConfig,
+) -> PairEvidence:
+    """The evidence of placing map ``pair[1]`` at ``T_a_b`` (3x3) in map ``pair[0]``, the
+    links' keyframes giving each side's patch (module doc)."""
+    a, b = pair
+    keyframes_a = [c.keyframe if c.target == a else c.centre for c in links]
+    keyframes_b = [c.keyframe if c.target == b else c.centre for c in links]
+    correlation = config.correlation()
+    target_a, target_b = targets[a], targets[b]
+    patch_b = patch_of(target_b.drawing, _positions(units[b], keyframes_b), config.place_radius)
+    patch_a = patch_of(target_a.drawing, _positions(units[a], keyframes_a), config.place_radius)
+    b_on_a = placement_evidence(target_a.drawing, patch_b, T_a_b, correlation, target_a.correlation)
+    a_on_b = placement_evidence(
+        target_b.drawing, patch_a, se2.invert(T_a_b), correlation, target_b.correlation
+    )
+    return PairEvidence(b_on_a, a_on_b)
+
+
+def _positions(unit: MapUnit, keyframes: Sequence[int]) -> np.ndarray:
+    rows = np.searchsorted(unit.index, np.unique(np.asarray(keyframes, dtype=np.int64)))
+    return np.asarray(unit.poses[rows, :2])

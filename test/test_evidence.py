@@ -1,0 +1,154 @@
+"""The evidence model of place matches (issue 46) with known answers: buildings that fit two
+ways are never placed, one wall that tells them apart is enough, and what is published says
+how sure it is.
+
+Buildings are drawn here by hand so that their symmetry is exact: a corridor with equal rooms
+either side that a half turn about its middle maps onto itself, and a row of equal rooms.
+Keyframes are made as a robot's ``partial_map`` carries them (test_joint_merging's
+``keyframes_along``), each robot's map frame anywhere (``random_frames``).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+from test_joint_merging import keyframes_along, moved
+from test_merging import random_frames
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.correlation import CorrelationConfig, Drawing
+from multi_robot_mapper.core.evidence.model import JoinModel, installed_model
+from multi_robot_mapper.core.evidence.placement import placement_evidence
+from multi_robot_mapper.core.merging import MergeConfig, MergeResult
+from multi_robot_mapper.core.merging.joint import merge_joint
+from multi_robot_mapper.core.simulation import drive_path
+from multi_robot_mapper.core.worlds import polygon
+
+CONFIG = MergeConfig()
+WIDTH = 2.4  # m, the corridor
+ROOM = 5.0  # m, each room's width along the corridor
+DEPTH = 5.0  # m, each room's depth
+DOOR = 1.0  # m
+
+
+def corridor_of_rooms(rooms: int = 8, offset_door: float = 0.0) -> np.ndarray:
+    """A corridor along x (0..rooms*ROOM, 0..WIDTH) with ``rooms`` equal rooms either side,
+    each with a door in the middle: a half turn about the corridor's middle maps it onto
+    itself. ``offset_door`` moves the door of the third room on the north side along the
+    corridor (the one feature that tells the two ends apart)."""
+    walls = []
+    length = rooms * ROOM
+    for y0, y1 in ((WIDTH, WIDTH + DEPTH), (0.0, -DEPTH)):
+        for k in range(rooms):
+            start = k * ROOM
+            door = start + 0.5 * (ROOM - DOOR) + (offset_door if (y0 > 0 and k == 2) else 0.0)
+            walls.append(polygon([(start, y0), (door, y0)], closed=False))
+            walls.append(polygon([(door + DOOR, y0), (start + ROOM, y0)], closed=False))
+            walls.append(polygon([(start, y0), (start, y1)], closed=False))
+        walls.append(polygon([(length, y0), (length, y1)], closed=False))
+        walls.append(polygon([(0.0, y1), (length, y1)], closed=False))
+    walls.append(polygon([(0.0, 0.0), (0.0, WIDTH)], closed=False))
+    walls.append(polygon([(length, 0.0), (length, WIDTH)], closed=False))
+    return np.vstack(walls)
+
+
+def drive(walls: np.ndarray, route: list[tuple[float, float]], seed: int) -> list:  # type: ignore[type-arg]
+    """Keyframes along ``route`` (a keyframe every 0.8 m, world frame)."""
+    waypoints = np.array(route, dtype=np.float64)
+    length = float(np.hypot(*np.diff(waypoints, axis=0).T).sum())
+    poses = drive_path(waypoints, 0.8, 1.0, length / 0.8 * 0.99)
+    return keyframes_along(walls, poses, seed)
+
+
+@functools.cache
+def corridor_drives(offset_door: float) -> tuple[list, list]:  # type: ignore[type-arg]
+    """Robot a drives the whole corridor; robot b its western third and into a room."""
+    walls = corridor_of_rooms(offset_door=offset_door)
+    middle = 0.5 * WIDTH
+    a = drive(walls, [(1.0, middle), (39.0, middle)], seed=1)
+    b = drive(walls, [(4.0, middle), (17.5, middle), (17.5, 4.5)], seed=2)
+    return a, b
+
+
+def merge_two(a: list, b: list, seed: int) -> tuple[MergeResult, dict[str, np.ndarray]]:  # type: ignore[type-arg]
+    frames = dict(zip(("a", "b"), random_frames(2, seed), strict=True))
+    keyframes = {"a": moved(a, frames["a"]), "b": moved(b, frames["b"])}
+    return merge_joint(keyframes, CONFIG, budget=0.0), frames
+
+
+def placement_error(result: MergeResult, frames: dict[str, np.ndarray], robot: str) -> float:
+    """Metres between where the merge put the robot's map frame and the truth."""
+    assert result.reference is not None
+    truth = se2.invert(frames[result.reference]) @ frames[robot]
+    placed = result.matrix(robot)
+    assert placed is not None
+    return float(np.hypot(*se2.pose_from_matrix(se2.invert(truth) @ placed)[:2]))
+
+
+def test_a_corridor_that_a_half_turn_maps_onto_itself_gives_no_margin() -> None:
+    # The exact half turn about the corridor's middle puts every wall of b's stretch on a
+    # wall: as much wall as the truth explains, so no margin either way.
+    walls = corridor_of_rooms()
+    drawing = Drawing.of(walls, np.zeros((0, 2)), CONFIG.correlation_cell)
+    west = Drawing.of(walls[walls[:, [0, 2]].max(axis=1) < 15.0], np.zeros((0, 2)), 0.3)
+    evidence = placement_evidence(drawing, west, np.eye(3), CorrelationConfig(cell=0.3))
+    assert evidence.score > 40.0  # b's walls all lie on a's
+    assert evidence.rival > 0.9 * evidence.score  # and as well turned half round
+    assert abs(evidence.rival_placement[0]) == pytest.approx(np.pi, abs=np.radians(2.0))  # type: ignore[index]
+    assert evidence.margin < 0.1 * evidence.score
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_symmetric_corridor_is_never_merged_turned_round(seed: int) -> None:
+    a, b = corridor_drives(0.0)
+    result, _ = merge_two(a, b, seed)
+    # It cannot be told which end b drove: placing it is a guess, so it is not placed.
+    assert result.placements["b"] is None or result.placements["a"] is None
+    unmerged = result.unmerged[0]
+    assert result.unmerged_reasons[unmerged]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_one_door_that_tells_the_ends_apart_is_enough_to_merge(seed: int) -> None:
+    a, b = corridor_drives(1.5)
+    result, frames = merge_two(a, b, seed)
+    # Placed right, or not at all: never turned round.
+    for robot in ("a", "b"):
+        if result.placements[robot] is not None:
+            assert placement_error(result, frames, robot) < 0.10
+    if not result.unmerged:
+        assert min(result.probabilities.values()) >= CONFIG.join_probability
+
+
+def test_equal_rooms_seen_one_each_are_not_merged() -> None:
+    # a looks into the third room from the north door, b into the sixth: the rooms are
+    # equal, and what else each saw of the corridor is equal too. Nothing tells them apart.
+    walls = corridor_of_rooms()
+    middle = 0.5 * WIDTH
+    a = drive(walls, [(10.0, middle), (12.5, middle), (12.5, 4.5), (12.5, middle)], seed=3)
+    b = drive(walls, [(25.0, middle), (27.5, middle), (27.5, 4.5), (27.5, middle)], seed=4)
+    for seed in range(3):
+        result, _ = merge_two(a, b, seed)
+        assert result.unmerged, "equal rooms placed on each other"
+
+
+def test_what_is_published_carries_its_probability() -> None:
+    a, b = corridor_drives(1.5)
+    result, _ = merge_two(a, b, 0)
+    for robot, pose in result.placements.items():
+        if pose is None:
+            assert robot in result.unmerged_reasons
+        elif robot != result.reference:
+            assert CONFIG.join_probability <= result.probabilities[robot] <= 1.0
+
+
+def test_the_join_model_is_data_the_package_ships() -> None:
+    model = installed_model()
+    assert model.features and len(model.weights) == len(model.features)
+    assert JoinModel.load(model.dumps()) == model
+    # More wall that no rival explains never makes a placement less likely.
+    weak = {"margin": 2.0, "log_score": 3.0, "rival_ratio": 0.9, "conflict": 0.0}
+    strong = dict(weak, margin=40.0, rival_ratio=0.3)
+    assert model.probability(strong) > model.probability(weak)
