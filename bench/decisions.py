@@ -363,6 +363,9 @@ def collect_one(name: str, kinds: list[str], updates: int, work: str) -> str:
     lines = []
     for kind in kinds:
         stem = f"{name.replace(':', '_')}_{kind}"
+        if (Path(work) / "records" / f"{stem}.json").is_file():
+            lines.append(f"{kind}: kept")  # collected before (a run resumed)
+            continue
         snapshots, closures = snapshots_of(scenario, kind, times)
         truth = scenario.truth()
         records, matches = run_updates(truth, times, snapshots, config, None)

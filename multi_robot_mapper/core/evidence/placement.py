@@ -49,6 +49,11 @@ from multi_robot_mapper.core.evidence.correlation import (
 
 FloatArray = NDArray[np.float64]
 
+# How every decision's walls and free space are drawn and scored, whoever makes it (the
+# merger's place matches, the local mapper's closures and joins): one scale of evidence for
+# one fitted model. The merger's correlation defaults (MergeConfig correlation_cell,
+# free_space_weight).
+EVIDENCE_CORRELATION = CorrelationConfig(cell=0.3, blur=1.0, free_space_weight=2.0)
 # Placements farther apart than this (or turned more) are different answers: rivals. The
 # same as a place's rivals (place_links).
 DISTINCT_SHIFT = 1.0  # m

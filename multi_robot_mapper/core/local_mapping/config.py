@@ -50,10 +50,21 @@ class LocalMapperConfig:
     loop_confidence: float = param(
         0.9,
         unit="",
-        doc="a loop closure (or a join of two pieces of map) needs a match right with at "
-        "least this probability, before the consistency checks",
+        doc="a loop closure (or a join of two pieces of map) is tried when its windows' match "
+        "is right with at least this probability (then the consistency checks, then the "
+        "evidence model: join_probability)",
         minimum=0.0,
         maximum=1.0,
+    )
+    join_probability: float = param(
+        0.99,
+        unit="",
+        doc="a loop closure or a join of two pieces of map is made only when the evidence "
+        "model's probability that it is right reaches this: the walls it moves, each counted "
+        "once, against their best rival placement on the whole map they are placed on "
+        "(core/evidence, the same model and threshold as the merger's join_probability)",
+        minimum=0.5,
+        maximum=0.999999,
     )
     recent_keyframes: int = param(
         3,

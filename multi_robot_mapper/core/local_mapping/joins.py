@@ -203,7 +203,9 @@ class PieceJoins(WindowMatcher):
                     continue
                 T_found = self._piece_frame(first, index, found)
                 earlier = self._return_candidates.setdefault(other, [])
-                if self._seconded(earlier, index, T_found, apart=True):
+                if self._seconded(earlier, index, T_found, apart=True) and (
+                    self._join_believed(first, index, found)
+                ):
                     return [self._join(first, index, found, result.confidence)]
         return []
 
@@ -256,7 +258,9 @@ class PieceJoins(WindowMatcher):
             ):
                 # The guess came from the piece's first scan: only another keyframe's match
                 # is a second opinion.
-                return [self._join(first, mine, found, result.confidence)]
+                if self._join_believed(first, mine, found):
+                    return [self._join(first, mine, found, result.confidence)]
+                continue
             if not near_guess and not reachable:
                 # Found away from the guess (on the ring, or through a chain of pieces lost
                 # one after the other, whose guesses compose their errors): the piece's first
@@ -269,9 +273,24 @@ class PieceJoins(WindowMatcher):
             # Away from the guess, a second opinion shares no scan with the first: neighbouring
             # keyframes' windows overlap, and see a corridor slid the same way (fhw: a join
             # 0.96 m off at 0.96).
-            if self._seconded(earlier, mine, T_found, apart=not near_guess):
+            if self._seconded(earlier, mine, T_found, apart=not near_guess) and (
+                self._join_believed(first, mine, found)
+            ):
                 return [self._join(first, mine, found, result.confidence)]
         return []
+
+    def _join_believed(self, first: int, mine: int, T_first_mine: Pose) -> bool:
+        """Does the evidence model believe the join that puts keyframe ``mine`` at
+        ``T_first_mine`` in keyframe ``first``'s frame: ``mine``'s piece near it, on the whole
+        of ``first``'s piece (:meth:`_believed`)? A join it doubts is refused."""
+        keyframes = self.keyframes
+        here = se2.compose(keyframes.pose(first), T_first_mine)
+        patch = keyframes.members(keyframes.piece(mine))
+        target = keyframes.members(keyframes.piece(first))
+        if self._believed("join", patch, target, mine, here):
+            return True
+        self._refuse("evidence (join)")
+        return False
 
     def _join_radius(self, piece: int) -> float:
         """How far from where a guess puts a keyframe of ``piece`` its joins look: the loop

@@ -103,6 +103,12 @@ class KeyframeMap:
         owner = self._owner[keep]
         return se2.transform_segments_each(self._poses[owner], self._segments[keep])
 
+    def owned_segments(self, indices: IntArray) -> FloatArray:
+        """The map segments owned by keyframes ``indices``, in their piece's frame."""
+        keep = np.isin(self._owner, np.asarray(indices, dtype=np.int64))
+        owner = self._owner[keep]
+        return se2.transform_segments_each(self._poses[owner], self._segments[keep])
+
     def keyframes(self, indices: list[int] | None = None) -> list[Keyframe]:
         """Keyframes (default: every one) with the map segments they own, in their frame."""
         wanted = range(len(self.scans)) if indices is None else indices

@@ -231,6 +231,16 @@ class LoopCloser(PieceJoins):
             if not self._agrees_with_graph(first, index, found):
                 self._refuse("far from the graph's prediction")
                 continue
+            # The recent stretch of map near the new keyframe, placed by the closure on the
+            # piece's older map: believed only when no rival placement there explains about
+            # as much (the evidence model, as for a link between robots).
+            members = self.keyframes.members(piece)
+            recent = members[(members > index - config.loop_window) & (members <= index)]
+            older = members[members <= index - config.loop_window]
+            here = se2.compose(self.keyframes.pose(first), found)
+            if not self._believed("loop", recent, older, index, here):
+                self._refuse("evidence")
+                continue
             edge = self._scan_edge(first, index, found)
             closure = Closure(
                 edge.first,

@@ -14,9 +14,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.model import installed_model
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.attempts import hypotheses_of, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.evidence import (
+    decision_evidence,
+    moved_to,
+    patch_around,
+    probability_of,
+)
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
 from multi_robot_mapper.core.matching.beams import Viewpoint
@@ -57,6 +64,9 @@ class WindowMatcher:
         self.graph = PoseGraph()
         self.accepted: dict[int, Closure] = {}  # graph edge id -> closure in the graph
         self.refused: dict[str, int] = {}  # reason -> closures refused
+        self.model = installed_model()  # the evidence model (core/evidence)
+        # (kind, P, margin m, score m, conflict m) of every decision the evidence weighed
+        self.weighed: list[tuple[str, float, float, float, float]] = []
         self._path_since_closure: dict[int, float] = {}  # piece -> metres since a closure
 
     def _match(self, first: int, second: int, predicted: Pose | None, search: bool) -> MatchResult:
@@ -178,6 +188,23 @@ class WindowMatcher:
             (10.0, 1.0),
         )
         return Edge(first, second, pose_of_match(T_1_2), information, robust)
+
+    def _believed(
+        self, kind: str, patch: IntArray, target: IntArray, mine: int, T_target_mine: Pose
+    ) -> bool:
+        """Does the evidence model believe placing keyframes ``patch`` so that keyframe
+        ``mine`` lies at ``T_target_mine`` in the frame of keyframes ``target``
+        (:mod:`~core.local_mapping.evidence`)? Counted in ``weighed``."""
+        keyframes = self.keyframes
+        evidence = decision_evidence(
+            keyframes,
+            patch_around(keyframes, patch, mine),
+            target,
+            moved_to(keyframes, mine, T_target_mine),
+        )
+        probability = probability_of(evidence, self.model)
+        self.weighed.append((kind, probability, evidence.margin, evidence.score, evidence.conflict))
+        return probability >= self.config.join_probability
 
     def _refuse(self, reason: str) -> None:
         self.refused[reason] = self.refused.get(reason, 0) + 1

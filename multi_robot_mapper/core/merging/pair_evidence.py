@@ -18,6 +18,7 @@ import numpy as np
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.model import join_features
 from multi_robot_mapper.core.evidence.placement import (
+    EVIDENCE_CORRELATION,
     PlacementEvidence,
     patch_of,
     placement_evidence,
@@ -75,13 +76,16 @@ def pair_evidence(
     a, b = pair
     keyframes_a = [c.keyframe if c.target == a else c.centre for c in links]
     keyframes_b = [c.keyframe if c.target == b else c.centre for c in links]
-    correlation = config.correlation()
     target_a, target_b = targets[a], targets[b]
     patch_b = patch_of(target_b.drawing, _positions(units[b], keyframes_b), config.place_radius)
     patch_a = patch_of(target_a.drawing, _positions(units[a], keyframes_a), config.place_radius)
-    b_on_a = placement_evidence(target_a.drawing, patch_b, T_a_b, correlation, target_a.correlation)
+    # The targets' correlation transforms, when made at the evidence's own scale.
+    same = config.correlation_cell == EVIDENCE_CORRELATION.cell
+    prepared_a = target_a.correlation if same else None
+    prepared_b = target_b.correlation if same else None
+    b_on_a = placement_evidence(target_a.drawing, patch_b, T_a_b, EVIDENCE_CORRELATION, prepared_a)
     a_on_b = placement_evidence(
-        target_b.drawing, patch_a, se2.invert(T_a_b), correlation, target_b.correlation
+        target_b.drawing, patch_a, se2.invert(T_a_b), EVIDENCE_CORRELATION, prepared_b
     )
     return PairEvidence(b_on_a, a_on_b)
 

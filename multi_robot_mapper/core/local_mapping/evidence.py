@@ -1,0 +1,107 @@
+"""The evidence model (:mod:`~multi_robot_mapper.core.evidence`) for the back end's decisions:
+a loop closure places the robot's recent stretch of map on its older map, a join places one
+piece of map on another. Either is believed only when the probability that it is right
+reaches ``join_probability``, as a link between robots is.
+
+The *patch* is the walls of the keyframes the decision moves, near the keyframe it was found
+from, with the free space their scans crossed; the *target* is the map it is placed on (the
+older keyframes of the piece for a closure, the other piece for a join), with its scans'
+free space. The placement is searched for rivals on the whole target
+(:func:`~core.evidence.placement.placement_evidence`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.correlation import Drawing
+from multi_robot_mapper.core.evidence.model import JoinModel, join_features
+from multi_robot_mapper.core.evidence.placement import (
+    EVIDENCE_CORRELATION,
+    PlacementEvidence,
+    placement_evidence,
+)
+from multi_robot_mapper.core.evidence.seen import scan_free_points
+from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+Pose = tuple[float, float, float]
+
+# A decision's patch: the keyframes it moves within this distance of the keyframe it was
+# found from (the merger's place_radius: a place).
+PATCH_RADIUS = 6.0  # m
+# Free space from the scans of keyframes at least this far apart, at most this many of them
+# (the merger's view_spacing and max_views).
+VIEW_SPACING = 1.0  # m
+MAX_VIEWS = 60
+
+
+def drawing_of(keyframes: KeyframeMap, members: IntArray) -> Drawing:
+    """The walls the keyframes ``members`` own and the free space their scans crossed, in
+    their piece's frame."""
+    members = np.asarray(members, dtype=np.int64)
+    walls = keyframes.owned_segments(members)
+    views = _thinned(keyframes.poses[members], VIEW_SPACING, MAX_VIEWS)
+    scans = [keyframes.scans[int(k)].view for k in members[views]]
+    free = scan_free_points(scans, keyframes.poses[members[views]], 0.5 * EVIDENCE_CORRELATION.cell)
+    return Drawing.of(walls, free, EVIDENCE_CORRELATION.cell)
+
+
+def decision_evidence(
+    keyframes: KeyframeMap,
+    patch: IntArray,
+    target: IntArray,
+    T_target_patch: FloatArray,
+) -> PlacementEvidence:
+    """The evidence of placing keyframes ``patch`` (their piece's frame) at ``T_target_patch``
+    (3x3) on keyframes ``target`` (theirs)."""
+    if len(patch) == 0 or len(target) == 0:
+        return PlacementEvidence.nothing()
+    return placement_evidence(
+        drawing_of(keyframes, target),
+        drawing_of(keyframes, patch),
+        T_target_patch,
+        EVIDENCE_CORRELATION,
+    )
+
+
+def patch_around(keyframes: KeyframeMap, candidates: IntArray, centre: int) -> IntArray:
+    """Of ``candidates``, the keyframes within PATCH_RADIUS of keyframe ``centre``."""
+    candidates = np.asarray(candidates, dtype=np.int64)
+    here = keyframes.poses[centre, :2]
+    distance = np.hypot(*(keyframes.poses[candidates, :2] - here).T)
+    return np.asarray(candidates[distance <= PATCH_RADIUS])
+
+
+def moved_to(
+    keyframes: KeyframeMap, mine: int, T_piece_mine: tuple[float, float, float]
+) -> FloatArray:
+    """T_target_patch that puts keyframe ``mine`` at ``T_piece_mine`` (in the target's frame)
+    and its piece rigidly with it."""
+    return np.asarray(
+        se2.matrix_from_pose(*T_piece_mine)
+        @ se2.invert(se2.matrix_from_pose(*keyframes.pose(mine)))
+    )
+
+
+def probability_of(evidence: PlacementEvidence, model: JoinModel) -> float:
+    """P(right) of a decision with this evidence (the join model's)."""
+    return model.probability(
+        join_features(evidence.margin, evidence.score, evidence.rival_ratio, evidence.conflict)
+    )
+
+
+def _thinned(poses: FloatArray, spacing: float, most: int) -> IntArray:
+    """Rows of ``poses`` kept greedily, each at least ``spacing`` from those kept, then at
+    most ``most`` of them evenly."""
+    kept: list[int] = []
+    for row in range(len(poses)):
+        if not kept or np.min(np.hypot(*(poses[kept, :2] - poses[row, :2]).T)) >= spacing:
+            kept.append(row)
+    rows = np.asarray(kept, dtype=np.int64)
+    if len(rows) > most:
+        rows = rows[np.linspace(0, len(rows) - 1, most).astype(int)]
+    return rows
