@@ -173,7 +173,7 @@ def generated_scenario(seed: int) -> Scenario:
     """A generated building (``core.buildings``) and K robots driving it (``core.building_runs``),
     everything drawn from ``seed``: the plan's kind and size (20-200 m), glass, furniture and
     people; 2-8 robots, the share of their drives on common ground (0 to 1), how long they
-    drive (60-180 s at 0.8 m/s), the laser (SICK or Hokuyo geometry) and its rate (10, 20 or
+    drive (40-120 s at 0.8 m/s), the laser (SICK or Hokuyo geometry) and its rate (10, 20 or
     40 Hz) or sparse keeping (a scan every 0.5 m or 15 deg, as the CARMEN "corrected" logs)."""
     from multi_robot_mapper.core.building_runs import (
         BuildingScanner,
@@ -190,7 +190,7 @@ def generated_scenario(seed: int) -> Scenario:
     people = int(rng.choice([0, 0, 5, 15]))
     robots = int(rng.integers(2, 9))
     overlap = float(rng.choice([0.0, 0.1, 0.25, 0.5, 0.75, 1.0]))
-    duration = float(rng.uniform(60.0, 180.0))
+    duration = float(rng.uniform(40.0, 120.0))
     laser_name = str(rng.choice(["sick", "hokuyo"]))
     rate = float(rng.choice([10.0, 20.0, 40.0]))
     sparse = bool(rng.random() < 0.3)
