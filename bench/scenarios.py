@@ -323,15 +323,13 @@ def update_times(scenario: Scenario, updates: int) -> list[float]:
 # --- the truth of a scenario --------------------------------------------------------------
 
 
-def world_walls(keyframes: Sequence[Keyframe], T_world_robot: FloatArray) -> FloatArray:
-    """A robot's (truth) map in ``world``."""
+def world_walls(keyframes: Sequence[Keyframe], T_world_keyframe: FloatArray) -> FloatArray:
+    """A robot's map in ``world``: each keyframe's segments at its true pose ``(K, 3)``."""
     if not keyframes:
         return np.zeros((0, 4))
     parts = [
-        se2.transform_segments(
-            T_world_robot @ se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments
-        )
-        for kf in keyframes
+        se2.transform_segments(se2.matrix_from_pose(*pose), kf.segments)
+        for kf, pose in zip(keyframes, np.asarray(T_world_keyframe).reshape(-1, 3), strict=True)
     ]
     return np.vstack(parts)
 
