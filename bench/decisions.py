@@ -248,12 +248,32 @@ def snapshots_of(
     maps' closures and joins judged (none for truth maps)."""
     snapshots: dict[str, list[list[Keyframe]]] = {}
     closures: list[dict[str, Any]] = []
+    weighed: list[dict[str, Any]] = []
     for robot, drive in scenario.drives.items():
         if kind == "truth":
             snapshots[robot] = truth_snapshots(drive, times)
             continue
         own = own_snapshots(drive, times)
         snapshots[robot] = own.snapshots
+        for item in own.weighed:
+            first, second = own.keyframe_stamps[[item.first, item.mine]]
+            world = scenario.truth().truth_of(robot, np.array([first, second]))
+            real = se2.between(tuple(world[0]), tuple(world[1]))
+            error = _error(se2.matrix_from_pose(*item.found), se2.matrix_from_pose(*real))
+            ev = item.evidence
+            weighed.append(
+                {
+                    "robot": robot,
+                    "kind": item.kind,
+                    "probability": round(item.probability, 6),
+                    "score": round(ev.score, 3),
+                    "rival": round(ev.rival, 3),
+                    "wall": round(ev.wall, 3),
+                    "conflict": round(ev.conflict, 3),
+                    "error_m": round(error[0], 3),
+                    "right": not _wrong(error),
+                }
+            )
         for closure in own.closures:
             first, second = own.keyframe_stamps[[closure.first, closure.second]]
             world = scenario.truth().truth_of(robot, np.array([first, second]))
@@ -273,7 +293,9 @@ def snapshots_of(
                     "wrong": _wrong(error),
                 }
             )
-    return snapshots, closures
+    return snapshots, closures + [
+        {**w, "weighed_kind": w["kind"], "kind": "weighed"} for w in weighed
+    ]
 
 
 def run_updates(
@@ -448,6 +470,8 @@ def figures(records: list[dict[str, Any]]) -> dict[str, Any]:
                     merged += 1
                     delays.append(_delay(updates, robot))
         for c in case["closures"]:
+            if c["kind"] == "weighed":
+                continue  # a decision the evidence model weighed (bench/fit_join.py reads it)
             if c["kind"] == "join":
                 joins += 1
                 wrong_joins += c["wrong"]

@@ -50,10 +50,15 @@ def features_of(record: dict[str, Any]) -> list[float] | None:
     ways = [record.get("b_on_a"), record.get("a_on_b")]
     if any(w is None for w in ways):
         return None
+    return _features(ways, record["seen_through"][1])  # type: ignore[arg-type]
+
+
+def _features(ways: list[dict[str, float]], conflict: float) -> list[float]:
+    """The features of a decision measured one or two ways (the weaker way)."""
     margin = min(w["score"] - max(w["rival"], 0.0) for w in ways)
     score = min(w["score"] for w in ways)
     ratio = max((max(w["rival"], 0.0) / w["score"]) if w["score"] > 0 else 1.0 for w in ways)
-    conflict = max([w.get("conflict", 0.0) for w in ways] + [record["seen_through"][1]])
+    conflict = max([w.get("conflict", 0.0) for w in ways] + [conflict])
     values = join_features(margin, score, ratio, conflict)
     return [values[name] for name in FEATURES]
 
@@ -66,6 +71,15 @@ def load(works: list[str]) -> tuple[np.ndarray, np.ndarray, list[str], list[str]
         for path in sorted((Path(work) / "records").glob("*.json")):
             case = json.loads(path.read_text())
             source = f"{case['description'].get('source', '?')}/{case['maps']}"
+            for item in case.get("closures", []):
+                if item["kind"] != "weighed":
+                    continue  # accepted closures and joins, judged (the weighed ones are here)
+                way = {k: item[k] for k in ("score", "rival", "conflict")}
+                values = _features([way, way], 0.0)
+                rows.append(values)
+                labels.append(bool(item["right"]))
+                groups.append(case["scenario"])
+                sources.append(f"{source}/{item['weighed_kind']}")
             for update in case["updates"]:
                 for record in update["verdicts"]:
                     values = features_of(record)

@@ -31,6 +31,7 @@ from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.geometry import sample_segments
 from multi_robot_mapper.core.local_mapping import Closure, Keyframe, LocalMapper, LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.evidence import Weighed
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.scan import LaserScanData
 
@@ -286,6 +287,7 @@ class OwnMap:
     closures: list[Closure]  # loop closures and joins accepted (``Closure.kind``)
     keyframe_stamps: FloatArray  # (K,) stamp of every keyframe, by index
     scans_mapped: int
+    weighed: list[Weighed]  # every closure and join the evidence model weighed
 
 
 def own_snapshots(
@@ -309,7 +311,8 @@ def own_snapshots(
             continue
     snapshots += [mapper.keyframes() for _ in pending]
     stamps = np.array([kf.stamp for kf in sorted(mapper.keyframes(), key=lambda k: k.index)])
-    return OwnMap(snapshots, list(mapper.closures), stamps, len(drive.stamps))
+    weighed = list(mapper.backend.closer.weighed)  # type: ignore[attr-defined]
+    return OwnMap(snapshots, list(mapper.closures), stamps, len(drive.stamps), weighed)
 
 
 def update_times(scenario: Scenario, updates: int) -> list[float]:

@@ -2,10 +2,12 @@
 :class:`~.correlation.Drawing` (the evidence model counts another map's walls there against a
 placement).
 
-A beam that returned at range r saw nothing for r metres: points every ``spacing`` along it up
-to ``margin`` before the return (and at most ``reach``). A beam with no return claims nothing
-(glass, an open door beyond the range: nothing is known there), as the merger's synthetic
-views claim nothing on a bearing with no wall (:class:`~core.merging.free_space.MapViews`).
+A beam that returned at range r saw nothing for r metres. As the merger's synthetic views
+(:class:`~core.merging.free_space.MapViews`), on beams about a degree apart, free space along a
+beam reaches only as far as the nearest return of the beams within ``SEEN_SPREAD`` either side
+(a gap between two walls, a wall's end seen at a grazing angle, is not seen through), up to
+``margin`` before it and at most ``reach``; a beam with no return within that window claims
+nothing (glass, an open door beyond the range: nothing is known there).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ FloatArray = NDArray[np.float64]
 SEEN_REACH = 8.0  # m
 SEEN_MARGIN = 0.5  # m
 SEEN_BEAM_STEP = float(np.radians(1.0))  # rad between the beams used
+SEEN_SPREAD = 6  # beams either side (MergeConfig view_spread)
 
 
 def scan_free_points(
@@ -44,8 +47,10 @@ def scan_free_points(
         beams = np.arange(0, len(ranges), every)
         r = ranges[beams]
         valid = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
-        beams, r = beams[valid], r[valid]
-        free = np.minimum(r - margin, reach)
+        limits = np.where(valid, r, -np.inf)
+        padded = np.pad(limits, SEEN_SPREAD, constant_values=-np.inf)
+        window = np.lib.stride_tricks.sliding_window_view(padded, 2 * SEEN_SPREAD + 1)
+        free = np.minimum(window.min(axis=1) - margin, reach)
         beam, step = np.nonzero(free[:, None] > steps[None, :])
         if beam.size == 0:
             continue

@@ -12,6 +12,8 @@ free space. The placement is searched for rivals on the whole target
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -24,29 +26,64 @@ from multi_robot_mapper.core.evidence.placement import (
     placement_evidence,
 )
 from multi_robot_mapper.core.evidence.seen import scan_free_points
+from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 Pose = tuple[float, float, float]
 
+
+@dataclasses.dataclass(frozen=True)
+class Weighed:
+    """A closure or join the evidence model weighed: keyframe ``mine`` placed at ``found`` in
+    keyframe ``first``'s frame, its probability and evidence."""
+
+    kind: str  # "loop" or "join"
+    first: int
+    mine: int
+    found: Pose
+    probability: float
+    evidence: PlacementEvidence
+
+
 # A decision's patch: the keyframes it moves within this distance of the keyframe it was
 # found from (the merger's place_radius: a place).
 PATCH_RADIUS = 6.0  # m
+PATCH_KEYFRAMES = 20
 # Free space from the scans of keyframes at least this far apart, at most this many of them
 # (the merger's view_spacing and max_views).
 VIEW_SPACING = 1.0  # m
 MAX_VIEWS = 60
 
 
-def drawing_of(keyframes: KeyframeMap, members: IntArray) -> Drawing:
-    """The walls the keyframes ``members`` own and the free space their scans crossed, in
-    their piece's frame."""
+def drawing_of(keyframes: KeyframeMap, members: IntArray, own_scans: bool = False) -> Drawing:
+    """The walls of keyframes ``members`` and the free space their scans crossed, in their
+    piece's frame: the map segments they own, or with ``own_scans`` their scans' segments
+    fused (Alg. 5: a wall seen again is one wall). A keyframe that revisits a place owns
+    little of the map (its walls fused into the older keyframes'), so a stretch of map that
+    is placed is drawn from its own scans."""
     members = np.asarray(members, dtype=np.int64)
-    walls = keyframes.owned_segments(members)
-    views = _thinned(keyframes.poses[members], VIEW_SPACING, MAX_VIEWS)
+    poses = keyframes.poses[members]
+    if own_scans:
+        walls, owner = np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
+        for k, pose in zip(members.tolist(), poses, strict=True):
+            placed = se2.transform_segments(
+                se2.matrix_from_pose(*pose), keyframes.scans[k].segments
+            )
+            walls, owner = fuse(
+                walls,
+                owner,
+                placed,
+                np.full(len(placed), k, dtype=np.int64),
+                keyframes.config,
+                keyframes.tolerance,
+            )
+    else:
+        walls = keyframes.owned_segments(members)
+    views = _thinned(poses, VIEW_SPACING, MAX_VIEWS)
     scans = [keyframes.scans[int(k)].view for k in members[views]]
-    free = scan_free_points(scans, keyframes.poses[members[views]], 0.5 * EVIDENCE_CORRELATION.cell)
+    free = scan_free_points(scans, poses[views], 0.5 * EVIDENCE_CORRELATION.cell)
     return Drawing.of(walls, free, EVIDENCE_CORRELATION.cell)
 
 
@@ -62,18 +99,22 @@ def decision_evidence(
         return PlacementEvidence.nothing()
     return placement_evidence(
         drawing_of(keyframes, target),
-        drawing_of(keyframes, patch),
+        drawing_of(keyframes, patch, own_scans=True),
         T_target_patch,
         EVIDENCE_CORRELATION,
     )
 
 
 def patch_around(keyframes: KeyframeMap, candidates: IntArray, centre: int) -> IntArray:
-    """Of ``candidates``, the keyframes within PATCH_RADIUS of keyframe ``centre``."""
+    """Of ``candidates``, the keyframes within PATCH_RADIUS of keyframe ``centre``, at most
+    PATCH_KEYFRAMES of them (spread evenly: a robot that drove round a room holds many)."""
     candidates = np.asarray(candidates, dtype=np.int64)
     here = keyframes.poses[centre, :2]
     distance = np.hypot(*(keyframes.poses[candidates, :2] - here).T)
-    return np.asarray(candidates[distance <= PATCH_RADIUS])
+    near = candidates[distance <= PATCH_RADIUS]
+    if len(near) > PATCH_KEYFRAMES:
+        near = near[np.linspace(0, len(near) - 1, PATCH_KEYFRAMES).astype(int)]
+    return np.asarray(near)
 
 
 def moved_to(

@@ -284,10 +284,9 @@ class PieceJoins(WindowMatcher):
         ``T_first_mine`` in keyframe ``first``'s frame: ``mine``'s piece near it, on the whole
         of ``first``'s piece (:meth:`_believed`)? A join it doubts is refused."""
         keyframes = self.keyframes
-        here = se2.compose(keyframes.pose(first), T_first_mine)
         patch = keyframes.members(keyframes.piece(mine))
         target = keyframes.members(keyframes.piece(first))
-        if self._believed("join", patch, target, mine, here):
+        if self._believed("join", patch, target, first, mine, T_first_mine):
             return True
         self._refuse("evidence (join)")
         return False

@@ -237,8 +237,7 @@ class LoopCloser(PieceJoins):
             members = self.keyframes.members(piece)
             recent = members[(members > index - config.loop_window) & (members <= index)]
             older = members[members <= index - config.loop_window]
-            here = se2.compose(self.keyframes.pose(first), found)
-            if not self._believed("loop", recent, older, index, here):
+            if not self._believed("loop", recent, older, first, index, found):
                 self._refuse("evidence")
                 continue
             edge = self._scan_edge(first, index, found)

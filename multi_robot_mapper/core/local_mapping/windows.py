@@ -9,6 +9,7 @@ the keyframe's frame: a window sees more of a place than one scan, and its match
 from __future__ import annotations
 
 import dataclasses
+from collections import deque
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,6 +20,7 @@ from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.attempts import hypotheses_of, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.evidence import (
+    Weighed,
     decision_evidence,
     moved_to,
     patch_around,
@@ -38,6 +40,8 @@ Pose = tuple[float, float, float]
 # Keyframes per window matched for loop closures and joins: the keyframe and its nearest
 # neighbours in time (the confidence is calibrated on windows of three scans).
 _WINDOW = 3
+# Decisions the evidence model weighed that a back end keeps (the latest).
+_WEIGHED_KEPT = 10_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,8 +69,9 @@ class WindowMatcher:
         self.accepted: dict[int, Closure] = {}  # graph edge id -> closure in the graph
         self.refused: dict[str, int] = {}  # reason -> closures refused
         self.model = installed_model()  # the evidence model (core/evidence)
-        # (kind, P, margin m, score m, conflict m) of every decision the evidence weighed
-        self.weighed: list[tuple[str, float, float, float, float]] = []
+        # The latest decisions the evidence model weighed (for the benches' judges; bounded:
+        # a robot maps for hours).
+        self.weighed: deque[Weighed] = deque(maxlen=_WEIGHED_KEPT)
         self._path_since_closure: dict[int, float] = {}  # piece -> metres since a closure
 
     def _match(self, first: int, second: int, predicted: Pose | None, search: bool) -> MatchResult:
@@ -190,20 +195,17 @@ class WindowMatcher:
         return Edge(first, second, pose_of_match(T_1_2), information, robust)
 
     def _believed(
-        self, kind: str, patch: IntArray, target: IntArray, mine: int, T_target_mine: Pose
+        self, kind: str, patch: IntArray, target: IntArray, first: int, mine: int, found: Pose
     ) -> bool:
         """Does the evidence model believe placing keyframes ``patch`` so that keyframe
-        ``mine`` lies at ``T_target_mine`` in the frame of keyframes ``target``
-        (:mod:`~core.local_mapping.evidence`)? Counted in ``weighed``."""
+        ``mine`` lies at ``found`` in keyframe ``first``'s frame, on keyframes ``target``
+        (:mod:`~core.local_mapping.evidence`)? Each decision weighed is kept in ``weighed``."""
         keyframes = self.keyframes
-        evidence = decision_evidence(
-            keyframes,
-            patch_around(keyframes, patch, mine),
-            target,
-            moved_to(keyframes, mine, T_target_mine),
-        )
+        here = se2.compose(keyframes.pose(first), found)
+        moved = moved_to(keyframes, mine, here)
+        evidence = decision_evidence(keyframes, patch_around(keyframes, patch, mine), target, moved)
         probability = probability_of(evidence, self.model)
-        self.weighed.append((kind, probability, evidence.margin, evidence.score, evidence.conflict))
+        self.weighed.append(Weighed(kind, first, mine, found, probability, evidence))
         return probability >= self.config.join_probability
 
     def _refuse(self, reason: str) -> None:
