@@ -233,6 +233,7 @@ def verdict_record(
                 "rival": round(ev.rival, 3),
                 "wall": round(ev.wall, 3),
                 "conflict": round(ev.conflict, 3),
+                "matched": round(ev.matched, 3),
             }
         record["probability"] = verdict.probability
     return record
@@ -270,6 +271,7 @@ def snapshots_of(
                     "rival": round(ev.rival, 3),
                     "wall": round(ev.wall, 3),
                     "conflict": round(ev.conflict, 3),
+                    "matched": round(ev.matched, 3),
                     "error_m": round(error[0], 3),
                     "right": not _wrong(error),
                 }

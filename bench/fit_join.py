@@ -38,6 +38,10 @@ from multi_robot_mapper.core.evidence.model import (  # noqa: E402
     JoinModel,
     join_features,
 )
+from multi_robot_mapper.core.evidence.placement import (  # noqa: E402
+    EVIDENCE_CORRELATION,
+    PlacementEvidence,
+)
 
 L2_GRID = (1e-4, 1e-3, 1e-2)
 FOLDS = 10
@@ -54,12 +58,23 @@ def features_of(record: dict[str, Any]) -> list[float] | None:
 
 
 def _features(ways: list[dict[str, float]], conflict: float) -> list[float]:
-    """The features of a decision measured one or two ways (the weaker way)."""
-    margin = min(w["score"] - max(w["rival"], 0.0) for w in ways)
-    score = min(w["score"] for w in ways)
-    ratio = max((max(w["rival"], 0.0) / w["score"]) if w["score"] > 0 else 1.0 for w in ways)
-    conflict = max([w.get("conflict", 0.0) for w in ways] + [conflict])
-    values = join_features(margin, score, ratio, conflict)
+    """The features of a decision measured one or two ways, as the merger computes them
+    (evidence.model.join_features); a record's matched wall is its score plus the free-space
+    weight times its conflict (the score's two parts)."""
+    weight = EVIDENCE_CORRELATION.free_space_weight
+    evidence = [
+        PlacementEvidence(
+            w["score"],
+            w["rival"],
+            w.get("wall", 0.0),
+            np.zeros(3),
+            None,
+            w.get("conflict", 0.0),
+            w.get("matched", w["score"] + weight * w.get("conflict", 0.0)),
+        )
+        for w in ways
+    ]
+    values = join_features(evidence, conflict)
     return [values[name] for name in FEATURES]
 
 
@@ -74,7 +89,7 @@ def load(works: list[str]) -> tuple[np.ndarray, np.ndarray, list[str], list[str]
             for item in case.get("closures", []):
                 if item["kind"] != "weighed":
                     continue  # accepted closures and joins, judged (the weighed ones are here)
-                way = {k: item[k] for k in ("score", "rival", "conflict")}
+                way = {k: item[k] for k in ("score", "rival", "conflict", "wall") if k in item}
                 values = _features([way, way], 0.0)
                 rows.append(values)
                 labels.append(bool(item["right"]))
@@ -199,6 +214,12 @@ def main() -> None:
             wrong = int((accepted & ~y).sum())
             recall = (accepted & y).sum() / max(1, (mine & y).sum())
             print(f"| {source} | {threshold:g} | {int(accepted.sum())} | {wrong} | {recall:.3f} |")
+    doubtful = np.flatnonzero((p >= 0.99) & ~y)
+    for k in doubtful:
+        print(
+            f"held out, P {p[k]:.4f} but wrong: {groups[k]} ({sources[k]}), features "
+            + ", ".join(f"{n} {v:.2f}" for n, v in zip(FEATURES, x[k], strict=True))
+        )
     intercept, weights = fit(x, y, l2)
     print(
         "\nfit on every set: intercept "

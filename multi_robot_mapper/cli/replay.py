@@ -107,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
                 trajectories=offline.trajectories,
                 robot_frames=offline.robot_frames,
                 stats=offline.stats,
+                probabilities=offline.probabilities,
+                unmerged_reasons=offline.unmerged_reasons,
             ),
         )
         figure = pictures.draw_map(

@@ -82,6 +82,10 @@ class OfflineMap:
     anchors: dict[str, tuple[FloatArray, IntArray, FloatArray]] = dataclasses.field(
         default_factory=dict
     )
+    # robot -> the probability that its placement is right, and why an unmerged robot is not
+    # placed (merging only)
+    probabilities: dict[str, float] = dataclasses.field(default_factory=dict)
+    unmerged_reasons: dict[str, str] = dataclasses.field(default_factory=dict)
 
 
 Progress = Callable[[str, int, int], None]  # (robot, scans done, scans total)
@@ -396,6 +400,17 @@ def _merged_joint(local: OfflineMap, config: MergeConfig, method: str = "pivot")
             "merge_stats": dict(result.stats),
         }
     )
+    believed = {
+        robot: result.frame_probabilities[robot][_main_piece(local, robot)]
+        for robot in local.robots
+        if frames.get(robot) is not None
+    }
+    reasons = {
+        robot: result.unmerged_reasons.get(robot, "its main piece of map is not placed")
+        for robot in local.robots
+        if frames.get(robot) is None
+    }
+    stats["unmerged_reasons"] = reasons
     return OfflineMap(
         local.robots,
         result.segments,
@@ -406,6 +421,8 @@ def _merged_joint(local: OfflineMap, config: MergeConfig, method: str = "pivot")
         local.keyframe_poses,
         local.keyframes,
         local.anchors,
+        probabilities=believed,
+        unmerged_reasons=reasons,
     )
 
 

@@ -8,8 +8,9 @@ Layout of ``DIR``:
 - ``trajectories/<robot>.tum``: one line per posed scan, ``stamp x y z qx qy qz qw`` (TUM
   format; stamp in seconds, z = 0, a yaw-only quaternion), poses in ``map``. Stamps are written
   with ``%.9f``, enough digits to give back the same float64, so they associate exactly;
-- ``robots.json``: ``{robot: {"x", "y", "theta"}}`` (the pose of ``<robot>/map`` in ``map``) or
-  ``{robot: "unmerged"}``;
+- ``robots.json``: ``{robot: {"x", "y", "theta", "probability"}}`` (the pose of ``<robot>/map``
+  in ``map``, and the probability that it is right when the method says) or
+  ``{robot: "unmerged: <why>"}`` (``"unmerged"`` alone where no reason is known);
 - ``stats.json``: a JSON object of timings and counts.
 
 Pictures (``map.png``, ``map.svg``) live in the same folder but are not this module's business.
@@ -57,6 +58,10 @@ class ReplayResult:
     trajectories: dict[str, tuple[FloatArray, FloatArray]]
     robot_frames: dict[str, Pose | None]  # T_map_<robot>/map as (x, y, theta); None = unmerged
     stats: dict[str, Any]
+    # robot -> P(its placement is right) (merged robots, when the method says); robot -> why
+    # it is not placed (unmerged robots)
+    probabilities: dict[str, float] = dataclasses.field(default_factory=dict)
+    unmerged_reasons: dict[str, str] = dataclasses.field(default_factory=dict)
 
 
 def trajectory_path(directory: Path, robot: str) -> Path:
@@ -94,11 +99,13 @@ def write_results(directory: Path, result: ReplayResult) -> None:
     frames: dict[str, Any] = {}
     for robot in result.robots:
         frame = result.robot_frames.get(robot)
-        frames[robot] = (
-            UNMERGED
-            if frame is None
-            else {"x": float(frame[0]), "y": float(frame[1]), "theta": float(frame[2])}
-        )
+        if frame is None:
+            why = result.unmerged_reasons.get(robot)
+            frames[robot] = f"{UNMERGED}: {why}" if why else UNMERGED
+            continue
+        frames[robot] = {"x": float(frame[0]), "y": float(frame[1]), "theta": float(frame[2])}
+        if robot in result.probabilities:
+            frames[robot]["probability"] = float(result.probabilities[robot])
     _write_json(directory / ROBOTS_FILE, frames)
     _write_json(directory / STATS_FILE, result.stats)
 
@@ -184,10 +191,17 @@ def read_results(directory: Path) -> ReplayResult:
     if not isinstance(frames_data, dict):
         raise ResultsError(f"{frames_path}: expected a JSON object robot -> pose or 'unmerged'")
     frames: dict[str, Pose | None] = {}
+    probabilities: dict[str, float] = {}
+    reasons: dict[str, str] = {}
     for robot in robots:
         if robot not in frames_data:
             raise ResultsError(f"{frames_path}: robot {robot!r} is missing")
-        frames[robot] = _parse_frame(frames_data[robot], frames_path, robot)
+        entry = frames_data[robot]
+        frames[robot] = _parse_frame(entry, frames_path, robot)
+        if isinstance(entry, dict) and _finite_number(entry.get("probability")):
+            probabilities[robot] = float(entry["probability"])
+        if isinstance(entry, str) and entry.startswith(f"{UNMERGED}: "):
+            reasons[robot] = entry[len(UNMERGED) + 2 :]
 
     stats_path = directory / STATS_FILE
     stats = _read_json(stats_path)
@@ -201,6 +215,8 @@ def read_results(directory: Path) -> ReplayResult:
         trajectories=trajectories,
         robot_frames=frames,
         stats=stats,
+        probabilities=probabilities,
+        unmerged_reasons=reasons,
     )
 
 
@@ -271,8 +287,12 @@ def _number_array(value: Any, path: Path, key: str) -> FloatArray:
     return array
 
 
+def _finite_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
 def _parse_frame(value: Any, path: Path, robot: str) -> Pose | None:
-    if value == UNMERGED:
+    if value == UNMERGED or (isinstance(value, str) and value.startswith(f"{UNMERGED}: ")):
         return None
     if isinstance(value, dict) and {"x", "y", "theta"} <= set(value):
         pose = (value["x"], value["y"], value["theta"])
@@ -282,7 +302,7 @@ def _parse_frame(value: Any, path: Path, robot: str) -> Pose | None:
         ):
             return (float(pose[0]), float(pose[1]), float(pose[2]))
     raise ResultsError(
-        f"{path}: robot {robot!r} must be {{'x', 'y', 'theta'}} numbers or 'unmerged'"
+        f"{path}: robot {robot!r} must be {{'x', 'y', 'theta'}} numbers or 'unmerged[: why]'"
     )
 
 

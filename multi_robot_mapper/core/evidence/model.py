@@ -12,8 +12,10 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from importlib import resources
+
+from multi_robot_mapper.core.evidence.placement import PlacementEvidence
 
 MODEL_FILE = "join_model.json"
 
@@ -23,6 +25,7 @@ FEATURES = (
     "log_score",  # log(1 + m of wall the placement explains, weaker way)
     "rival_ratio",  # the larger share of the placement's score a rival reaches (0-1+)
     "conflict",  # m of wall the placement puts in free space the robots saw, either way
+    "conflict_share",  # that, as a share of the wall it matches (the larger way)
 )
 
 
@@ -63,16 +66,16 @@ def installed_model() -> JoinModel:
     return JoinModel.load(text)
 
 
-def join_features(
-    margin: float, score: float, rival_ratio: float, conflict: float
-) -> dict[str, float]:
-    """The model's features of a decision from its evidence (:mod:`.placement`; the weaker
-    way where it is measured both ways): ``margin`` and ``score`` (m), ``rival_ratio``, and
-    ``conflict``, the metres of wall the decision puts in free space (of the maps it
-    places; of every map of the groups a join makes)."""
+def join_features(ways: Sequence[PlacementEvidence], conflict: float = 0.0) -> dict[str, float]:
+    """The model's features of a decision from its evidence (:mod:`.placement`), measured one
+    way or both (the weaker way counts): margin and score (m), the rival's share, the walls
+    in free space (m; the larger of the ways' and ``conflict``, measured over more of the
+    maps: of every map of the groups a join makes) and their share of the wall matched."""
+    score = min(w.score for w in ways)
     return {
-        "margin": margin,
+        "margin": min(w.margin for w in ways),
         "log_score": math.log1p(max(score, 0.0)),
-        "rival_ratio": rival_ratio,
-        "conflict": conflict,
+        "rival_ratio": max(w.rival_ratio for w in ways),
+        "conflict": max(conflict, *(w.conflict for w in ways)),
+        "conflict_share": max(w.conflict_share for w in ways),
     }

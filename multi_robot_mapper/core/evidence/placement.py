@@ -53,7 +53,7 @@ FloatArray = NDArray[np.float64]
 # merger's place matches, the local mapper's closures and joins): one scale of evidence for
 # one fitted model. The merger's correlation defaults (MergeConfig correlation_cell,
 # free_space_weight).
-EVIDENCE_CORRELATION = CorrelationConfig(cell=0.3, blur=1.0, free_space_weight=2.0)
+EVIDENCE_CORRELATION = CorrelationConfig(cell=0.3, blur=1.0, free_space_weight=5.0)
 # Placements farther apart than this (or turned more) are different answers: rivals. The
 # same as a place's rivals (place_links).
 DISTINCT_SHIFT = 1.0  # m
@@ -82,6 +82,7 @@ class PlacementEvidence:
     placement: FloatArray  # (theta, tx, ty) the refined placement, T_target_patch
     rival_placement: FloatArray | None  # (theta, tx, ty) of the rival
     conflict: float = 0.0  # m of wall in the other's free space at the placement, either way
+    matched: float = 0.0  # m of wall on a wall of the same direction at the placement
 
     @property
     def margin(self) -> float:
@@ -93,6 +94,13 @@ class PlacementEvidence:
         """The share of the placement's score its best rival reaches (1 when it scores
         nothing)."""
         return max(self.rival, 0.0) / self.score if self.score > 0.0 else 1.0
+
+    @property
+    def conflict_share(self) -> float:
+        """The walls in free space as a share of the walls matched: small for a placement
+        that is right (the maps' drift, moving objects), large for a look-alike whose walls
+        stand where the other robot saw through."""
+        return self.conflict / max(self.matched, 1.0)
 
     @staticmethod
     def nothing() -> PlacementEvidence:
@@ -230,8 +238,16 @@ def placement_evidence(
         moved, value = scorer.refine(row)
         if distinct(moved, placed) and (rival_row is None or value > rival):
             rival, rival_row = value, moved
-    conflict = float(scorer.parts(placed)[1][0])
-    return PlacementEvidence(score, rival, float(patch.weight.sum()), placed, rival_row, conflict)
+    matched, through = scorer.parts(placed)
+    return PlacementEvidence(
+        score,
+        rival,
+        float(patch.weight.sum()),
+        placed,
+        rival_row,
+        float(through[0]),
+        float(matched[0]),
+    )
 
 
 def _unique_turns(turns: FloatArray, tolerance: float = float(np.radians(2.0))) -> FloatArray:

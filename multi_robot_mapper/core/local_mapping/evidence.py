@@ -130,9 +130,7 @@ def moved_to(
 
 def probability_of(evidence: PlacementEvidence, model: JoinModel) -> float:
     """P(right) of a decision with this evidence (the join model's)."""
-    return model.probability(
-        join_features(evidence.margin, evidence.score, evidence.rival_ratio, evidence.conflict)
-    )
+    return model.probability(join_features([evidence]))
 
 
 def _thinned(poses: FloatArray, spacing: float, most: int) -> IntArray:

@@ -569,6 +569,8 @@ def _result(
     result.probabilities = {
         robot: chains[(robot, 0)] for robot in robots if placements[robot] is not None
     }
+    for key in solved.frames:
+        result.frame_probabilities.setdefault(key[0], {})[key[1]] = chains[key]
     result.unmerged_reasons = {
         robot: unmerged_reason(robot, units, verdicts, accepted, chains, ref_unit, config)
         for robot in robots

@@ -63,9 +63,11 @@ class MergeResult:
     verdicts: dict[object, object] = dataclasses.field(default_factory=dict)
     # what the next update's refinement after the graph resumes from (ffs: FfsState)
     refinement: object | None = None
-    # robot -> the probability that its placement is right (placed robots; joint graph), and
-    # robot -> why it is not placed (unmerged robots)
+    # robot -> the probability that its placement (its map frame's) is right (placed robots;
+    # joint graph); robot -> piece -> the same of each placed piece (as ``frames``); robot ->
+    # why its map frame is not placed (unmerged robots)
     probabilities: dict[str, float] = dataclasses.field(default_factory=dict)
+    frame_probabilities: dict[str, dict[int, float]] = dataclasses.field(default_factory=dict)
     unmerged_reasons: dict[str, str] = dataclasses.field(default_factory=dict)
 
     @property
