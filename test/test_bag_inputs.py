@@ -221,6 +221,20 @@ def test_a_single_scan_bag_just_works(tmp_path: Path, capsys: pytest.CaptureFixt
     assert metrics["ate_all_rmse_m"] < 0.05
 
 
+@pytest.mark.parametrize("damage", ["junk", "cut"])
+def test_a_damaged_ros1_bag_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], damage: str
+) -> None:
+    scans = [(T0 + 0.1 * i, ros1_scan(T0 + 0.1 * i, scan_reading(1.0))) for i in range(20)]
+    data = write_ros1_bag(tmp_path / "whole.bag", {"/scan": scans}).read_bytes()
+    bag = tmp_path / "bad.bag"
+    bag.write_bytes(b"not a bag at all" if damage == "junk" else data[: len(data) // 2])
+    code, _, err = mrm(capsys, "replay", bag, "--out", tmp_path / "out")
+    assert code == 2 and err.count("\n") == 1 and str(bag) in err, err
+    if damage == "cut":
+        assert "rosbag reindex" in err
+
+
 # --- one bag per robot ------------------------------------------------------------------------
 
 

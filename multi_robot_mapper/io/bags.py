@@ -336,6 +336,8 @@ def read_recordings(
     if salvage:
         return _read_salvaged(path, scan_pattern, report)
     hint = "; --salvage reads every intact chunk" if _mcap_file(path) is not None else ""
+    if _is_ros1(path):
+        hint = "; `rosbag reindex` rebuilds the index of a ROS 1 bag whose recording was cut short"
     reader = _open_reader(path, hint)
     try:
         topics: dict[str, list[Connection]] = {}
