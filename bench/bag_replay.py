@@ -150,6 +150,15 @@ def replay(name: str, args: argparse.Namespace) -> dict[str, Any]:
     known = np.isfinite(clock[: len(scans)])
     errors = relation_errors(relations, clock[: len(scans)][known], poses[known], tolerance)
     row["relations"] = errors.summary() | {"matched_by": how}
+    if args.out is not None:  # every scan's pose (NaN: unposed) and the relations' errors
+        args.out.mkdir(parents=True, exist_ok=True)
+        np.savez(
+            args.out / f"{name}_{args.beam_geometry.kind}.npz",
+            stamps=stamps,
+            poses=poses,
+            translation_m=errors.translation_m,
+            rotation_rad=errors.rotation_rad,
+        )
     if recording.ground_truth:  # the reference poses on the same relations: how good a match
         reference = np.full((len(scans), 3), np.nan)
         for i, t in enumerate(stamps):
@@ -173,6 +182,7 @@ def main() -> None:
     parser.add_argument("--scans", type=int, default=0, help="first N scans only (0: all)")
     parser.add_argument("--beam-geometry", type=BeamGeometry.parse, default=BeamGeometry())
     parser.add_argument("--json", type=Path, help="also write the rows here")
+    parser.add_argument("--out", type=Path, help="folder for each bag's poses and errors (.npz)")
     args = parser.parse_args()
     rows = []
     print(
