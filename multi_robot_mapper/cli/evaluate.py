@@ -1,12 +1,22 @@
-"""``mrm evaluate DIR --bag BAG [--json]``: score a replay result against the bag's reference.
+"""``mrm evaluate DIR [--bag BAG ...] [--truth CSV] [--relations FILE [--relation-stamps LOG]]
+[--json]``: score a replay result against the bag's reference poses and against relations.
 
-Each scan of the bag gets the reference pose stamped nearest it (within
+Reference poses: each scan of the bag gets the reference pose stamped nearest it (within
 GROUND_TRUTH_MATCH_S, the rule ``mrm replay`` uses) and the estimated pose whose trajectory stamp
 equals its stamp (within STAMP_MATCH_S); scans without a reference pose are left out and
 counted. Reference points are every scan's valid points placed at its reference pose (the
 ground-truth pose is taken as the pose of the scan's laser frame), thinned to every k-th valid point
-so at most ``--max-points`` remain. Prints a table (or the JSON with ``--json``) and writes
-``DIR/metrics.json``.
+so at most ``--max-points`` remain. The bag's reference poses are its ``<robot>/ground_truth``
+topics, or the ``--truth`` files.
+
+Relations (``--relations FILE``, the benchmark of Kümmerle et al. 2009,
+:mod:`multi_robot_mapper.evaluation.relations`): the mean ± std of the translational and
+rotational errors of the relative motions the trajectory estimates between the relations' pairs
+of stamps. A relation's stamps name scans by their stamp: the bag's own stamps, or, with
+``--relation-stamps LOG``, the timestamps of a CARMEN log whose k-th FLASER line is the bag's
+k-th scan (for a bag whose converter rewrote its stamps). Needs no reference pose.
+
+Prints a table (or the JSON with ``--json``) and writes ``DIR/metrics.json``.
 """
 
 from __future__ import annotations
@@ -23,10 +33,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.cli.common import CliError, check_limits, check_output
+from multi_robot_mapper.cli.recordings import add_recording_options, load_recordings
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.scan import ScanError, scan_points
 from multi_robot_mapper.evaluation import metrics as rules
 from multi_robot_mapper.evaluation.metrics import Metrics, RobotTrack, evaluate
+from multi_robot_mapper.evaluation.relations import RelationErrors
 from multi_robot_mapper.io.bags import GROUND_TRUTH_MATCH_S, nearest_stamps, reference_poses
 from multi_robot_mapper.io.outputs import atomic_write_text
 from multi_robot_mapper.io.results import ReplayResult
@@ -52,11 +64,32 @@ class EvaluationInputs:
 
 def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
-        "evaluate", help="score a replay result folder against the bag's reference poses"
+        "evaluate",
+        help="score a replay result folder against the bag's reference poses and relations",
     )
     parser.add_argument("directory", type=Path, help="folder written by mrm replay --out")
     parser.add_argument(
-        "--bag", type=Path, required=True, help="the bag that was replayed (with ground truth)"
+        "--bag",
+        dest="bags",
+        action="append",
+        default=[],
+        type=Path,
+        help="the bag that was replayed, with reference poses (repeat for one bag per robot, "
+        "in the replay's order)",
+    )
+    add_recording_options(parser)
+    parser.add_argument(
+        "--relations",
+        type=Path,
+        metavar="FILE",
+        help="relations to score the trajectories on (t1 t2 x y z roll pitch yaw per line)",
+    )
+    parser.add_argument(
+        "--relation-stamps",
+        type=Path,
+        metavar="LOG",
+        help="CARMEN log whose k-th FLASER line is the bag's k-th scan: its timestamps are the "
+        "relations' clock (needs --bag of one robot)",
     )
     parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
     parser.add_argument(
@@ -66,6 +99,30 @@ def register(subparsers: Any) -> None:
         help=f"reference points kept, thinning beams evenly (default {MAX_REFERENCE_POINTS})",
     )
     parser.set_defaults(func=run)
+
+
+def estimated_poses(result: ReplayResult, robot: str, stamps: FloatArray) -> FloatArray:
+    """(N, 3) the result's pose of each scan stamped ``stamps`` (NaN rows where unposed);
+    AssociationError when a trajectory stamp matches no scan."""
+    estimate = np.full((len(stamps), 3), np.nan)
+    traj_stamps, traj_poses = result.trajectories.get(robot, (np.zeros(0), np.zeros((0, 3))))
+    if len(traj_stamps) == 0:
+        return estimate
+    if len(stamps) == 0:
+        raise AssociationError(f"{robot}: the result has poses, the bag no scan of this robot")
+    scan_order = np.argsort(stamps, kind="stable")
+    nearest, gap = nearest_stamps(stamps[scan_order], np.asarray(traj_stamps))
+    if np.any(gap > STAMP_MATCH_S):
+        bad = float(np.asarray(traj_stamps)[np.argmax(gap)])
+        raise AssociationError(
+            f"{robot}: trajectory stamp {bad:.9f} s matches no scan of the bag within "
+            f"{STAMP_MATCH_S * 1e6:g} us (is it the bag that was replayed?)"
+        )
+    target = scan_order[nearest]
+    if len(np.unique(target)) != len(target):
+        raise AssociationError(f"{robot}: two trajectory stamps match the same scan")
+    estimate[target] = traj_poses
+    return estimate
 
 
 def build_inputs(
@@ -100,22 +157,7 @@ def build_inputs(
         if not rec.ground_truth:
             raise AssociationError(f"{robot} has scans but no ground truth in the bag")
         stamps = np.array([s.stamp for s in rec.scans], dtype=np.float64)
-        estimate = np.full((len(stamps), 3), np.nan)
-        traj_stamps, traj_poses = result.trajectories.get(robot, (np.zeros(0), np.zeros((0, 3))))
-        if len(traj_stamps):
-            scan_order = np.argsort(stamps, kind="stable")
-            nearest, gap = nearest_stamps(stamps[scan_order], np.asarray(traj_stamps))
-            if np.any(gap > STAMP_MATCH_S):
-                bad = float(np.asarray(traj_stamps)[np.argmax(gap)])
-                raise AssociationError(
-                    f"{robot}: trajectory stamp {bad:.9f} s matches no scan of the bag within "
-                    f"{STAMP_MATCH_S * 1e6:g} us (is it the bag that was replayed?)"
-                )
-            target = scan_order[nearest]
-            if len(np.unique(target)) != len(target):
-                raise AssociationError(f"{robot}: two trajectory stamps match the same scan")
-            estimate[target] = traj_poses
-
+        estimate = estimated_poses(result, robot, stamps)
         reference_all, has_ref = reference_poses(rec, stamps)
         without[robot] = int(np.count_nonzero(~has_ref))
         if not np.any(has_ref):
@@ -183,35 +225,127 @@ def format_table(metrics: Metrics, method: str = "") -> str:
     return "\n".join(lines)
 
 
+def relation_scores(
+    result: ReplayResult,
+    recordings: Mapping[str, Any],
+    relations_path: Path,
+    stamp_log: Path | None = None,
+) -> RelationErrors:
+    """Every robot's trajectory scored on the relations of ``relations_path``.
+
+    A robot's scans are the bag's (``recordings``, as for :func:`build_inputs`), or, without a
+    bag, the posed scans of its trajectory. With ``stamp_log`` (one robot only) scan k takes
+    the timestamp of the log's k-th FLASER line.
+    """
+    from multi_robot_mapper.evaluation.relations import (
+        RelationsFormatError,
+        combine,
+        read_relations,
+        relation_errors,
+    )
+
+    try:
+        relations = read_relations(relations_path)
+    except RelationsFormatError as exc:
+        raise CliError(str(exc)) from exc
+    scores = []
+    for robot in result.robots:
+        if recordings:
+            if robot not in recordings:
+                raise AssociationError(f"robot {robot} of the result is not in the bag")
+            stamps = np.array([s.stamp for s in recordings[robot].scans], dtype=np.float64)
+            stamps.sort(kind="stable")
+            poses = estimated_poses(result, robot, stamps)
+        else:
+            stamps, poses = result.trajectories.get(robot, (np.zeros(0), np.zeros((0, 3))))
+        if stamp_log is not None:
+            stamps = _log_stamps(stamp_log, len(stamps))
+        scores.append(relation_errors(relations, stamps, poses))
+    if not scores:
+        raise AssociationError("the result has no robot")
+    return combine(scores)
+
+
+def _log_stamps(path: Path, count: int) -> FloatArray:
+    """The timestamps of a CARMEN log's FLASER lines, which must be ``count``, all readable."""
+    from multi_robot_mapper.io.carmen import CarmenFormatError, read_carmen
+
+    try:
+        log = read_carmen(path)
+    except (CarmenFormatError, OSError, UnicodeError) as exc:
+        raise CliError(f"cannot read {path}: {exc}") from exc
+    if log.skipped or log.truncated or len(log) != count:
+        raise CliError(
+            f"{path}: {len(log)} readable FLASER lines for the bag's {count} scans "
+            f"({'; '.join(log.skipped_summary()) or 'not one line per scan'}): --relation-stamps "
+            "needs the log the bag was made from"
+        )
+    return np.array([s.timestamp for s in log], dtype=np.float64)
+
+
+def format_relations(summary: Mapping[str, Any]) -> str:
+    """The relations figures as the paper gives them (mean ± std), and what was matched."""
+    return "\n".join(
+        [
+            f"relations          {summary['matched']} of {summary['relations']} matched "
+            f"({summary['without_scan']} name no scan, {summary['unposed']} an unposed scan)",
+            f"  translational    {_fmt(summary['translation_mean_m'], digits=4)} ± "
+            f"{_fmt(summary['translation_std_m'], ' m', digits=4)}",
+            f"  rotational       {_fmt(summary['rotation_mean_deg'], digits=3)} ± "
+            f"{_fmt(summary['rotation_std_deg'], '°', digits=3)}",
+        ]
+    )
+
+
+def _check_arguments(args: argparse.Namespace) -> None:
+    check_limits(args, "max_points")
+    if not args.bags and args.relations is None:
+        raise CliError("nothing to score against: give --bag (reference poses) or --relations")
+    if args.relation_stamps is not None and (args.relations is None or len(args.bags) != 1):
+        raise CliError("--relation-stamps needs --relations and the one bag that was replayed")
+    for path in (args.relations, args.relation_stamps):
+        if path is not None and not Path(path).is_file():
+            raise CliError(f"no such file: {path}")
+
+
 def run(args: argparse.Namespace) -> int:
-    from multi_robot_mapper.io.bags import read_recordings
     from multi_robot_mapper.io.results import read_results
 
-    check_limits(args, "max_points")
     directory = Path(args.directory)
     result = read_results(directory)
+    _check_arguments(args)
     check_output(directory / METRICS_FILE, kind="file")  # before the work
-    if not Path(args.bag).exists():
-        raise CliError(f"no such bag: {args.bag}")
-    recordings = read_recordings(args.bag)
+    recordings = load_recordings(args, args.bags)[0] if args.bags else {}
+    has_truth = any(r.ground_truth for r in recordings.values())
+    report: dict[str, Any] = {"method": result.method}
+    metrics, inputs = None, None
     try:
-        inputs = build_inputs(result, recordings, args.max_points)
+        if recordings and (has_truth or args.relations is None):
+            inputs = build_inputs(result, recordings, args.max_points)
+            if not inputs.tracks:
+                raise CliError(
+                    f"{', '.join(map(str, args.bags))} has no scan with a ground-truth pose to "
+                    "evaluate against (--truth gives a truth file)"
+                )
+            metrics = evaluate(
+                inputs.tracks, result.map_segments, inputs.reference_points, result.robot_frames
+            )
+            report = metrics.to_dict() | report
+            report["reference_beam_stride"] = inputs.beam_stride
+            report["scans_without_reference"] = inputs.scans_without_reference
+        if args.relations is not None:
+            scores = relation_scores(result, recordings, args.relations, args.relation_stamps)
+            report["relations"] = {"file": str(args.relations), **scores.summary()}
     except AssociationError as exc:
-        raise CliError(f"{directory} and {args.bag}: {exc}") from exc
-    if not inputs.tracks:
-        raise CliError(f"{args.bag} has no scan with a ground-truth pose to evaluate against")
-    metrics = evaluate(
-        inputs.tracks, result.map_segments, inputs.reference_points, result.robot_frames
-    )
-    report = metrics.to_dict()
-    report["method"] = result.method
-    report["bag"] = str(args.bag)
-    report["reference_beam_stride"] = inputs.beam_stride
-    report["scans_without_reference"] = inputs.scans_without_reference
+        where = ", ".join(map(str, args.bags or [args.relations]))
+        raise CliError(f"{directory} and {where}: {exc}") from exc
+    if args.bags:
+        report["bag"] = ", ".join(map(str, args.bags))
     atomic_write_text(directory / METRICS_FILE, json.dumps(report, indent=1) + "\n")
     if args.json:
         print(json.dumps(report, indent=1))
-    else:
+        return 0
+    if metrics is not None and inputs is not None:
         print(format_table(metrics, result.method))
         skipped = sum(inputs.scans_without_reference.values())
         if skipped:
@@ -219,5 +353,7 @@ def run(args: argparse.Namespace) -> int:
                 f"({skipped} scans without a reference pose within "
                 f"{GROUND_TRUTH_MATCH_S * 1e3:g} ms were left out)"
             )
-        print(f"-> {directory / METRICS_FILE}")
+    if "relations" in report:
+        print(("" if metrics is None else "\n") + format_relations(report["relations"]))
+    print(f"-> {directory / METRICS_FILE}")
     return 0

@@ -4,8 +4,9 @@ The log's scans are cut into K contiguous runs, one per robot (``robot1`` .. ``r
 K robots had explored consecutive parts of the building at the same time: every run's stamps
 are shifted so that all robots start at the first run's start. With ``--overlap-scans N`` each
 run also gets the N scans before its own start, so neighbouring robots share some place (what a
-map merger needs). Each scan is written as ``/robotK/scan`` (frame ``robotK/laser``) with the
-log's reference laser pose as ``/robotK/ground_truth`` (frame ``world``); no odometry is written.
+map merger needs); ``mrm import-bag`` cuts a bag the same way (one function does both). Each
+scan is written as ``/robotK/scan`` (frame ``robotK/laser``) with the log's reference laser pose
+as ``/robotK/ground_truth`` (frame ``world``); no odometry is written.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from multi_robot_mapper.io.carmen import (
     monotonic_stamps,
     read_carmen,
 )
+from multi_robot_mapper.io.recordings import cut_recording, split_runs
 
 __all__ = ["increasing", "register", "run", "split_runs"]
 
@@ -59,13 +61,6 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=run)
 
 
-def split_runs(count: int, robots: int, overlap: int) -> list[tuple[int, int]]:
-    """``[start, stop)`` scan indices of each robot's run: K contiguous runs of ``count`` scans,
-    each but the first extended ``overlap`` scans back (never before the first scan)."""
-    bounds = np.linspace(0, count, robots + 1).round().astype(np.int64).tolist()
-    return [(max(0, bounds[k] - overlap), bounds[k + 1]) for k in range(robots)]
-
-
 def run(args: argparse.Namespace) -> int:
     from multi_robot_mapper.io.bags import write_recordings
 
@@ -86,16 +81,18 @@ def run(args: argparse.Namespace) -> int:
 
     logged = np.array([s.timestamp for s in scans], dtype=np.float64)
     stamps, notes = monotonic_stamps(logged, log.name)
-    recordings: dict[str, RobotRecording] = {}
-    for k, (start, stop) in enumerate(split_runs(len(scans), args.robots, args.overlap_scans)):
-        name = f"robot{k + 1}"
-        shift = stamps[start] - stamps[0]  # every run starts at the first run's start
-        run_scans, truth = [], []
-        for i in range(start, stop):
-            stamp = float(stamps[i] - shift)
-            run_scans.append(TimedScan(stamp, f"{name}/laser", carmen_scan_data(scans[i])))
-            truth.append(TimedPose(stamp, scans[i].reference_pose, "world"))
-        recordings[name] = RobotRecording(name=name, scans=run_scans, ground_truth=truth)
+    whole = RobotRecording(
+        name=log.stem,
+        scans=[
+            TimedScan(float(t), "laser", carmen_scan_data(s))
+            for t, s in zip(stamps, scans, strict=True)
+        ],
+        ground_truth=[
+            TimedPose(float(t), s.reference_pose, "world")
+            for t, s in zip(stamps, scans, strict=True)
+        ],
+    )
+    recordings = cut_recording(whole, args.robots, args.overlap_scans)
     write_recordings(out, recordings, storage=args.storage)
     sizes = ", ".join(f"{r.name} {len(r.scans)}" for r in recordings.values())
     print(f"wrote {out} ({args.storage}): scans per robot: {sizes}")

@@ -3,9 +3,10 @@
 mrm demo           three simulated robots mapped live by the nodes, merged, drawn and scored
 mrm frontend       the scan-to-segment front end over a CARMEN log, with statistics
 mrm import-carmen  a CARMEN log cut into K robots, written as a rosbag2 file
+mrm import-bag     one robot's bag (ROS 1 or 2) cut into K robots, written as a rosbag2 file
 mrm simulate       K simulated robots in a built-in world, written as a rosbag2 file
-mrm replay         the pipeline offline on a rosbag2 file: map, trajectories, pictures
-mrm evaluate       a replay's output scored against the bag's reference poses
+mrm replay         the pipeline offline on bags (ROS 1 or 2): map, trajectories, pictures
+mrm evaluate       a replay's output scored against reference poses and relations
 mrm run            robot_mappers and a map_merger in one process, live (no launch files)
 """
 
@@ -135,9 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
     frontend.add_argument("log", help="CARMEN log (.log or .log.gz)")
     add_config_options(frontend)
     frontend.set_defaults(func=_cmd_frontend)
-    from multi_robot_mapper.cli import evaluate, import_carmen, replay, run, simulate
+    from multi_robot_mapper.cli import evaluate, import_bag, import_carmen, replay, run, simulate
 
-    for command in (import_carmen, simulate, replay, evaluate, run):
+    for command in (import_carmen, import_bag, simulate, replay, evaluate, run):
         command.register(sub)
     return parser
 

@@ -1,8 +1,10 @@
-"""``mrm replay BAG --out DIR [--method local|pivot|ffs|reference] [--config YAML]
-[--merger-config YAML] [--set NAME=VALUE]``.
+"""``mrm replay BAG [BAG ...] --out DIR [--method local|pivot|ffs|reference] [--names N,...]
+[--beam-geometry SPEC] [--truth CSV] [--config YAML] [--merger-config YAML] [--set NAME=VALUE]``.
 
 Runs the pipeline offline, as fast as the CPU allows, through the same core the nodes use, and
 writes DIR/map.json, map.svg, map.png, trajectories/<robot>.tum, robots.json and stats.json.
+A bag is a rosbag2 folder (mcap or sqlite3), a ``.mcap`` file or a ROS 1 ``.bag``; one bag may
+hold every robot (``/<robot>/scan``) or each robot bring its own (one bag per robot).
 """
 
 from __future__ import annotations
@@ -23,16 +25,26 @@ from multi_robot_mapper.cli.common import (
     load_mapper_config,
     load_merger_config,
 )
+from multi_robot_mapper.cli.recordings import add_recording_options, load_recordings
 from multi_robot_mapper.core.pipeline import METHODS, TimedLaserScan
 
 
 def register(subparsers: Any) -> None:
-    parser = subparsers.add_parser("replay", help="run the pipeline offline on a rosbag2 file")
-    parser.add_argument("bag", type=Path, help="rosbag2 folder or .mcap file with */scan topics")
+    parser = subparsers.add_parser(
+        "replay", help="run the pipeline offline on bags (rosbag2 or ROS 1; one or one per robot)"
+    )
+    parser.add_argument(
+        "bags",
+        nargs="+",
+        type=Path,
+        metavar="BAG",
+        help="rosbag2 folder, .mcap file or ROS 1 .bag file with /<robot>/scan or /scan topics; "
+        "several for one bag per robot",
+    )
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     add_overwrite_option(parser)
     parser.add_argument("--method", choices=METHODS, default="local")
-    parser.add_argument("--scan-topics", default="/*/scan", help="topic pattern (fnmatch)")
+    add_recording_options(parser)
     parser.add_argument(
         "--salvage",
         action="store_true",
@@ -51,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         run_offline,
     )
     from multi_robot_mapper.io import pictures
-    from multi_robot_mapper.io.bags import ReadReport, read_recordings, reference_poses
+    from multi_robot_mapper.io.bags import reference_poses
     from multi_robot_mapper.io.outputs import staged_folder
     from multi_robot_mapper.io.results import ReplayResult, write_results
 
@@ -62,10 +74,7 @@ def run(args: argparse.Namespace) -> int:
         require_method(args.method)  # before reading a large bag
     except MethodNotImplementedError as exc:
         raise CliError(str(exc)) from exc
-    report = ReadReport()
-    recordings = read_recordings(
-        args.bag, scan_pattern=args.scan_topics, salvage=args.salvage, report=report
-    )
+    recordings, report = load_recordings(args, args.bags, salvage=args.salvage)
     inputs: dict[str, Sequence[TimedLaserScan]] = {}
     for name, rec in recordings.items():
         stamps = np.array([s.stamp for s in rec.scans], dtype=np.float64)
@@ -77,7 +86,10 @@ def run(args: argparse.Namespace) -> int:
     if args.method == "reference" and not any(
         item.reference_pose is not None for scans in inputs.values() for item in scans
     ):
-        raise CliError(f"{args.bag} has no <robot>/ground_truth poses: 'reference' needs them")
+        raise CliError(
+            f"{', '.join(map(str, args.bags))}: no reference pose (a <robot>/ground_truth topic "
+            "or --truth): 'reference' needs them"
+        )
     bar = ProgressBar(f"replay {args.method}")
     try:
         offline = run_offline(
@@ -91,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         bar.close()
     paths = {robot: poses for robot, (_, poses) in offline.trajectories.items()}
-    title = f"{args.bag.name}: method '{args.method}'" + (
+    title = f"{', '.join(b.name for b in args.bags)}: method '{args.method}'" + (
         " (scans at reference poses, not a mapping result)" if args.method == "reference" else ""
     )
     # Everything goes to a fresh folder that replaces --out only when complete: an interrupted

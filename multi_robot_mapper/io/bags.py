@@ -1,10 +1,12 @@
 """rosbag2 recordings of several robots' laser scans (and ground truth), read and written.
 
 A recording holds, per robot ``<name>``, ``/<name>/scan`` (``sensor_msgs/msg/LaserScan``) and
-optionally ``/<name>/ground_truth`` (``geometry_msgs/msg/PoseStamped``). Bags are read and
-written with ``rosbags`` (pure Python, no ROS installation): a rosbag2 directory with
-``metadata.yaml`` in mcap or sqlite3 storage, or a bare ``.mcap`` file. Messages are the
-``rosbags`` dataclasses of the ROS 2 Jazzy typestore, so no rclpy is needed.
+optionally ``/<name>/ground_truth`` (``geometry_msgs/msg/PoseStamped``); a bag of one robot may
+call its scans plain ``/scan``. Bags are read and written with ``rosbags`` (pure Python, no ROS
+installation): a rosbag2 directory with ``metadata.yaml`` in mcap or sqlite3 storage, or a bare
+``.mcap`` file; a ROS 1 ``.bag`` file is read too (its messages decoded with the definitions it
+carries). Written messages are the ``rosbags`` dataclasses of the ROS 2 Jazzy typestore, so no
+rclpy is needed.
 
 Every problem with a file becomes a :class:`BagError` subclass with a one-line message naming
 the file; ``rosbags``' own exceptions never escape.
@@ -28,9 +30,11 @@ import numpy as np
 import yaml
 from mcap.exceptions import McapError
 from rosbags.interfaces import Connection
+from rosbags.rosbag1 import Reader as Ros1Reader
+from rosbags.rosbag1 import ReaderError as Ros1ReaderError
 from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterError
 from rosbags.serde import SerdeError
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from multi_robot_mapper.core.geometry import (
@@ -48,6 +52,11 @@ from multi_robot_mapper.io.outputs import OutputError, staged_new
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
 GROUND_TRUTH = "ground_truth"
+# The scan topics read unless told otherwise (comma-separated fnmatch patterns): every robot's
+# namespaced scans, and the plain /scan of a bag that holds one robot.
+DEFAULT_SCAN_TOPICS = "/*/scan,/scan"
+# The robot of a scan topic without a namespace.
+UNNAMED_ROBOT = "robot"
 # builtin_interfaces/Time counts seconds in an int32, bags count ns since 1970 unsigned.
 _MAX_STAMP_S = 2.0**31
 # A ROS namespace: tokens of letters, digits and underscores, not starting with a digit.
@@ -58,6 +67,8 @@ _ROBOT_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
 # (AttributeError, NameError, ...) are deliberately not.
 _READ_ERRORS = (
     ReaderError,
+    Ros1ReaderError,
+    TypesysError,  # a ROS 1 bag's message definition that cannot be parsed
     SerdeError,
     OSError,
     EOFError,
@@ -147,7 +158,17 @@ def robot_name(topic: str) -> str:
     A scan topic without a namespace ("/scan") belongs to "robot".
     """
     namespace = topic.rsplit("/", 1)[0].strip("/")
-    return namespace or "robot"
+    return namespace or UNNAMED_ROBOT
+
+
+def valid_robot_name(name: str) -> bool:
+    """Whether ``name`` can be a ROS topic namespace (what a robot's name becomes)."""
+    return _ROBOT_NAME.fullmatch(name) is not None
+
+
+def matches_scan_topics(topic: str, patterns: str) -> bool:
+    """Whether ``topic`` matches one of the comma-separated fnmatch ``patterns``."""
+    return any(fnmatch.fnmatchcase(topic, p.strip()) for p in patterns.split(",") if p.strip())
 
 
 def _natural_key(name: str) -> list[tuple[int, int | str]]:
@@ -238,26 +259,44 @@ def _pose_msg(item: TimedPose) -> Any:
     )
 
 
-def _open_reader(path: Path, hint: str = "") -> Reader:
-    """A rosbags reader for a bag directory or a bare ``.mcap``/``.db3`` file."""
+def _open_reader(path: Path, hint: str = "") -> Reader | Ros1Reader:
+    """A rosbags reader for a bag directory, a bare ``.mcap``/``.db3`` file or a ROS 1 bag."""
     if path.is_dir():
         if not (path / "metadata.yaml").is_file():
             raise BagCorruptError(
                 f"{path}: not a rosbag2 directory (no metadata.yaml; "
                 "`ros2 bag reindex` can rebuild it)"
             )
-    elif path.suffix not in (".mcap", ".db3"):
+    elif path.suffix not in (".mcap", ".db3", ".bag"):
         raise BagCorruptError(
-            f"{path}: not a rosbag2 bag (expected a bag directory or a .mcap file)"
+            f"{path}: not a bag (expected a rosbag2 directory, a .mcap file or a ROS 1 .bag file)"
         )
     elif path.stat().st_size == 0:
         raise BagCorruptError(f"{path}: the file is empty")
     try:
-        reader = Reader(path)
+        reader: Reader | Ros1Reader = Ros1Reader(path) if _is_ros1(path) else Reader(path)
         reader.open()
     except _READ_ERRORS as exc:
         raise BagCorruptError(f"{path}: cannot open the bag ({_reason(exc)}){hint}") from None
     return reader
+
+
+def _is_ros1(path: Path) -> bool:
+    return path.is_file() and path.suffix == ".bag"
+
+
+def _ros1_decoder(connections: list[Connection]) -> Any:
+    """``deserialize(raw, msgtype)`` for the messages of a ROS 1 bag, with the message
+    definitions the bag carries (the standard ROS 1 Noetic ones if it carries none)."""
+    types: dict[str, Any] = {}
+    for connection in connections:
+        if connection.msgdef.data:
+            types.update(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+    if not types:
+        return get_typestore(Stores.ROS1_NOETIC).deserialize_ros1
+    typestore = get_typestore(Stores.EMPTY)
+    typestore.register(types)
+    return typestore.deserialize_ros1
 
 
 def _reason(exc: BaseException) -> str:
@@ -276,15 +315,16 @@ class ReadReport:
 
 def read_recordings(
     path: str | Path,
-    scan_pattern: str = "/*/scan",
+    scan_pattern: str = DEFAULT_SCAN_TOPICS,
     *,
     salvage: bool = False,
     report: ReadReport | None = None,
 ) -> dict[str, RobotRecording]:
-    """Every robot's scans (and ground truth, when recorded) from a rosbag2 bag.
+    """Every robot's scans (and ground truth, when recorded) from a rosbag2 or ROS 1 bag.
 
-    ``scan_pattern`` is an ``fnmatch`` pattern on topic names; each matching topic is one
-    robot, named by its namespace (:func:`robot_name`). Ground truth is read from
+    ``scan_pattern`` is one or more comma-separated ``fnmatch`` patterns on topic names; each
+    matching topic is one robot, named by its namespace (:func:`robot_name`). Ground truth is
+    read from
     ``<namespace>/ground_truth`` when that topic exists. Lists are sorted by header stamp.
     A topic of another message type is left out (and said in ``report``) while others remain;
     a damaged MCAP file is refused unless ``salvage``, which reads every intact chunk.
@@ -296,6 +336,8 @@ def read_recordings(
     if salvage:
         return _read_salvaged(path, scan_pattern, report)
     hint = "; --salvage reads every intact chunk" if _mcap_file(path) is not None else ""
+    if _is_ros1(path):
+        hint = "; `rosbag reindex` rebuilds the index of a ROS 1 bag whose recording was cut short"
     reader = _open_reader(path, hint)
     try:
         topics: dict[str, list[Connection]] = {}
@@ -308,6 +350,9 @@ def read_recordings(
             (c.topic, c.msgtype, raw) for c, _, raw in reader.messages(connections=selected)
         )
         expected = {t: sum(c.msgcount for c in topics[t]) for t in wanted}
+        if isinstance(reader, Ros1Reader):
+            decode = _ros1_decoder(selected)
+            return _decode(messages, wanted, expected, "the bag's index", report, decode)
         return _decode(messages, wanted, expected, "metadata.yaml", report)
     except BagError:
         raise
@@ -369,7 +414,7 @@ def _select(
 ) -> dict[str, tuple[str, str]]:
     """topic -> (robot, "scan" or "truth") of the topics to read; a topic of another message
     type is left out with a note, and an error only when no scan topic remains."""
-    scan_topics = sorted(t for t in types if fnmatch.fnmatchcase(t, scan_pattern))
+    scan_topics = sorted(t for t in types if matches_scan_topics(t, scan_pattern))
     if not scan_topics:
         known = ", ".join(sorted(types)) or "none"
         raise NoScanTopicsError(f"{path}: no topic matches {scan_pattern!r} (topics: {known})")
@@ -403,6 +448,7 @@ def _decode(
     expected: dict[str, int],
     source: str,
     report: ReadReport,
+    deserialize: Any = None,
 ) -> dict[str, RobotRecording]:
     recordings = {
         name: RobotRecording(name=name, scans=[], ground_truth=[])
@@ -410,7 +456,7 @@ def _decode(
         if kind == "scan"
     }
     counts: dict[str, int] = dict.fromkeys(wanted, 0)
-    deserialize = _typestore().deserialize_cdr
+    deserialize = deserialize or _typestore().deserialize_cdr
     for topic, msgtype, raw in messages:
         name, kind = wanted[topic]
         msg = deserialize(raw, msgtype)
@@ -451,7 +497,7 @@ def write_recordings(
     # Messages go in stamp order across robots, as a recorder would have received them.
     messages: list[tuple[int, int, str, Any]] = []  # (ns, order, topic, message)
     for name, recording in recordings.items():
-        if not _ROBOT_NAME.fullmatch(name):
+        if not valid_robot_name(name):
             raise BagError(f"{path}: robot name {name!r} cannot be a ROS topic namespace")
         topics = (
             (f"/{name}/scan", recording.scans),
