@@ -59,8 +59,10 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from scenarios import (  # noqa: E402
+    DENSE_BAGS,
     Scenario,
     TruthTable,
+    bag_scenario,
     carmen_scenario,
     overlap_component,
     own_snapshots,
@@ -98,7 +100,9 @@ class Truth:
         for key, unit in units.items():
             world = scenario.truth_of(key[0], unit.stamps)
             poses[key] = {
-                int(i): se2.matrix_from_pose(*p) for i, p in zip(unit.index, world, strict=True)
+                int(i): se2.matrix_from_pose(*p)
+                for i, p in zip(unit.index, world, strict=True)
+                if np.isfinite(p).all()  # a keyframe without a reference pose is not judged
             }
         return Truth(poses)
 
@@ -135,7 +139,8 @@ def judge_placements(
         distance = float(np.median([e[0] for e in errors]))
         angle = float(np.median([e[1] for e in errors]))
         out[f"{key[0]}/{key[1]}"] = {
-            "wrong": _wrong((distance, angle)),
+            "wrong": bool(np.isfinite(distance)) and _wrong((distance, angle)),
+            "judged": bool(np.isfinite(distance)),
             "error_m": round(distance, 3),
             "error_deg": round(math.degrees(angle), 2),
             "neighbours": len(errors),
@@ -180,8 +185,11 @@ def _frame_error(
 
     def frame_in_world(k: UnitKey) -> np.ndarray:
         unit = units[k]
-        world = np.array([se2.pose_from_matrix(truth.poses[k][int(i)]) for i in unit.index])
-        return se2.rigid_fit(unit.poses, world)
+        known = [r for r, i in enumerate(unit.index) if int(i) in truth.poses[k]]
+        if len(known) < 2:
+            return np.full((3, 3), np.nan)  # too few reference poses to place its frame
+        world = np.array([se2.pose_from_matrix(truth.poses[k][int(unit.index[r])]) for r in known])
+        return se2.rigid_fit(unit.poses[known], world)
 
     T_map_key = se2.matrix_from_pose(*result.frames[key[0]][key[1]])
     T_map_ref = se2.matrix_from_pose(*result.frames[ref[0]].get(ref[1], (0.0, 0.0, 0.0)))
@@ -199,11 +207,15 @@ def judge_verdict(
     errors = []
     for candidate in verdict.links:
         link = oriented(candidate, a)
+        if link.k_first not in truth.poses[a] or link.k_second not in truth.poses[b]:
+            continue  # no reference pose at one of its keyframes
         pa = se2.matrix_from_pose(*units[a].poses[units[a].row(link.k_first)])
         pb = se2.matrix_from_pose(*units[b].poses[units[b].row(link.k_second)])
         estimate = se2.invert(pa) @ T_a_b @ pb
         real = se2.invert(truth.poses[a][link.k_first]) @ truth.poses[b][link.k_second]
         errors.append(_error(estimate, real))
+    if not errors:
+        return float("nan"), float("nan")
     return float(np.median([e[0] for e in errors])), float(np.median([e[1] for e in errors]))
 
 
@@ -225,6 +237,7 @@ def verdict_record(
         "error_m": round(error[0], 3),
         "error_deg": round(math.degrees(error[1]), 2),
         "right": not _wrong(error),
+        "judged": bool(np.isfinite(error[0])),  # false: no keyframe of it has a reference
     }
     if verdict.evidence is not None:
         for name, ev in (("b_on_a", verdict.evidence.b_on_a), ("a_on_b", verdict.evidence.a_on_b)):
@@ -259,6 +272,8 @@ def snapshots_of(
         for item in own.weighed:
             first, second = own.keyframe_stamps[[item.first, item.mine]]
             world = scenario.truth().truth_of(robot, np.array([first, second]))
+            if not np.isfinite(world).all():
+                continue  # a keyframe without a reference pose
             real = se2.between(tuple(world[0]), tuple(world[1]))
             error = _error(se2.matrix_from_pose(*item.found), se2.matrix_from_pose(*real))
             ev = item.evidence
@@ -279,6 +294,8 @@ def snapshots_of(
         for closure in own.closures:
             first, second = own.keyframe_stamps[[closure.first, closure.second]]
             world = scenario.truth().truth_of(robot, np.array([first, second]))
+            if not np.isfinite(world).all():
+                continue  # judged only between keyframes with reference poses
             real = se2.between(tuple(world[0]), tuple(world[1]))
             error = _error(
                 se2.matrix_from_pose(*closure.T_first_second), se2.matrix_from_pose(*real)
@@ -363,7 +380,8 @@ def _stamps(frames: list[Keyframe]) -> np.ndarray:
 
 
 def scenario_of(name: str) -> Scenario | None:
-    """A scenario by name: ``generated:SEED``, ``world:WORLD:K:SEED``, ``carmen:LOG:K``."""
+    """A scenario by name: ``generated:SEED``, ``world:WORLD:K:SEED``, ``carmen:LOG:K``,
+    ``bag:BAG:K``."""
     kind, *rest = name.split(":")
     if kind == "generated":
         from scenarios import generated_scenario
@@ -373,6 +391,8 @@ def scenario_of(name: str) -> Scenario | None:
         return world_scenario(rest[0], int(rest[1]), int(rest[2]))
     if kind == "carmen":
         return carmen_scenario(rest[0], int(rest[1]))
+    if kind == "bag":
+        return bag_scenario(rest[0], int(rest[1]))
     raise ValueError(f"unknown scenario {name!r}")
 
 
@@ -460,7 +480,7 @@ def figures(records: list[dict[str, Any]]) -> dict[str, Any]:
             for v in update["verdicts"]:
                 decisions += 1
                 accepted += v["accepted"]
-                accepted_wrong += v["accepted"] and not v["right"]
+                accepted_wrong += v["accepted"] and v.get("judged", True) and not v["right"]
         robots_ever_wrong += len(ever_wrong)
         if updates:
             last = updates[-1]
@@ -558,6 +578,8 @@ def _names(args: argparse.Namespace) -> list[str]:
         return [f"generated:{seed}" for seed in range(args.first, args.first + args.count)]
     if args.source == "carmen":
         return [f"carmen:{log}:{k}" for log in args.logs for k in args.robots]
+    if args.source == "bag":
+        return [f"bag:{bag}:{k}" for bag in args.bags for k in args.robots]
     return [f"world:{w}:{k}:{args.first}" for w in args.worlds for k in args.robots]
 
 
@@ -565,7 +587,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     collect = sub.add_parser("collect")
-    collect.add_argument("--source", choices=("generated", "carmen", "world"), required=True)
+    collect.add_argument("--source", choices=("generated", "carmen", "bag", "world"), required=True)
+    collect.add_argument("--bags", nargs="*", default=list(DENSE_BAGS))
     collect.add_argument("--first", type=int, default=0)
     collect.add_argument("--count", type=int, default=200)
     collect.add_argument(

@@ -98,7 +98,7 @@ def load(works: list[str]) -> tuple[np.ndarray, np.ndarray, list[str], list[str]
             for update in case["updates"]:
                 for record in update["verdicts"]:
                     values = features_of(record)
-                    if values is None:
+                    if values is None or not record.get("judged", True):
                         continue
                     key = (path.stem, tuple(record["pair"]), tuple(np.round(values, 3)))
                     if key in seen:

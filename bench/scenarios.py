@@ -135,6 +135,43 @@ def world_scenario(world: str, robots: int, seed: int, duration: float = 40.0) -
     return Scenario(f"{world}_{robots}_{seed}", drives, {"source": "world", "world": world})
 
 
+# The dense bags with reference poses (bags/README.md), and their beam geometry: CARMEN's
+# convention, which their reference poses agree with (docs/bags.md).
+DENSE_BAGS = ("intel", "aces", "fr079", "mit-csail")
+
+
+def bag_scenario(bag: str, robots: int) -> Scenario | None:
+    """A shared dense bag (every scan, 10 Hz) cut into ``robots`` contiguous runs as ``mrm
+    import-bag`` cuts it, CARMEN's beam geometry, its reference poses the truth where a scan
+    has one (a pose of NaN elsewhere: those scans are never judged). None when absent."""
+    from multi_robot_mapper.io.recordings import (
+        BeamGeometry,
+        attach_truth,
+        cut_recording,
+        read_bags,
+        read_truth_csv,
+        with_beam_geometry,
+    )
+
+    path = DATA / "bags" / f"{bag}.bag"
+    truth_path = DATA / "bags" / f"{bag}.truth.csv"
+    if not path.is_file() or not truth_path.is_file():
+        return None
+    recordings = with_beam_geometry(read_bags([path]), BeamGeometry.parse("carmen"))
+    (recording,) = recordings.values()
+    recording = attach_truth(recording, read_truth_csv(truth_path))
+    drives = {}
+    for name, run in cut_recording(recording, robots).items():
+        stamps = np.array([s.stamp for s in run.scans], dtype=np.float64)
+        poses = np.full((len(stamps), 3), np.nan)
+        truth_stamps = np.array([g.stamp for g in run.ground_truth], dtype=np.float64)
+        rows = np.searchsorted(stamps, truth_stamps).clip(0, len(stamps) - 1)
+        exact = np.abs(stamps[rows] - truth_stamps) < 1e-6
+        poses[rows[exact]] = np.array([g.pose for g in run.ground_truth])[exact]
+        drives[name] = Drive(stamps, poses, [s.scan for s in run.scans])
+    return Scenario(f"bag_{bag}_{robots}", drives, {"source": "bag", "bag": bag, "robots": robots})
+
+
 class LazyScans(Sequence[LaserScanData]):
     """A generated building's scans along one drive, ray cast when first read: a truth map
     reads only its keyframes' scans. Each scan's noise comes from its own stream
