@@ -50,7 +50,8 @@ import math  # noqa: E402
 import pickle  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
+from concurrent.futures.process import BrokenProcessPool  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -624,18 +625,32 @@ def main() -> None:
 
 
 def _run(function: Any, jobs: list[tuple[Any, ...]], workers: int) -> None:
+    """Each job in a worker process; a worker that dies (a crash, the kernel's OOM killer)
+    costs its job only: the pool is made again and the others go on (a job that kills two
+    workers is reported and skipped)."""
     if workers <= 1:
         for job in jobs:
             print(function(*job), flush=True)
         return
-    with ProcessPoolExecutor(workers) as pool:
-        for line in pool.map(_star, [(function, job) for job in jobs]):
-            print(line, flush=True)
-
-
-def _star(item: tuple[Any, tuple[Any, ...]]) -> Any:
-    function, job = item
-    return function(*job)
+    pending = list(jobs)
+    deaths: dict[int, int] = {}
+    while pending:
+        with ProcessPoolExecutor(workers) as pool:
+            futures = {pool.submit(function, *job): k for k, job in enumerate(pending)}
+            done: set[int] = set()
+            try:
+                for future in as_completed(futures):
+                    print(future.result(), flush=True)
+                    done.add(futures[future])
+            except BrokenProcessPool:
+                pass
+        left = [k for k in range(len(pending)) if k not in done]
+        for k in left[:workers]:  # the jobs running when the pool broke
+            deaths[id(pending[k])] = deaths.get(id(pending[k]), 0) + 1
+        skipped = [k for k in left if deaths.get(id(pending[k]), 0) >= 2]
+        for k in skipped:
+            print(f"{pending[k][0]}: skipped, its worker died twice", flush=True)
+        pending = [pending[k] for k in left if k not in skipped]
 
 
 if __name__ == "__main__":

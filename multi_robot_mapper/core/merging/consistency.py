@@ -392,8 +392,10 @@ TOO_FAST = "a robot would drive"
 GROUP_DOUBT = "joined with every map of both groups"
 # metres of wall a join puts in free space: (every map of the joined group placed in the
 # root's frame, the maps of one side, those of the other) -> metres
-GroupConflict = Callable[
-    [Mapping[UnitKey, FloatArray], Sequence[UnitKey], Sequence[UnitKey]], float
+# the evidence of joining two groups: (group A's maps placed in its root's frame, group B's in
+# its root's, T_roota_rootb) -> the evidence (pair_evidence.group_evidence)
+GroupEvidence = Callable[
+    [Mapping[UnitKey, FloatArray], Mapping[UnitKey, FloatArray], FloatArray], PairEvidence
 ]
 
 
@@ -403,14 +405,14 @@ def accept_pairs(
     config: MergeConfig,
     model: JoinModel,
     reaches: Mapping[str, RobotReach] | None = None,
-    group_conflict: GroupConflict | None = None,
+    group_evidence: GroupEvidence | None = None,
 ) -> Accepted:
     """Candidate pairs, most probable first: a pair joining two groups joins them, one inside
     a group must close the cycle through the group's tree (module doc). With ``reaches``
     (:mod:`~multi_robot_mapper.core.merging.motion`) a join is refused when the joined group
     would need a robot to drive faster than ``max_speed`` between two of its pieces; with
-    ``group_conflict`` (:func:`group_free_space`), a join of groups is weighed again with the
-    walls it puts in the free space of every map of both."""
+    ``group_evidence`` (:func:`~core.merging.pair_evidence.group_evidence`), a join of groups
+    of more than one map is weighed again on every map of both."""
     order = sorted(
         (v for v in verdicts if v.accepted), key=lambda v: (-v.probability, -v.weight, v.pair)
     )
@@ -444,13 +446,12 @@ def accept_pairs(
         judged = _judge_join(
             verdict,
             joined,
-            list(group_a),
-            list(group_b),
+            (group_a, group_b, T_ra_rb),
             units,
             config,
             model,
             reaches,
-            group_conflict,
+            group_evidence,
         )
         if not judged.accepted:
             refused.append(judged)
@@ -474,80 +475,37 @@ def accept_pairs(
 def _judge_join(
     verdict: PairVerdict,
     joined: Mapping[UnitKey, FloatArray],
-    side_a: Sequence[UnitKey],
-    side_b: Sequence[UnitKey],
+    groups: tuple[Mapping[UnitKey, FloatArray], Mapping[UnitKey, FloatArray], FloatArray],
     units: Mapping[UnitKey, MapUnit],
     config: MergeConfig,
     model: JoinModel,
     reaches: Mapping[str, RobotReach] | None,
-    group_conflict: GroupConflict | None,
+    group_evidence: GroupEvidence | None,
 ) -> PairVerdict:
-    """The pair's verdict as a join of its two groups (:func:`accept_pairs`): refused when a
-    robot would have to drive too fast, or when the walls in the joined group's free space
-    bring its probability below ``join_probability``."""
+    """The pair's verdict as a join of its two groups (``groups``: each group's maps in its
+    root's frame and T_roota_rootb; ``joined``: every map of both in A's root frame, as the
+    join places them): refused when a robot would have to drive too fast, or, for groups of
+    more than one map, when the evidence on every map of both falls below
+    ``join_probability``."""
     excess = (
         0.0 if reaches is None else motion_excess(joined, units, reaches, config.link_pair_slack)
     )
     if excess > 0.0:
         reason = f"{TOO_FAST} {excess:.1f} m beyond max_speed"
         return dataclasses.replace(verdict, accepted=False, reason=reason)
-    if group_conflict is None or verdict.evidence is None or len(side_a) + len(side_b) <= 2:
+    group_a, group_b, T_ra_rb = groups
+    if group_evidence is None or len(group_a) + len(group_b) <= 2:
         return verdict  # two maps alone: the pair's own probability
-    conflict = max(verdict.conflict, group_conflict(joined, side_a, side_b))
-    probability = model.probability(verdict.evidence.features(conflict))
-    doubted = doubt(probability, verdict.evidence, conflict, config)
+    evidence = group_evidence(group_a, group_b, T_ra_rb)
+    probability = model.probability(evidence.features())
+    doubted = doubt(probability, evidence, evidence.conflict, config)
     return dataclasses.replace(
         verdict,
         accepted=not doubted,
         reason=f"{GROUP_DOUBT}: {doubted}" if doubted else "",
         probability=probability,
-        conflict=conflict,
-    )
-
-
-def group_free_space(
-    units: Mapping[UnitKey, MapUnit], views_of: ViewsOf, config: MergeConfig
-) -> GroupConflict:
-    """:data:`GroupConflict` over the robots' views: the most wall any map of one side puts
-    in the free space of any map of the other, or takes from it, every map of the joined
-    group at its placement (maps whose walls lie too far apart to be seen are skipped)."""
-
-    def conflict(
-        joined: Mapping[UnitKey, FloatArray], side_a: Sequence[UnitKey], side_b: Sequence[UnitKey]
-    ) -> float:
-        worst = 0.0
-        boxes = {
-            key: _box(se2.transform_segments(joined[key], units[key].segments))
-            for key in (*side_a, *side_b)
-        }
-        for x in side_a:
-            for y in side_b:
-                if not _boxes_meet(boxes[x], boxes[y], config.view_range):
-                    continue
-                T_x_y = se2.invert(joined[x]) @ joined[y]
-                through = free_space_conflict(
-                    units[x].segments, views_of(x), units[y].segments, views_of(y), T_x_y, config
-                )
-                worst = max(worst, through)
-        return worst
-
-    return conflict
-
-
-def _box(segments: FloatArray) -> FloatArray:
-    """(4,) x0, y0, x1, y1 of the segments' ends (empty: an empty box)."""
-    if len(segments) == 0:
-        return np.array([np.inf, np.inf, -np.inf, -np.inf])
-    ends = segments.reshape(-1, 2)
-    return np.concatenate((ends.min(axis=0), ends.max(axis=0)))
-
-
-def _boxes_meet(a: FloatArray, b: FloatArray, margin: float) -> bool:
-    return bool(
-        a[0] - margin <= b[2]
-        and b[0] - margin <= a[2]
-        and a[1] - margin <= b[3]
-        and b[1] - margin <= a[3]
+        evidence=evidence,
+        conflict=evidence.conflict,
     )
 
 

@@ -57,7 +57,6 @@ from multi_robot_mapper.core.merging.consistency import (
     PairVerdict,
     accept_pairs,
     consistent_set,
-    group_free_space,
     placement,
     seen_through_near,
 )
@@ -65,7 +64,11 @@ from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.global_map import fuse_keyframes
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.motion import robot_reaches
-from multi_robot_mapper.core.merging.pair_evidence import PairEvidence, pair_evidence
+from multi_robot_mapper.core.merging.pair_evidence import (
+    PairEvidence,
+    group_evidence,
+    pair_evidence,
+)
 from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.place_matching import (
@@ -150,7 +153,14 @@ def merge_joint(
         config,
         model,
         robot_reaches(units, config.max_speed),
-        group_free_space(units, lambda key: target_of(units[key], config).views, config),
+        lambda group_a, group_b, T: group_evidence(
+            group_a,
+            group_b,
+            T,
+            units,
+            {key: target_of(units[key], config) for key in (*group_a, *group_b)},
+            config,
+        ),
     )
     checked = time.perf_counter()
     previous_reference = None if previous is None else previous.reference

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.correlation import Drawing
 from multi_robot_mapper.core.evidence.model import join_features
 from multi_robot_mapper.core.evidence.placement import (
     EVIDENCE_CORRELATION,
@@ -78,7 +79,9 @@ def pair_evidence(
     a, b = pair
     linked_a = _positions(units[a], [c.keyframe if c.target == a else c.centre for c in links])
     linked_b = _positions(units[b], [c.keyframe if c.target == b else c.centre for c in links])
-    shared_a, shared_b = _shared_ground(units[a], units[b], T_a_b, 0.5 * config.place_radius)
+    shared_a, shared_b = _shared_ground(
+        units[a].poses[:, :2], units[b].poses[:, :2], T_a_b, 0.5 * config.place_radius
+    )
     target_a, target_b = targets[a], targets[b]
     centres_b = np.vstack((linked_b, shared_b))
     centres_a = np.vstack((linked_a, shared_a))
@@ -95,19 +98,82 @@ def pair_evidence(
     return PairEvidence(b_on_a, a_on_b)
 
 
+def group_evidence(
+    group_a: Mapping[UnitKey, np.ndarray],
+    group_b: Mapping[UnitKey, np.ndarray],
+    T_a_b: np.ndarray,
+    units: Mapping[UnitKey, MapUnit],
+    targets: Mapping[UnitKey, Target],
+    config: MergeConfig,
+) -> PairEvidence:
+    """The evidence of joining two groups of maps: group B (each map at its ``T_rootb_map``)
+    placed at ``T_a_b`` on group A (each at its ``T_roota_map``), measured as between two maps
+    (:func:`pair_evidence`) on the groups' maps drawn together, each wall once: the patch of
+    every map of B on the shared ground, its rival searched on every map of A, the free space
+    of every robot of both counting against (issue 46: a join is checked against every member
+    of the group it creates)."""
+    drawing_a, positions_a = _group_drawing(group_a, units, targets)
+    drawing_b, positions_b = _group_drawing(group_b, units, targets)
+    shared_a, shared_b = _shared_ground(positions_a, positions_b, T_a_b, 0.5 * config.place_radius)
+    patch_b = patch_of(drawing_b, shared_b, config.place_radius)
+    patch_a = patch_of(drawing_a, shared_a, config.place_radius)
+    b_on_a = placement_evidence(drawing_a, patch_b, T_a_b, EVIDENCE_CORRELATION)
+    a_on_b = placement_evidence(drawing_b, patch_a, se2.invert(T_a_b), EVIDENCE_CORRELATION)
+    return PairEvidence(b_on_a, a_on_b)
+
+
+# A wall point of a group's map within this of an earlier map's is the same wall (drawn once).
+_SAME_WALL = 0.1  # m
+
+
+def _group_drawing(
+    group: Mapping[UnitKey, np.ndarray],
+    units: Mapping[UnitKey, MapUnit],
+    targets: Mapping[UnitKey, Target],
+) -> tuple[Drawing, np.ndarray]:
+    """Every map of a group drawn in the group's frame, each wall once (a wall two robots
+    mapped is one wall), and every keyframe's position there."""
+    walls: list[np.ndarray] = []
+    direction: list[np.ndarray] = []
+    weight: list[np.ndarray] = []
+    free: list[np.ndarray] = []
+    positions: list[np.ndarray] = []
+    for key in sorted(group):
+        T = group[key]
+        theta = float(np.arctan2(T[1, 0], T[0, 0]))
+        drawing = targets[key].drawing.moved(T, theta)
+        points = drawing.walls
+        if walls and len(points):
+            distance, _ = cKDTree(np.vstack(walls)).query(points, distance_upper_bound=_SAME_WALL)
+            new = ~np.isfinite(distance)
+        else:
+            new = np.ones(len(points), dtype=bool)
+        walls.append(points[new])
+        direction.append(drawing.direction[new])
+        weight.append(drawing.weight[new])
+        free.append(drawing.free)
+        positions.append(se2.transform_points(T, units[key].poses[:, :2]))
+    return (
+        Drawing(
+            np.vstack(walls), np.concatenate(direction), np.concatenate(weight), np.vstack(free)
+        ),
+        np.vstack(positions),
+    )
+
+
 def _shared_ground(
-    a: MapUnit, b: MapUnit, T_a_b: np.ndarray, reach: float
+    a: np.ndarray, b: np.ndarray, T_a_b: np.ndarray, reach: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The positions of A's keyframes within ``reach`` of a keyframe of B placed by
-    ``T_a_b`` (in A's frame), and of B's within ``reach`` of one of A's (in B's frame)."""
-    placed_b = se2.transform_points(T_a_b, b.poses[:, :2])
-    if len(a.poses) == 0 or len(placed_b) == 0:
+    """Of the keyframe positions ``a`` (A's frame) those within ``reach`` of a position of
+    ``b`` placed by ``T_a_b``, and of ``b`` (B's frame) those within ``reach`` of one of A's."""
+    placed_b = se2.transform_points(T_a_b, b)
+    if len(a) == 0 or len(placed_b) == 0:
         return np.zeros((0, 2)), np.zeros((0, 2))
-    distance, _ = cKDTree(placed_b).query(a.poses[:, :2], distance_upper_bound=reach)
+    distance, _ = cKDTree(placed_b).query(a, distance_upper_bound=reach)
     near_a = np.isfinite(distance)
-    distance, _ = cKDTree(a.poses[:, :2]).query(placed_b, distance_upper_bound=reach)
+    distance, _ = cKDTree(a).query(placed_b, distance_upper_bound=reach)
     near_b = np.isfinite(distance)
-    return np.asarray(a.poses[near_a, :2]), np.asarray(b.poses[near_b, :2])
+    return np.asarray(a[near_a]), np.asarray(b[near_b])
 
 
 def _positions(unit: MapUnit, keyframes: Sequence[int]) -> np.ndarray:
