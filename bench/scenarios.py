@@ -365,13 +365,12 @@ def update_times(scenario: Scenario, updates: int) -> list[float]:
 
 def world_walls(keyframes: Sequence[Keyframe], T_world_keyframe: FloatArray) -> FloatArray:
     """A robot's map in ``world``: each keyframe's segments at its true pose ``(K, 3)``."""
-    if not keyframes:
-        return np.zeros((0, 4))
     parts = [
         se2.transform_segments(se2.matrix_from_pose(*pose), kf.segments)
         for kf, pose in zip(keyframes, np.asarray(T_world_keyframe).reshape(-1, 3), strict=True)
+        if np.isfinite(pose).all()  # a keyframe without a reference pose is left out
     ]
-    return np.vstack(parts)
+    return np.vstack(parts) if parts else np.zeros((0, 4))
 
 
 def shared_wall(a: FloatArray, b: FloatArray) -> float:

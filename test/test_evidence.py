@@ -14,12 +14,12 @@ import functools
 
 import numpy as np
 import pytest
-from test_joint_merging import keyframes_along, moved
+from test_joint_merging import drives, keyframes_along, moved, stranger_keyframes
 from test_merging import random_frames
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig, Drawing
-from multi_robot_mapper.core.evidence.model import JoinModel, installed_model
+from multi_robot_mapper.core.evidence.model import FEATURES, JoinModel, installed_model
 from multi_robot_mapper.core.evidence.placement import placement_evidence
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult
 from multi_robot_mapper.core.merging.joint import merge_joint
@@ -149,6 +149,36 @@ def test_the_join_model_is_data_the_package_ships() -> None:
     assert model.features and len(model.weights) == len(model.features)
     assert JoinModel.load(model.dumps()) == model
     # More wall that no rival explains never makes a placement less likely.
-    weak = {"margin": 2.0, "log_score": 3.0, "rival_ratio": 0.9, "conflict": 0.0, "conflict_share": 0.0}
+    weak = {
+        "margin": 2.0,
+        "log_score": 3.0,
+        "rival_ratio": 0.9,
+        "conflict": 0.0,
+        "conflict_share": 0.0,
+    }
     strong = dict(weak, margin=40.0, rival_ratio=0.3)
     assert model.probability(strong) > model.probability(weak)
+
+
+def test_a_wrong_join_does_not_move_the_reference() -> None:
+    # A model that believes every placement joins a robot of another building to the office
+    # robots through whatever its places matched (a wrong join). The reference robot's map is
+    # still where its own keyframes put it, and the office robot joined to it still at the
+    # truth: a join moves the map it places, never the reference (the joint graph anchors the
+    # reference, and a link between two maps that nothing else ties bends neither).
+    _, office = drives("office", 3)
+    world = {"r1": office[0], "r2": office[1], "stranger": stranger_keyframes()}
+    names = sorted(world)
+    frames = dict(zip(names, random_frames(len(names), seed=5), strict=True))
+    keyframes = {name: moved(world[name], frames[name]) for name in names}
+    believing = JoinModel(FEATURES, 20.0, (0.0,) * len(FEATURES), "believes everything")
+    result = merge_joint(keyframes, CONFIG, budget=0.0, model=believing)
+    assert result.placements["stranger"] is not None  # joined, wrongly
+    reference = result.reference
+    assert reference is not None
+    own = np.array([kf.T_robotmap_keyframe for kf in keyframes[reference]])
+    placed = result.keyframe_poses[reference]
+    assert np.hypot(*(placed[:, :2] - own[:, :2]).T).max() < 0.01
+    other = "r2" if reference == "r1" else "r1"
+    if reference != "stranger":
+        assert placement_error(result, frames, other) < 0.10
