@@ -21,10 +21,12 @@ again: the way to try a decision rule. ``table`` prints the figures of every rec
 What is counted (the truth is never seen by the merger):
 
 - **placements**: every map (a robot's piece) the merger places in ``map`` at an update, and
-  whether it is *wrong*: where its keyframes lie within 5 m of another placed map's keyframes
-  at the truth, their relative poses in ``map`` differ from the truth's by more than 0.30 m or
-  5 deg (the median over such pairs); a map with no such neighbour is judged by its frame
-  against the reference's. *Ever*: every update's publication counts; *end*: the last update.
+  whether it is *wrong*: its published keyframes, put in ``world`` by the reference map's own
+  (a rigid fit of the reference's keyframes to their true poses), lie more than 0.30 m or
+  5 deg from their true poses (the median over its keyframes). On own maps this error holds
+  the maps' drift too. *Ever*: every update's publication counts; *end*: the last update. A
+  wrong placement that is the truth moved by the building's own symmetry (generated rotation
+  wings: no map can tell the wings apart) is counted apart too.
 - **merged**: of the robots in the largest group that overlap at the truth (``OVERLAP_WALL``
   of shared wall, ``bench/scenarios.py``), those whose main map is placed right at the end.
 - **time to merge**: from the first update at which a robot overlaps the placed group at the
@@ -83,7 +85,6 @@ from multi_robot_mapper.core.merging.places import MapUnit, UnitKey, units_of  #
 
 RIGHT_DISTANCE = 0.30  # m
 RIGHT_ANGLE = math.radians(5.0)
-NEIGHBOURS = 5.0  # m: keyframes of two maps this close at the truth judge each other
 
 
 # --- judging --------------------------------------------------------------------------------
@@ -118,85 +119,85 @@ def _wrong(error: tuple[float, float]) -> bool:
 
 
 def judge_placements(
-    result: MergeResult, units: dict[UnitKey, MapUnit], truth: Truth
+    result: MergeResult,
+    units: dict[UnitKey, MapUnit],
+    truth: Truth,
+    symmetries: list[np.ndarray] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Every placed map's verdict (module doc): ``unit name -> {wrong, error_m, error_deg,
-    neighbours}``."""
+    ...}``. The published keyframes (their poses in ``map``) are put in ``world`` by the rigid
+    fit of the reference map's own keyframes to their true poses; a map's error is the median
+    over its keyframes of how far each lies from its true pose (and turned from it)."""
     placed: dict[UnitKey, dict[int, np.ndarray]] = {}
     for robot, index in result.keyframe_index.items():
         for i, pose in zip(index, result.keyframe_poses[robot], strict=True):
             for key in units:
                 if key[0] == robot and int(i) in truth.poses[key]:
-                    placed.setdefault(key, {})[int(i)] = se2.matrix_from_pose(*pose)
+                    placed.setdefault(key, {})[int(i)] = np.asarray(pose, dtype=np.float64)
+    ref = next((k for k in placed if k[0] == result.reference and k[1] == 0), None)
     out: dict[str, dict[str, Any]] = {}
+    if ref is None or len(placed[ref]) < 2:
+        return out
+    ids = sorted(placed[ref])
+    T_world_map = se2.rigid_fit(
+        np.array([placed[ref][i] for i in ids]),
+        np.array([se2.pose_from_matrix(truth.poses[ref][i]) for i in ids]),
+    )
     for key, mine in placed.items():
-        errors = []
-        for other, theirs in placed.items():
-            if other == key:
-                continue
-            errors += _neighbour_errors(mine, theirs, truth.poses[key], truth.poses[other])
-        if not errors:
-            errors = [_frame_error(result, key, units, truth)]
-        distance = float(np.median([e[0] for e in errors]))
-        angle = float(np.median([e[1] for e in errors]))
+        ids = sorted(mine)
+        estimate = se2.matrices_from_poses(np.array([mine[i] for i in ids]))
+        real = np.stack([truth.poses[key][i] for i in ids])
+        moved = T_world_map[None] @ estimate
+        distance = float(np.median(np.hypot(*(moved[:, :2, 2] - real[:, :2, 2]).T)))
+        turn = np.arctan2(moved[:, 1, 0], moved[:, 0, 0]) - np.arctan2(real[:, 1, 0], real[:, 0, 0])
+        angle = float(np.median(np.abs(se2.wrap_angle(turn))))
+        wrong = _wrong((distance, angle))
         out[f"{key[0]}/{key[1]}"] = {
-            "wrong": bool(np.isfinite(distance)) and _wrong((distance, angle)),
-            "judged": bool(np.isfinite(distance)),
+            "wrong": wrong,
+            "judged": True,
+            # placed where the building's own symmetry repeats what it saw (no map tells)
+            "symmetry_image": wrong and _symmetry_image(result, key, units, truth, symmetries),
             "error_m": round(distance, 3),
             "error_deg": round(math.degrees(angle), 2),
-            "neighbours": len(errors),
-            "reference": key[0] == result.reference,
+            "keyframes": len(ids),
+            "reference": key == ref,
         }
     return out
 
 
-def _neighbour_errors(
-    mine: dict[int, np.ndarray],
-    theirs: dict[int, np.ndarray],
-    truth_mine: dict[int, np.ndarray],
-    truth_theirs: dict[int, np.ndarray],
-) -> list[tuple[float, float]]:
-    """Relative poses in ``map`` of keyframe pairs (one of each map) within NEIGHBOURS of
-    each other at the truth, against the truth's."""
-    a = sorted(mine)
-    b = sorted(theirs)
-    pa = np.array([truth_mine[i][:2, 2] for i in a])
-    pb = np.array([truth_theirs[j][:2, 2] for j in b])
-    gap = np.hypot(pa[:, None, 0] - pb[None, :, 0], pa[:, None, 1] - pb[None, :, 1])
-    rows, cols = np.nonzero(gap <= NEIGHBOURS)
-    if len(rows) > 200:  # a sample is as good a median
-        pick = np.linspace(0, len(rows) - 1, 200).astype(int)
-        rows, cols = rows[pick], cols[pick]
-    out = []
-    for r, c in zip(rows, cols, strict=True):
-        i, j = a[r], b[c]
-        estimate = se2.invert(mine[i]) @ theirs[j]
-        real = se2.invert(truth_mine[i]) @ truth_theirs[j]
-        out.append(_error(estimate, real))
-    return out
-
-
-def _frame_error(
-    result: MergeResult, key: UnitKey, units: dict[UnitKey, MapUnit], truth: Truth
-) -> tuple[float, float]:
-    """A map's frame in ``map`` against the truth, relative to the reference's (each map's
-    true frame the rigid fit of its keyframes' true poses), at the map's keyframes' middle."""
-    assert result.reference is not None
+def _symmetry_image(
+    result: MergeResult,
+    key: UnitKey,
+    units: dict[UnitKey, MapUnit],
+    truth: Truth,
+    symmetries: list[np.ndarray] | None,
+) -> bool:
+    """Is a wrong placement of map ``key`` the truth moved by one of the building's
+    symmetries (relative to the reference's frame), within 0.30 m / 5 deg?"""
+    if not symmetries or result.reference is None:
+        return False
+    world = _frames_in_world(units, truth)
     ref = (result.reference, 0)
-
-    def frame_in_world(k: UnitKey) -> np.ndarray:
-        unit = units[k]
-        known = [r for r, i in enumerate(unit.index) if int(i) in truth.poses[k]]
-        if len(known) < 2:
-            return np.full((3, 3), np.nan)  # too few reference poses to place its frame
-        world = np.array([se2.pose_from_matrix(truth.poses[k][int(unit.index[r])]) for r in known])
-        return se2.rigid_fit(unit.poses[known], world)
-
-    T_map_key = se2.matrix_from_pose(*result.frames[key[0]][key[1]])
-    T_map_ref = se2.matrix_from_pose(*result.frames[ref[0]].get(ref[1], (0.0, 0.0, 0.0)))
-    T_world_map = frame_in_world(ref) @ se2.invert(T_map_ref)
+    if ref not in world or key not in world:
+        return False
+    T_map_ref = se2.matrix_from_pose(*result.frames[ref[0]].get(0, (0.0, 0.0, 0.0)))
+    T_world_map = world[ref] @ se2.invert(T_map_ref)
+    placed = T_world_map @ se2.matrix_from_pose(*result.frames[key[0]][key[1]])
     middle = se2.matrix_from_pose(*units[key].poses[:, :2].mean(axis=0), 0.0)
-    return _error(T_world_map @ T_map_key @ middle, frame_in_world(key) @ middle)
+    return any(not _wrong(_error(placed @ middle, S @ world[key] @ middle)) for S in symmetries)
+
+
+def _frames_in_world(units: dict[UnitKey, MapUnit], truth: Truth) -> dict[UnitKey, np.ndarray]:
+    """Each map's frame in ``world``: the rigid fit of its keyframes' true poses."""
+    out = {}
+    for key, unit in units.items():
+        known = [r for r, i in enumerate(unit.index) if int(i) in truth.poses[key]]
+        if len(known) >= 2:
+            world = np.array(
+                [se2.pose_from_matrix(truth.poses[key][int(unit.index[r])]) for r in known]
+            )
+            out[key] = se2.rigid_fit(unit.poses[known], world)
+    return out
 
 
 def judge_verdict(
@@ -353,7 +354,7 @@ def run_updates(
                 "time": round(clock, 3),
                 "seconds": round(seconds, 3),
                 "reference": result.reference,
-                "placements": judge_placements(result, units, truth),
+                "placements": judge_placements(result, units, truth, scenario.symmetries()),
                 "overlapping": sorted(overlap_component(walls_truth)),
                 "verdicts": [
                     verdict_record(v, units, truth)
@@ -449,9 +450,10 @@ def judge_one(stem: str, work: str, overrides: dict[str, Any]) -> str:
         kept = pickle.load(handle)
     old = json.loads((Path(work) / "records" / f"{stem}.json").read_text())
     config = config_from_flat(MergeConfig, overrides)
-    records, _ = run_updates(
-        kept["truth"], kept["times"], kept["snapshots"], config, kept["matches"]
+    truth = dataclasses.replace(
+        kept["truth"], symmetry=str(old["description"].get("symmetry", "none"))
     )
+    records, _ = run_updates(truth, kept["times"], kept["snapshots"], config, kept["matches"])
     _write_records(
         work, stem, old["scenario"], old["maps"], old["description"], records, old["closures"]
     )
@@ -469,6 +471,7 @@ def figures(records: list[dict[str, Any]]) -> dict[str, Any]:
     closures = wrong_closures = joins = wrong_joins = 0
     decisions = accepted_wrong = accepted = 0
     robots_ever_wrong = 0
+    symmetry_ever = symmetry_end = 0
     for case in records:
         updates = case["updates"]
         ever_wrong: set[str] = set()
@@ -477,6 +480,7 @@ def figures(records: list[dict[str, Any]]) -> dict[str, Any]:
                 published += 1
                 if p["wrong"]:
                     wrong_ever += 1
+                    symmetry_ever += p.get("symmetry_image", False)
                     ever_wrong.add(name.split("/")[0])
             for v in update["verdicts"]:
                 decisions += 1
@@ -487,6 +491,7 @@ def figures(records: list[dict[str, Any]]) -> dict[str, Any]:
             last = updates[-1]
             end_placed += len(last["placements"])
             end_wrong += sum(p["wrong"] for p in last["placements"].values())
+            symmetry_end += sum(p.get("symmetry_image", False) for p in last["placements"].values())
             for robot in last["overlapping"]:
                 overlapping += 1
                 if _placed_right(last, robot):
@@ -505,6 +510,8 @@ def figures(records: list[dict[str, Any]]) -> dict[str, Any]:
         "scenarios": len(records),
         "published": published,
         "wrong_ever": wrong_ever,
+        "symmetry_ever": symmetry_ever,
+        "symmetry_end": symmetry_end,
         "robots_ever_wrong": robots_ever_wrong,
         "end_placed": end_placed,
         "end_wrong": end_wrong,
@@ -555,9 +562,10 @@ def print_table(work: str) -> None:
         source = str(case["description"].get("source", "?"))
         groups.setdefault((source, case["maps"]), []).append(case)
     print(
-        "| source | maps | scenarios | published wrong, ever | robots ever wrong | wrong at "
-        "the end | overlapping robots merged | time to merge, median / p90 (s) | closures "
-        "wrong | joins wrong | sets accepted wrong |"
+        "| source | maps | scenarios | published wrong, ever (of them the building's own "
+        "symmetry) | robots ever wrong | wrong at the end (symmetry) | overlapping robots "
+        "merged | time to merge, median / p90 (s) | closures wrong | joins wrong | sets "
+        "accepted wrong |"
     )
     print("|" + " --- |" * 11)
     for (source, maps), members in sorted(groups.items()):
@@ -567,7 +575,8 @@ def print_table(work: str) -> None:
             share += f" ({100.0 * f['merged'] / f['overlapping']:.1f} %)"
         print(
             f"| {source} | {maps} | {f['scenarios']} | {_rate(f['wrong_ever'], f['published'])} "
-            f"| {f['robots_ever_wrong']} | {_rate(f['end_wrong'], f['end_placed'])} | {share} | "
+            f"({f['symmetry_ever']}) | {f['robots_ever_wrong']} | "
+            f"{_rate(f['end_wrong'], f['end_placed'])} ({f['symmetry_end']}) | {share} | "
             f"{f['delay_median_s']:.0f} / {f['delay_p90_s']:.0f} | "
             f"{_rate(f['wrong_closures'], f['closures'])} | {_rate(f['wrong_joins'], f['joins'])} "
             f"| {_rate(f['accepted_wrong'], f['accepted'])} |"

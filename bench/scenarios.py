@@ -66,6 +66,16 @@ class TruthTable:
 
     stamps: dict[str, FloatArray]  # robot -> (N,) s
     poses: dict[str, FloatArray]  # robot -> (N, 3) T_world_laser
+    # the building's own symmetry (generated buildings): "rotation_180", "rotation_90",
+    # "mirror" or "none"; a rotation is about the world origin
+    symmetry: str = "none"
+
+    def symmetries(self) -> list[FloatArray]:
+        """The rigid motions (3x3, about the world origin) that map the building onto itself,
+        the identity left out: a robot placed at one of them, composed with the truth, is
+        placed where the building looks the same (no map alone can tell)."""
+        turns = {"rotation_180": (np.pi,), "rotation_90": (0.5 * np.pi, np.pi, -0.5 * np.pi)}
+        return [se2.matrix_from_pose(0.0, 0.0, t) for t in turns.get(self.symmetry, ())]
 
     def truth_of(self, robot: str, stamps: FloatArray) -> FloatArray:
         """(N, 3) true laser poses at ``stamps`` (exact: every keyframe is a scan)."""
@@ -92,6 +102,7 @@ class Scenario:
         return TruthTable(
             {r: d.stamps for r, d in self.drives.items()},
             {r: d.T_world_laser for r, d in self.drives.items()},
+            str(self.description.get("symmetry", "none")),
         )
 
 
