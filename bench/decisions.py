@@ -382,13 +382,13 @@ def _stamps(frames: list[Keyframe]) -> np.ndarray:
 
 
 def scenario_of(name: str) -> Scenario | None:
-    """A scenario by name: ``generated:SEED``, ``world:WORLD:K:SEED``, ``carmen:LOG:K``,
-    ``bag:BAG:K``."""
+    """A scenario by name: ``generated:SEED``, ``generated_own:SEED``, ``world:WORLD:K:SEED``,
+    ``carmen:LOG:K``, ``bag:BAG:K``."""
     kind, *rest = name.split(":")
-    if kind == "generated":
+    if kind in ("generated", "generated_own"):
         from scenarios import generated_scenario
 
-        return generated_scenario(int(rest[0]))
+        return generated_scenario(int(rest[0]), own=kind == "generated_own")
     if kind == "world":
         return world_scenario(rest[0], int(rest[1]), int(rest[2]))
     if kind == "carmen":
@@ -584,8 +584,9 @@ def print_table(work: str) -> None:
 
 
 def _names(args: argparse.Namespace) -> list[str]:
-    if args.source == "generated":
-        return [f"generated:{seed}" for seed in range(args.first, args.first + args.count)]
+    if args.source in ("generated", "generated_own"):
+        seeds = range(args.first, args.first + args.count)
+        return [f"{args.source}:{seed}" for seed in seeds]
     if args.source == "carmen":
         return [f"carmen:{log}:{k}" for log in args.logs for k in args.robots]
     if args.source == "bag":

@@ -218,12 +218,14 @@ def _lasers() -> dict[str, object]:
     }
 
 
-def generated_scenario(seed: int) -> Scenario:
+def generated_scenario(seed: int, own: bool = False) -> Scenario:
     """A generated building (``core.buildings``) and K robots driving it (``core.building_runs``),
     everything drawn from ``seed``: the plan's kind and size (20-200 m), glass, furniture and
     people; 2-8 robots, the share of their drives on common ground (0 to 1), how long they
     drive (40-120 s at 0.8 m/s), the laser (SICK or Hokuyo geometry) and its rate (10, 20 or
-    40 Hz) or sparse keeping (a scan every 0.5 m or 15 deg, as the CARMEN "corrected" logs)."""
+    40 Hz) or sparse keeping (a scan every 0.5 m or 15 deg, as the CARMEN "corrected" logs).
+    With ``own`` (the robots map with their own local mappers, every scan: the benchmark's
+    cost), at most 5 robots and a dense rate of 10 Hz; the rest drawn alike."""
     from multi_robot_mapper.core.building_runs import (
         BuildingScanner,
         SparseSpacing,
@@ -243,6 +245,8 @@ def generated_scenario(seed: int) -> Scenario:
     laser_name = str(rng.choice(["sick", "hokuyo"]))
     rate = float(rng.choice([10.0, 20.0, 40.0]))
     sparse = bool(rng.random() < 0.3)
+    if own:
+        robots, rate = min(robots, 5), 10.0
     building = generate_building(seed, glass=glass, clutter=clutter, people=people)
     laser = dataclasses.replace(_lasers()[laser_name], rate=rate)  # type: ignore[type-var]
     robots = min(robots, len(building.nodes))
@@ -271,6 +275,7 @@ def generated_scenario(seed: int) -> Scenario:
         "rate_hz": rate,
         "sparse": sparse,
     }
+    description["own_variant"] = own
     return Scenario(f"generated_{seed}", out, description)
 
 
