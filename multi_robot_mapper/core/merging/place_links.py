@@ -83,6 +83,21 @@ class LinkCandidate:
     rank: int  # 0: the best placement of the place on that map, 1: its best rival
     information: FloatArray  # (3, 3) of the keyframe-to-keyframe edge, gtsam's tangent order
 
+    def identity(self) -> tuple[object, ...]:
+        """What the candidate says (its information matrix follows from the same match): two
+        updates that found the same candidates decide alike."""
+        return (
+            self.source,
+            self.centre,
+            self.target,
+            self.keyframe,
+            self.T_keyframe_centre,
+            self.confidence,
+            self.fit,
+            self.value,
+            self.rank,
+        )
+
 
 @dataclasses.dataclass(frozen=True)
 class Target:

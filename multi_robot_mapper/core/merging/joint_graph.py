@@ -1,0 +1,195 @@
+"""The joint graph of the maps joined to the reference (:mod:`~multi_robot_mapper.core.merging.
+joint`, step 4): every keyframe of those maps a node, edges between a map's keyframes from its
+published poses, every accepted link between maps under the DCS robust kernel; solved in one
+batch (gtsam, :class:`~multi_robot_mapper.core.pose_graph.PoseGraph`) from the maps placed
+rigidly along the accepted pairs."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from collections import OrderedDict
+from collections.abc import Mapping
+from typing import Any, cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.consistency import Accepted, placement
+from multi_robot_mapper.core.merging.place_links import LinkCandidate
+from multi_robot_mapper.core.merging.place_matching import cached, content_digest
+from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
+from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+@dataclasses.dataclass
+class Solution:
+    """Optimised keyframe poses and fitted frames of the maps placed in ``map``."""
+
+    poses: dict[UnitKey, FloatArray]  # (K, 3) T_map_keyframe, rows as in the unit
+    frames: dict[UnitKey, FloatArray]  # 3x3 T_map_unit (rigid fit of its keyframes)
+    order: list[UnitKey]  # placing order (the reference first)
+    accepted: list[LinkCandidate] = dataclasses.field(default_factory=list)  # in the graph
+    nodes: int = 0
+    edges: int = 0
+    iterations: int = 0
+
+
+def solved(
+    units: Mapping[UnitKey, MapUnit],
+    group: list[UnitKey],
+    ref_unit: UnitKey | None,
+    accepted: Accepted,
+    config: MergeConfig,
+    last: tuple[Any, Solution] | None,
+    intra: OrderedDict[Any, Any],
+) -> tuple[Any, Solution]:
+    """:func:`_solve`, or ``last`` (the last update's solution and what it was solved from)
+    where the graph is the same; with what it was solved from. ``intra``: each map's edges
+    kept per content, from one update to the next."""
+    key = (
+        tuple((k, content_digest(units[k])) for k in sorted(group)),
+        ref_unit,
+        tuple(tuple(c.identity() for c in verdict.links) for verdict in accepted.pairs),
+        tuple((k, tuple((o, v.pair) for o, v in accepted.tree[k])) for k in sorted(accepted.tree)),
+        config,
+    )
+    if last is not None and last[0] == key:
+        return last
+    return key, _solve(units, group, ref_unit, accepted, config, intra)
+
+
+def _solve(
+    units: Mapping[UnitKey, MapUnit],
+    group: list[UnitKey],
+    ref_unit: UnitKey | None,
+    accepted: Accepted,
+    config: MergeConfig,
+    intra: OrderedDict[Any, Any],
+) -> Solution:
+    """The graph of every keyframe of the maps joined to ``ref_unit``, solved (module doc)
+    from the maps placed rigidly along the accepted pairs: never from the previous update's
+    poses, so that the merge is a function of its inputs and matches (a merger started again
+    on the same maps puts every robot in the same place)."""
+    if ref_unit is None:
+        return Solution({}, {}, [])
+    rigid = _rigid_placements(ref_unit, accepted, units, set(group))
+    order = list(rigid)
+    offsets: dict[UnitKey, int] = {}
+    total = 0
+    for key in order:
+        offsets[key] = total
+        total += len(units[key].index)
+    graph = PoseGraph(robust_scale=config.link_robust_scale, kernel="dcs")
+    for key in order:
+        unit = units[key]
+        start = [se2.pose_from_matrix(rigid[key] @ se2.matrix_from_pose(*p)) for p in unit.poses]
+        for row, placed in enumerate(start):
+            anchored = key == ref_unit and row == 0
+            x, y, theta = (float(v) for v in placed)
+            graph.add_node(offsets[key] + row, (x, y, theta), anchored=anchored)
+        for edge in _intra_edges(unit, offsets[key], config, intra):
+            graph.add_edge(edge)
+    accepted_links: list[LinkCandidate] = []
+    placed_units = set(order)
+    for verdict in accepted.pairs:
+        for candidate in verdict.links:
+            if candidate.source not in placed_units or candidate.target not in placed_units:
+                continue
+            target, source = units[candidate.target], units[candidate.source]
+            graph.add_edge(
+                Edge(
+                    offsets[candidate.target] + target.row(candidate.keyframe),
+                    offsets[candidate.source] + source.row(candidate.centre),
+                    candidate.T_keyframe_centre,
+                    candidate.information,
+                    robust=True,
+                )
+            )
+            accepted_links.append(candidate)
+    iterations = graph.solve() if accepted_links else 0
+    estimate = graph.poses()
+    poses = {
+        key: np.array([estimate[offsets[key] + row] for row in range(len(units[key].index))])
+        for key in order
+    }
+    frames = {key: se2.rigid_fit(units[key].poses, poses[key]) for key in order}
+    # ``map`` is the reference map's frame exactly: its fitted frame is the identity.
+    T_fix = se2.invert(frames[ref_unit])
+    for key in order:
+        frames[key] = np.eye(3) if key == ref_unit else T_fix @ frames[key]
+        poses[key] = np.array(
+            [se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in poses[key]]
+        )
+    return Solution(poses, frames, order, accepted_links, total, len(graph.edges), iterations)
+
+
+def _rigid_placements(
+    ref_unit: UnitKey,
+    accepted: Accepted,
+    units: Mapping[UnitKey, MapUnit],
+    members: set[UnitKey],
+) -> dict[UnitKey, FloatArray]:
+    """Each map of ``members`` joined to the reference placed rigidly through the accepted
+    pairs' best links (breadth first: the placing order)."""
+    placed: dict[UnitKey, FloatArray] = {ref_unit: np.eye(3)}
+    queue = [ref_unit]
+    while queue:
+        key = queue.pop(0)
+        for other, verdict in sorted(accepted.tree[key], key=lambda item: item[0]):
+            if other in placed or other not in members:
+                continue
+            placed[other] = placed[key] @ placement(verdict, key, units)
+            queue.append(other)
+    return placed
+
+
+def _intra_pairs(unit: MapUnit, radius: float) -> list[tuple[int, int]]:
+    """Rows of a map's keyframes joined by an edge: consecutive ones, and each keyframe with up
+    to three earlier ones within ``radius`` (not already consecutive)."""
+    pairs = [(row, row + 1) for row in range(len(unit.index) - 1)]
+    if radius > 0.0 and len(unit.index) > 2:
+        xy = unit.poses[:, :2]
+        for row in range(2, len(xy)):
+            gap = np.hypot(*(xy[: row - 1] - xy[row]).T)
+            near = np.flatnonzero(gap <= radius)
+            for other in near[np.argsort(gap[near], kind="stable")][:3]:
+                pairs.append((int(other), row))
+    return pairs
+
+
+def _intra_edges(
+    unit: MapUnit, offset: int, config: MergeConfig, kept: OrderedDict[Any, Any]
+) -> list[Edge]:
+    """The edges between keyframes of one map (:func:`_intra_pairs`), from their published
+    poses, with a standard deviation growing with the distance between them; the same map
+    seen again (most maps, most updates) reuses them."""
+    content = hashlib.sha1(unit.poses.tobytes()).hexdigest()
+    key = (unit.key, content, config)
+    pairs, relative, information = cast(
+        tuple[IntArray, FloatArray, FloatArray],
+        cached(kept, key, lambda: _intra_arrays(unit, config)),
+    )
+    return [
+        Edge(offset + int(a), offset + int(b), (x, y, t), info, robust=False)
+        for (a, b), (x, y, t), info in zip(pairs, relative.tolist(), information, strict=True)
+    ]
+
+
+def _intra_arrays(unit: MapUnit, config: MergeConfig) -> tuple[IntArray, FloatArray, FloatArray]:
+    """Rows joined, their relative poses and information matrices (vectorised)."""
+    pairs = np.array(_intra_pairs(unit, config.graph_radius), dtype=np.int64).reshape(-1, 2)
+    a, b = unit.poses[pairs[:, 0]], unit.poses[pairs[:, 1]]
+    relative = se2.between_each(a, b)
+    distance = np.hypot(*(b[:, :2] - a[:, :2]).T)
+    sigma = config.graph_sigma + config.graph_drift * distance
+    angle = config.graph_angle_sigma + config.graph_angle_drift * distance
+    information = np.zeros((len(pairs), 3, 3))
+    information[:, 0, 0] = information[:, 1, 1] = sigma**-2
+    information[:, 2, 2] = angle**-2
+    return pairs, relative, information
