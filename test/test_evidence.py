@@ -149,6 +149,12 @@ def test_the_join_model_is_data_the_package_ships() -> None:
     assert model.features and len(model.weights) == len(model.features)
     assert JoinModel.load(model.dumps()) == model
     # More wall that no rival explains never makes a placement less likely.
-    weak = {"margin": 2.0, "log_score": 3.0, "rival_ratio": 0.9, "conflict": 0.0, "conflict_share": 0.0}
+    weak = {
+        "margin": 2.0,
+        "log_score": 3.0,
+        "rival_ratio": 0.9,
+        "conflict": 0.0,
+        "conflict_share": 0.0,
+    }
     strong = dict(weak, margin=40.0, rival_ratio=0.3)
     assert model.probability(strong) > model.probability(weak)

@@ -7,6 +7,7 @@ so that Ctrl-C at any moment, even while numpy loads, ends with one line and exi
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -189,14 +190,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(words)
         name = f"mrm {args.command}"
         return int(args.func(args))
-    except Terminated:
-        print(f"{name}: terminated; nothing half-written was left", file=sys.stderr)
-        return 143
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        terminated = isinstance(exc, Terminated)
+        print(
+            f"{name}: {'terminated' if terminated else 'interrupted'}; nothing half-written "
+            "was left",
+            file=sys.stderr,
+        )
+        code = 143 if terminated else 130
         if as_program and in_main_thread:
+            # Everything was cleaned up on the way here. Exit now: a second Ctrl-C during the
+            # interpreter's shutdown would print a traceback, and an interrupt that went
+            # through code a C++ extension ran with PyRun_String (gtsam's pybind11, while
+            # importing) makes the interpreter kill itself with SIGINT at exit (-2, not 130).
             signal.signal(signal.SIGINT, signal.SIG_IGN)
-        print(f"{name}: interrupted; nothing half-written was left", file=sys.stderr)
-        return 130
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
+        return code
     except BrokenPipeError:  # `mrm ... | head` closed the pipe: not an error
         sys.stderr.close()
         return 0
