@@ -298,3 +298,31 @@ def test_ctrl_c_at_any_moment_is_one_line_and_exit_130(tmp_path: Path, moment: s
     assert err.strip().splitlines()[-1] == "mrm replay: interrupted; nothing half-written was left"
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
     assert not (tmp_path / "out").exists()
+
+
+def test_the_viewer_configs_show_what_record_writes_and_are_installed() -> None:
+    import yaml
+
+    from multi_robot_mapper.ros import recording
+
+    repo = Path(__file__).resolve().parents[1]
+    layout = json.loads((repo / "config" / "foxglove_layout.json").read_text())
+    panels = layout["configById"]
+    scene = panels["3D!mrm_map"]
+    assert scene["followTf"] == "map"
+    shown = {topic for topic, settings in scene["topics"].items() if settings["visible"]}
+    assert {recording.GLOBAL_MAP[0], recording.GLOBAL_GRID[0]} <= shown
+    assert recording.trajectory_topic("robot1") in shown
+    assert panels["DiagnosticSummary!mrm_diagnostics"]["topicToRender"] == "/diagnostics"
+    rviz = yaml.safe_load((repo / "config" / "multi_robot_mapper.rviz").read_text())
+    manager = rviz["Visualization Manager"]
+    assert manager["Global Options"]["Fixed Frame"] == "map"
+    displays = manager["Displays"]
+    displays += [d for group in displays for d in group.get("Displays", [])]
+    topics = {d["Topic"]["Value"]: d for d in displays if "Topic" in d}
+    for topic in (recording.GLOBAL_MAP[0], recording.GLOBAL_GRID[0]):
+        assert topics[topic]["Topic"]["Durability Policy"] == "Transient Local"  # latched
+    assert recording.trajectory_topic("robot1") in topics
+    assert any(d["Class"] == "rviz_default_plugins/TF" for d in displays)
+    setup = (repo / "setup.py").read_text()
+    assert "config/foxglove_layout.json" in setup and "config/multi_robot_mapper.rviz" in setup
