@@ -326,3 +326,21 @@ def test_the_viewer_configs_show_what_record_writes_and_are_installed() -> None:
     assert any(d["Class"] == "rviz_default_plugins/TF" for d in displays)
     setup = (repo / "setup.py").read_text()
     assert "config/foxglove_layout.json" in setup and "config/multi_robot_mapper.rviz" in setup
+
+
+def test_a_recorded_message_is_logged_at_its_header_stamp() -> None:
+    from builtin_interfaces.msg import Time
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import OccupancyGrid
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Header
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    from multi_robot_mapper.ros.recording import cdr_header_stamp
+
+    header = Header(stamp=Time(sec=1_000_000_123, nanosec=250_000_000), frame_id="map")
+    markers = MarkerArray(markers=[Marker(header=header, ns="global_map/robot1")])
+    assert cdr_header_stamp(serialize_message(markers), array=True) == 1_000_000_123.25
+    assert cdr_header_stamp(serialize_message(MarkerArray()), array=True) is None
+    for message in (OccupancyGrid(header=header), DiagnosticArray(header=header)):
+        assert cdr_header_stamp(serialize_message(message)) == 1_000_000_123.25

@@ -15,24 +15,40 @@ own message builders (:mod:`multi_robot_mapper.ros.markers`, :mod:`.diagnostics`
   (``map_merger``, ``map_merger/<robot>``).
 
 Messages are serialised by ``rclpy.serialization`` (no node, no context), TF by ``rosbags``
-(:func:`multi_robot_mapper.io.output_bag.tf_message`).
+(:func:`multi_robot_mapper.io.output_bag.tf_message`). :class:`LiveRecorder` records the same
+topics from running nodes (``mrm demo``).
 """
 
 from __future__ import annotations
 
+import struct
+import threading
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
-from nav_msgs.msg import Path
+from nav_msgs.msg import OccupancyGrid, Path
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Header
-from visualization_msgs.msg import Marker
+from visualization_msgs.msg import Marker, MarkerArray
 
+from multi_robot_mapper.core.geometry import stamp_seconds
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging.occupancy import global_grid
 from multi_robot_mapper.core.snapshots import Snapshot
-from multi_robot_mapper.io.messages import pose_msg, stamp_from_seconds
+from multi_robot_mapper.io.messages import (
+    pose_from_msg,
+    pose_msg,
+    seconds_from_stamp,
+    stamp_from_seconds,
+)
 from multi_robot_mapper.io.output_bag import TF_TYPE, FrameTransform, OutputBag, tf_message, thinned
 from multi_robot_mapper.ros import diagnostics
+from multi_robot_mapper.ros.map_merger import LATCHED_QOS, POSE_QOS
 from multi_robot_mapper.ros.markers import (
     MarkerCache,
     MarkerKey,
@@ -174,3 +190,103 @@ class SnapshotRecorder:
             )
             statuses.append(diagnostics.merger_status(health))
         return statuses
+
+
+def cdr_header_stamp(data: bytes, array: bool = False) -> float | None:
+    """The header stamp (s) of a serialised message that starts with a ``std_msgs/Header``
+    (``array``: a ``MarkerArray``, whose first marker's header is read; None when empty): CDR
+    is a 4-byte encapsulation (its second byte says little or big endian), then, for an
+    array, its uint32 length, then the stamp's int32 sec and uint32 nanosec."""
+    order = "<" if data[1] & 1 else ">"
+    start = 4
+    if array:
+        if struct.unpack_from(order + "I", data, start)[0] == 0:
+            return None
+        start += 4
+    sec, nanosec = struct.unpack_from(order + "iI", data, start)
+    return stamp_seconds(sec, nanosec)
+
+
+class LiveRecorder(Node):
+    """Records what a running ``map_merger`` of ``robots`` publishes into ``bag`` as it arrives
+    (``mrm demo``), with the topics of :class:`SnapshotRecorder`: ``/global_map``,
+    ``/global_grid`` and ``/diagnostics`` as published; ``/tf`` from ``/robot_frames/<robot>``
+    (``map`` -> ``<robot>/map``) and ``/<robot>/pose`` (its frame -> ``<robot>/laser``);
+    ``/trajectories/<robot>`` the robot's ``/robot_poses/<robot>`` so far, written with each
+    global map. Each message is logged at its header stamp (the inputs' time)."""
+
+    def __init__(
+        self, robots: Sequence[str], bag: OutputBag, map_frame: str = "map", **kwargs: Any
+    ):
+        super().__init__("output_recorder", **kwargs)
+        self.bag = bag
+        self.map_frame = map_frame
+        self._lock = threading.Lock()
+        self._paths: dict[str, list[PoseStamped]] = {r: [] for r in robots}
+        # Taken as they arrive, serialised (raw): nothing decoded or encoded again.
+        for (topic, _), kind, qos in (
+            (GLOBAL_MAP, MarkerArray, LATCHED_QOS),
+            (GLOBAL_GRID, OccupancyGrid, LATCHED_QOS),
+            (DIAGNOSTICS, DiagnosticArray, QoSProfile(depth=50)),
+        ):
+            self.create_subscription(
+                kind, topic, lambda data, t=topic: self._on_raw(t, data), qos, raw=True
+            )
+        for robot in robots:
+            self.create_subscription(
+                PoseStamped,
+                f"/robot_frames/{robot}",
+                lambda msg, r=robot: self._on_frame(r, msg),
+                LATCHED_QOS,
+            )
+            self.create_subscription(
+                PoseStamped, f"/{robot}/pose", lambda msg, r=robot: self._on_pose(r, msg), POSE_QOS
+            )
+            self.create_subscription(
+                PoseStamped,
+                f"/robot_poses/{robot}",
+                lambda msg, r=robot: self._on_placed(r, msg),
+                POSE_QOS,
+            )
+
+    def _write(self, topic: str, msgtype: str, stamp: float, data: bytes, latched: bool) -> None:
+        with self._lock:
+            self.bag.write(topic, msgtype, stamp, data, latched)
+
+    def _on_raw(self, topic: str, data: bytes) -> None:
+        """A serialised /global_map, /global_grid or /diagnostics, logged at its header stamp
+        (the first marker's for a MarkerArray; an empty array carries none and is skipped)."""
+        kinds = {
+            GLOBAL_MAP[0]: GLOBAL_MAP,
+            GLOBAL_GRID[0]: GLOBAL_GRID,
+            DIAGNOSTICS[0]: DIAGNOSTICS,
+        }
+        stamp = cdr_header_stamp(data, array=topic == GLOBAL_MAP[0])
+        if stamp is None:
+            return
+        self._write(*kinds[topic], stamp, data, topic != DIAGNOSTICS[0])
+        if topic != GLOBAL_MAP[0]:
+            return
+        with self._lock:
+            paths = {r: list(p) for r, p in self._paths.items() if p}
+        for robot, poses in paths.items():
+            path = Path(header=Header(frame_id=self.map_frame, stamp=stamp_from_seconds(stamp)))
+            path.poses = [poses[i] for i in thinned(len(poses), MAX_PATH_POSES)]
+            self._write(trajectory_topic(robot), PATH_TYPE, stamp, serialize_message(path), True)
+
+    def _on_frame(self, robot: str, msg: PoseStamped) -> None:
+        self._transform(msg, robot_map_frame(robot))
+
+    def _on_pose(self, robot: str, msg: PoseStamped) -> None:
+        self._transform(msg, laser_frame(robot))
+
+    def _on_placed(self, robot: str, msg: PoseStamped) -> None:
+        with self._lock:
+            self._paths[robot].append(msg)
+
+    def _transform(self, msg: PoseStamped, child: str) -> None:
+        stamp = seconds_from_stamp(msg.header.stamp)
+        pose = pose_from_msg(msg.pose)
+        placed = (float(pose[0]), float(pose[1]), float(pose[2]))
+        data = tf_message([FrameTransform(msg.header.frame_id, child, placed, stamp)])
+        self._write(TF, TF_TYPE, stamp, data, False)
