@@ -17,11 +17,13 @@ from pathlib import Path
 DESCRIPTION = (
     "Multi-robot 2-D mapping from laser scans without odometry: bags in, one merged map out."
 )
-EPILOG = (
-    "Start with: mrm replay BAG --out DIR --record DIR/replay.mcap (a merged map.png, map.json, "
-    "trajectories and an MCAP file for Foxglove or ros2 bag play); mrm COMMAND --help for a "
-    "command's options."
-)
+EPILOG = """\
+Start with:
+  mrm replay BAG --out DIR --record DIR/replay.mcap
+    a merged map.png, map.json, trajectories, and an MCAP file for Foxglove or ros2 bag play
+  mrm COMMAND --help
+    a command's options, each with its default
+"""
 # The errors a user can cause, as (module, class): printed as one line, exit code 2. Looked up
 # in sys.modules, so that none of those modules is imported before the command needs it (an
 # exception of a class whose module was never imported cannot be raised).
