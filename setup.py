@@ -18,7 +18,7 @@ setup(
         # Parameters, and the viewers' configurations for the outputs (mrm replay --record).
         (
             f"share/{PACKAGE}/config",
-            glob("config/*.yaml") + ["config/foxglove_layout.json", "config/multi_robot_mapper.rviz"],
+            [*glob("config/*.yaml"), *glob("config/*.json"), *glob("config/*.rviz")],
         ),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
