@@ -15,7 +15,11 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        # Parameters, and the viewers' configurations for the outputs (mrm replay --record).
+        (
+            f"share/{PACKAGE}/config",
+            [*glob("config/*.yaml"), *glob("config/*.json"), *glob("config/*.rviz")],
+        ),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     # Runtime dependencies are declared in package.xml (colcon/rosdep) and in

@@ -388,8 +388,11 @@ def _quick_demo(monkeypatch: pytest.MonkeyPatch) -> None:
         recorded.update(simulate(dataclasses.replace(scenario, duration=1.0, stagger=0.5)))
         return recorded
 
-    def played(recordings: dict, scenario: object, saved_map: Path, logs: object) -> object:
+    def played(
+        recordings: dict, scenario: object, saved_map: Path, logs: object, record: Path
+    ) -> object:
         atomic_write_text(saved_map, json.dumps({"seed": len(recorded)}))
+        atomic_write_text(record, "an MCAP file")
         observer = type("Observer", (), {"diagnostics": {}})()
         sent = {r: len(rec.scans) for r, rec in recordings.items()}
         return demo.LiveOutcome(observer, PlayStats(sent, [], 1.0), 0.0, sent, True)

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
+from test_cli import frame_segments, read_mcap
 
 from multi_robot_mapper.cli.demo import DemoScenario, run_demo
 from multi_robot_mapper.io.results import read_results
@@ -28,7 +29,8 @@ def test_the_demo_merges_every_robot_live_and_writes_its_files(tmp_path: Path) -
     assert result.live.settled
     assert result.merged == ["robot1", "robot2", "robot3"], result.table
     assert result.metrics.ate_rmse_m < 0.10
-    for name in ("bag", "result", "global map", "snapshots", "animation", "occupancy grid"):
+    files = ("bag", "result", "global map", "snapshots", "animation", "occupancy grid", "recording")
+    for name in files:
         assert result.files[name].exists(), name
     assert (tmp_path / "bag" / "metadata.yaml").exists()
     back = read_results(tmp_path / "result")
@@ -43,3 +45,16 @@ def test_the_demo_merges_every_robot_live_and_writes_its_files(tmp_path: Path) -
     # What the robots' mappers said on /diagnostics: every scan they got was counted.
     assert sum(result.live.scans_received.values()) > 0.3 * sum(result.live.play.published.values())
     assert any("map_merger/robot3" in line for line in result.statuses)
+    # The merger's outputs as they arrived, in an MCAP file: the last global map shows every
+    # robot's keyframes; TF places each robot's map frame in map.
+    messages = read_mcap(result.files["recording"])
+    topics = {topic for topic, _, _ in messages}
+    robots = ["robot1", "robot2", "robot3"]
+    assert {"/global_map", "/global_grid", "/tf", "/diagnostics"} <= topics
+    assert {f"/trajectories/{r}" for r in robots} <= topics
+    maps = [m for topic, _, m in messages if topic == "/global_map"]
+    assert len(maps) > 1 and sorted(frame_segments(maps[-1].markers)) == robots
+    children = {
+        t.child_frame_id for topic, _, m in messages if topic == "/tf" for t in m.transforms
+    }
+    assert {f"{r}/map" for r in robots} | {f"{r}/laser" for r in robots} <= children

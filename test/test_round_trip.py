@@ -78,7 +78,7 @@ def test_simulate_replay_local_evaluate_scores_each_robot_in_its_own_frame(
     args = ("--robots", 2, "--out", bag, "--duration", 4, "--rate", 10, "--seed", 3)
     assert mrm(capsys, "simulate", *args)[0] == 0
     out = tmp_path / "local"
-    code, _, err = mrm(capsys, "replay", bag, "--out", out)  # the default method is local
+    code, _, err = mrm(capsys, "replay", bag, "--out", out, "--method", "local")
     assert code == 0, err
     robots = json.loads((out / "robots.json").read_text())
     assert robots == {"robot1": "unmerged", "robot2": "unmerged"}

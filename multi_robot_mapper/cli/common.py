@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,52 @@ MERGER_PREFIX = "merge."  # --set names of the merging parameters (map_merger's 
 
 class CliError(Exception):
     """A user error: printed as one line on stderr, exit code 2."""
+
+
+def missing_input(path: str | Path, kind: str) -> CliError:
+    """The one wording of an input that is not there: ``no such <kind>: <path>``."""
+    return CliError(f"no such {kind}: {path}")
+
+
+# reStructuredText in the docstrings that describe commands: ``literal`` and :role:`target`.
+_LITERAL = re.compile(r"``(.+?)``", re.DOTALL)
+_ROLE = re.compile(r":[a-z]+:`~?([^`]+)`")
+
+
+def plain_text(text: str) -> str:
+    """``text`` without reStructuredText markup (``x`` -> x, :func:`a.b` -> a.b)."""
+    return _ROLE.sub(r"\1", _LITERAL.sub(r"\1", text))
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Descriptions as written (paragraphs kept) but without reStructuredText, and every
+    option's default said: an option whose help does not name its default gets
+    ``(default: X)``; a flag (store_true) is off unless given, which its help says."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        return super()._fill_text(plain_text(text), width, indent)
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = plain_text(action.help or "")
+        takes_value = action.nargs != 0
+        if (
+            action.option_strings
+            and takes_value
+            and not action.required
+            and action.default not in (None, [], argparse.SUPPRESS)
+            and "default" not in text
+        ):
+            text += " (default: %(default)s)"
+        return text
+
+
+def finish_parsers(parser: argparse.ArgumentParser) -> None:
+    """Every sub-command parser below ``parser`` formats its help with :class:`HelpFormatter`."""
+    parser.formatter_class = HelpFormatter
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                finish_parsers(sub)
 
 
 # Every number a command-line option takes, with its allowed range: one table, checked before
@@ -31,6 +78,8 @@ CLI_LIMITS: dict[str, tuple[float, float, str]] = {
     "speed": (0.01, 100.0, "times real time"),
     "noise": (0.0, 1.0, "m"),
     "duration": (0.1, 3600.0, "s"),
+    # replay --record-period: seconds of bag time between two recorded merges
+    "record_period": (0.1, 3600.0, "s"),
     "clutter": (0.0, 2.0, "objects/m^2"),
     # simulate --world generated: a building's largest extent, its walking people, and the
     # driving between kept scans of a sparse run
@@ -83,12 +132,20 @@ def check_output(path: Path, *, kind: str = "folder", overwrite: bool = False) -
 def add_config_options(parser: argparse.ArgumentParser, merging: bool = False) -> None:
     """``--config YAML`` and repeatable ``--set NAME=VALUE`` (same names as ROS parameters);
     with ``merging`` also ``--merger-config YAML``."""
-    parser.add_argument("--config", type=Path, help="YAML parameters (config/robot_mapper.yaml)")
+    parser.add_argument(
+        "--config",
+        type=Path,
+        metavar="YAML",
+        help="the robot mapper's parameters, as config/robot_mapper.yaml (default: the "
+        "built-in defaults, which that file holds)",
+    )
     if merging:
         parser.add_argument(
             "--merger-config",
             type=Path,
-            help="YAML merging parameters (config/map_merger.yaml; its merge.* section is used)",
+            metavar="YAML",
+            help="the merging parameters, as config/map_merger.yaml; its merge.* section is used "
+            "(default: the built-in defaults, which that file holds)",
         )
     merge_example = " or --set merge.link_min_value=20" if merging else ""
     add_set_option(
@@ -107,7 +164,7 @@ def add_set_option(parser: argparse.ArgumentParser, help_text: str) -> None:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help=help_text,
+        help=help_text + " (default: none)",
     )
 
 

@@ -12,12 +12,14 @@ comes back over the nodes' topics (``/global_map``, ``/robot_frames/<robot>``,
 Written to ``--out``: ``bag/`` (the simulated scans and ground truth), ``result/`` (map.json,
 robots.json, trajectories, metrics.json: what ``mrm replay`` writes, so ``mrm evaluate
 result --bag bag`` scores it again), ``global_map.png``, ``joining.png`` (snapshots as robots
-join), ``joining.gif``, ``global_grid.png`` and ``saved_map.json`` (the merger's
-``save_map``).
+join), ``joining.gif``, ``global_grid.png``, ``saved_map.json`` (the merger's
+``save_map``) and ``outputs.mcap`` (the merger's outputs as they arrived, for Foxglove and
+``ros2 bag play``: ``config/foxglove_layout.json``, ``config/multi_robot_mapper.rviz``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import threading
 import time
@@ -35,12 +37,14 @@ from multi_robot_mapper.core.worlds import WORLDS
 from multi_robot_mapper.evaluation.metrics import Metrics, evaluate
 from multi_robot_mapper.io import pictures
 from multi_robot_mapper.io.bags import RobotRecording, recording_of, write_recordings
+from multi_robot_mapper.io.output_bag import OutputBag
 from multi_robot_mapper.io.outputs import atomic_write_text, staged_entries
 from multi_robot_mapper.io.results import ReplayResult, write_results
 from multi_robot_mapper.ros.live import GlobalMapView, Observer, PlayStats, ScanPlayer, timeline
 from multi_robot_mapper.ros.map_merger import MapMerger
 from multi_robot_mapper.ros.markers import grid_from_msg
 from multi_robot_mapper.ros.processes import NodeProcesses
+from multi_robot_mapper.ros.recording import LiveRecorder
 from multi_robot_mapper.ros.testing import default_domain_id, isolated_context
 
 FloatArray = np.typing.NDArray[np.float64]
@@ -112,10 +116,24 @@ def play_live(
     scenario: DemoScenario,
     saved_map: Path,
     log_dir: Path | None = None,
+    record: Path | None = None,
 ) -> LiveOutcome:
     """Play the recordings live into a robot_mapper process per robot (as on the robots) and
     a map_merger in this process, watch their topics; the merger saves its map to
-    ``saved_map`` at the end."""
+    ``saved_map`` at the end. ``record``: an MCAP file of the merger's outputs as they
+    arrived (:class:`~multi_robot_mapper.ros.recording.LiveRecorder`)."""
+    with contextlib.ExitStack() as stack:
+        bag = None if record is None else stack.enter_context(OutputBag(record))
+        return _play_live(recordings, scenario, saved_map, log_dir, bag)
+
+
+def _play_live(
+    recordings: dict[str, RobotRecording],
+    scenario: DemoScenario,
+    saved_map: Path,
+    log_dir: Path | None,
+    bag: OutputBag | None,
+) -> LiveOutcome:
     robots = list(recordings)
     domain = default_domain_id()
     mappers = NodeProcesses.robot_mappers(robots, domain, log_dir=log_dir)
@@ -128,7 +146,10 @@ def play_live(
             driver = Node("demo_player", context=context)
             player = ScanPlayer(driver, robots, scenario.speed)
             executor = MultiThreadedExecutor(num_threads=3, context=context)
-            for node in (merger, observer, driver):
+            nodes: list[Node] = [merger, observer, driver]
+            if bag is not None:
+                nodes.append(LiveRecorder(robots, bag, context=context))
+            for node in nodes:
                 executor.add_node(node)
             spinner = threading.Thread(target=executor.spin, daemon=True)
             spinner.start()
@@ -147,7 +168,7 @@ def play_live(
             finally:
                 executor.shutdown()
                 spinner.join(timeout=10.0)
-                for node in (merger, observer, driver):
+                for node in nodes:
                     node.destroy_node()
     finally:
         mappers.stop()
@@ -233,7 +254,8 @@ def run_demo(out_dir: Path, scenario: DemoScenario | None = None) -> DemoResult:
         recordings = simulate_scenario(scenario)
         made = {"bag": write_recordings(staging / "bag", recordings)}
         made["saved map"] = staging / "saved_map.json"
-        live = play_live(recordings, scenario, made["saved map"], logs)
+        made["recording"] = staging / "outputs.mcap"
+        live = play_live(recordings, scenario, made["saved map"], logs, made["recording"])
 
         result = live_results(live.observer)
         made["result"] = staging / "result"

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from multi_robot_mapper.cli.common import CliError, check_limits, check_output
+from multi_robot_mapper.cli.common import CliError, check_limits, check_output, missing_input
 from multi_robot_mapper.cli.recordings import add_recording_options, load_recordings
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.scan import ScanError, scan_points
@@ -66,36 +66,45 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "evaluate",
         help="score a replay result folder against the bag's reference poses and relations",
+        description=__doc__,
     )
-    parser.add_argument("directory", type=Path, help="folder written by mrm replay --out")
+    parser.add_argument(
+        "directory",
+        type=Path,
+        metavar="DIR",
+        help="the result folder mrm replay --out wrote (map.json, robots.json, trajectories/)",
+    )
     parser.add_argument(
         "--bag",
         dest="bags",
         action="append",
         default=[],
         type=Path,
+        metavar="BAG",
         help="the bag that was replayed, with reference poses (repeat for one bag per robot, "
-        "in the replay's order)",
+        "in the replay's order; default: none, then --relations is needed)",
     )
     add_recording_options(parser)
     parser.add_argument(
         "--relations",
         type=Path,
         metavar="FILE",
-        help="relations to score the trajectories on (t1 t2 x y z roll pitch yaw per line)",
+        help="relations to score the trajectories on (t1 t2 x y z roll pitch yaw per line; "
+        "default: none)",
     )
     parser.add_argument(
         "--relation-stamps",
         type=Path,
         metavar="LOG",
         help="CARMEN log whose k-th FLASER line is the bag's k-th scan: its timestamps are the "
-        "relations' clock (needs --bag of one robot)",
+        "relations' clock (needs --bag of one robot; default: the bag's own stamps)",
     )
     parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
     parser.add_argument(
         "--max-points",
         type=int,
         default=MAX_REFERENCE_POINTS,
+        metavar="N",
         help=f"reference points kept, thinning beams evenly (default {MAX_REFERENCE_POINTS})",
     )
     parser.set_defaults(func=run)
@@ -305,13 +314,43 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise CliError("--relation-stamps needs --relations and the one bag that was replayed")
     for path in (args.relations, args.relation_stamps):
         if path is not None and not Path(path).is_file():
-            raise CliError(f"no such file: {path}")
+            raise missing_input(path, "file")
+
+
+def check_result_folder(directory: Path) -> None:
+    """Refuse, naming what was expected, a ``directory`` that is not a replay's result folder:
+    a bag given in its place, a file, a folder without ``map.json``."""
+    from multi_robot_mapper.io.results import MAP_FILE
+
+    expected = (
+        f"mrm evaluate expects the folder that mrm replay --out wrote ({MAP_FILE}, robots.json, "
+        "trajectories/)"
+    )
+    if not directory.exists():
+        raise CliError(f"no such result folder: {directory} ({expected})")
+    if (directory / MAP_FILE).is_file():
+        return
+    bag_files = (".mcap", ".db3", ".bag")
+    if directory.is_file():
+        bag = directory.suffix in bag_files
+    else:
+        bag = (directory / "metadata.yaml").is_file() or any(
+            p.suffix in bag_files for p in directory.iterdir()
+        )
+    if bag:
+        raise CliError(
+            f"{directory} is a bag, not a replay result: {expected}; run mrm replay "
+            f"{directory} --out DIR, then mrm evaluate DIR --bag {directory}"
+        )
+    kind = "a file" if directory.is_file() else f"a folder without {MAP_FILE}"
+    raise CliError(f"{directory} is {kind}: {expected}")
 
 
 def run(args: argparse.Namespace) -> int:
     from multi_robot_mapper.io.results import read_results
 
     directory = Path(args.directory)
+    check_result_folder(directory)
     result = read_results(directory)
     _check_arguments(args)
     check_output(directory / METRICS_FILE, kind="file")  # before the work

@@ -43,7 +43,9 @@ def register(subparsers: Any) -> None:
         help="each robot also gets the N scans before its own run (default 0)",
     )
     parser.add_argument("--out", required=True, metavar="BAG", help="new bag directory")
-    parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
+    parser.add_argument(
+        "--storage", choices=("mcap", "sqlite3"), default="mcap", help="rosbag2 storage format"
+    )
     add_recording_options(parser)
     parser.set_defaults(func=run)
 

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from multi_robot_mapper.cli.common import CliError, check_limits, check_output
+from multi_robot_mapper.cli.common import CliError, check_limits, check_output, missing_input
 from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan
 from multi_robot_mapper.io.carmen import (
     CarmenFormatError,
@@ -57,7 +57,9 @@ def register(subparsers: Any) -> None:
         "robot_front_laser_max, else the value repeating at the top of its ranges)",
     )
     parser.add_argument("--out", required=True, metavar="BAG", help="new bag directory")
-    parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
+    parser.add_argument(
+        "--storage", choices=("mcap", "sqlite3"), default="mcap", help="rosbag2 storage format"
+    )
     parser.set_defaults(func=run)
 
 
@@ -66,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
 
     log = Path(args.log)
     if not log.is_file():
-        raise CliError(f"no such log file: {log}")
+        raise missing_input(log, "log file")
     check_limits(args, "robots", "overlap_scans", "range_max")
     out = check_output(Path(args.out), kind="new")
     try:

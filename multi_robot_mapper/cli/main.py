@@ -1,37 +1,45 @@
-"""``mrm``: the pipeline's command line.
+"""``mrm``: the pipeline's command line (``mrm --help`` lists the commands).
 
-mrm demo           three simulated robots mapped live by the nodes, merged, drawn and scored
-mrm frontend       the scan-to-segment front end over a CARMEN log, with statistics
-mrm import-carmen  a CARMEN log cut into K robots, written as a rosbag2 file
-mrm import-bag     one robot's bag (ROS 1 or 2) cut into K robots, written as a rosbag2 file
-mrm simulate       K simulated robots in a built-in world, written as a rosbag2 file
-mrm replay         the pipeline offline on bags (ROS 1 or 2): map, trajectories, pictures
-mrm evaluate       a replay's output scored against reference poses and relations
-mrm run            robot_mappers and a map_merger in one process, live (no launch files)
+Only the standard library is imported here: the commands import what they need once they run,
+so that Ctrl-C at any moment, even while numpy loads, ends with one line and exit code 130.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
-
-from multi_robot_mapper.cli.common import (
-    CliError,
-    add_config_options,
-    check_limits,
-    check_output,
-    load_mapper_config,
+DESCRIPTION = (
+    "Multi-robot 2-D mapping from laser scans without odometry: bags in, one merged map out."
 )
-from multi_robot_mapper.core.config import ConfigError
+EPILOG = """\
+Start with:
+  mrm replay BAG --out DIR --record DIR/replay.mcap
+    a merged map.png, map.json, trajectories, and an MCAP file for Foxglove or ros2 bag play
+  mrm COMMAND --help
+    a command's options, each with its default
+"""
+# The errors a user can cause, as (module, class): printed as one line, exit code 2. Looked up
+# in sys.modules, so that none of those modules is imported before the command needs it (an
+# exception of a class whose module was never imported cannot be raised).
+USER_ERRORS = (
+    ("multi_robot_mapper.cli.common", "CliError"),
+    ("multi_robot_mapper.core.config", "ConfigError"),
+    ("multi_robot_mapper.io.bags", "BagError"),
+    ("multi_robot_mapper.io.results", "ResultsError"),
+    ("multi_robot_mapper.io.outputs", "OutputError"),
+)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from multi_robot_mapper.cli.common import check_limits, check_output
     from multi_robot_mapper.cli.demo import DemoScenario, run_demo
 
     check_limits(args, "seed", "speed")
@@ -83,13 +91,16 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_frontend(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from multi_robot_mapper.cli.common import CliError, load_mapper_config, missing_input
     from multi_robot_mapper.core.extraction import extract_scan
     from multi_robot_mapper.core.scan import ScanError
     from multi_robot_mapper.io.carmen import CarmenFormatError, carmen_scan_data, read_carmen
 
     config = load_mapper_config(args)
     if not Path(args.log).is_file():
-        raise CliError(f"no such log file: {args.log}")
+        raise missing_input(args.log, "log file")
     segments, dropped, invalid, rejected = [], [], [], 0
     try:
         log = read_carmen(args.log)
@@ -116,15 +127,20 @@ def _cmd_frontend(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from multi_robot_mapper.cli import evaluate, import_bag, import_carmen, replay, run, simulate
+    from multi_robot_mapper.cli.common import HelpFormatter, add_config_options, finish_parsers
+
     parser = argparse.ArgumentParser(
-        prog="mrm", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="mrm", description=DESCRIPTION, epilog=EPILOG, formatter_class=HelpFormatter
     )
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, title="commands", metavar="COMMAND")
     demo = sub.add_parser(
         "demo", help="three simulated robots mapped and merged live by the nodes, drawn and scored"
     )
     demo.add_argument("--out", default="demo_output", help="output folder")
-    demo.add_argument("--seed", type=int, default=0)
+    demo.add_argument(
+        "--seed", type=int, default=0, help="random seed of the robots' scans (range noise)"
+    )
     demo.add_argument(
         "--speed",
         type=float,
@@ -136,10 +152,9 @@ def build_parser() -> argparse.ArgumentParser:
     frontend.add_argument("log", help="CARMEN log (.log or .log.gz)")
     add_config_options(frontend)
     frontend.set_defaults(func=_cmd_frontend)
-    from multi_robot_mapper.cli import evaluate, import_bag, import_carmen, replay, run, simulate
-
     for command in (import_carmen, import_bag, simulate, replay, evaluate, run):
         command.register(sub)
+    finish_parsers(parser)
     return parser
 
 
@@ -151,29 +166,58 @@ def _terminate(signum: int, frame: object) -> None:
     raise Terminated()
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    from multi_robot_mapper.io.bags import BagError
-    from multi_robot_mapper.io.outputs import OutputError
-    from multi_robot_mapper.io.results import ResultsError
+def _is_user_error(exc: BaseException) -> bool:
+    for module, name in USER_ERRORS:
+        kind = getattr(sys.modules.get(module), name, None)
+        if isinstance(kind, type) and isinstance(exc, kind):
+            return True
+    return False
 
-    args = build_parser().parse_args(argv)
-    previous = None
-    if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _terminate)
+
+def _command_of(argv: Sequence[str]) -> str:
+    """The command named in ``argv`` before it is parsed (for a message of an early Ctrl-C)."""
+    return next((a for a in argv if not a.startswith("-")), "")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; exit codes: 0 done, 1 done with a warning, 2 a user error, 130 Ctrl-C,
+    143 SIGTERM. ``argv`` None: this process is ``mrm`` (sys.argv; a second Ctrl-C while the
+    interpreter shuts down is then ignored, so that it prints no traceback either)."""
+    as_program = argv is None
+    words = list(sys.argv[1:] if argv is None else argv)
+    name = " ".join(["mrm", _command_of(words)]).strip()
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
     try:
+        args = build_parser().parse_args(words)
+        name = f"mrm {args.command}"
         return int(args.func(args))
-    except (CliError, ConfigError, BagError, ResultsError, OutputError) as exc:
-        print(f"mrm {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except Terminated:
-        print(f"mrm {args.command}: terminated; nothing half-written was left", file=sys.stderr)
-        return 143
-    except KeyboardInterrupt:
-        print(f"mrm {args.command}: interrupted; nothing half-written was left", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        terminated = isinstance(exc, Terminated)
+        print(
+            f"{name}: {'terminated' if terminated else 'interrupted'}; nothing half-written "
+            "was left",
+            file=sys.stderr,
+        )
+        code = 143 if terminated else 130
+        if as_program and in_main_thread:
+            # Everything was cleaned up on the way here. Exit now: a second Ctrl-C during the
+            # interpreter's shutdown would print a traceback, and an interrupt that went
+            # through code a C++ extension ran with PyRun_String (gtsam's pybind11, while
+            # importing) makes the interpreter kill itself with SIGINT at exit (-2, not 130).
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
+        return code
     except BrokenPipeError:  # `mrm ... | head` closed the pipe: not an error
         sys.stderr.close()
         return 0
+    except Exception as exc:
+        if not _is_user_error(exc):
+            raise
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 2
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

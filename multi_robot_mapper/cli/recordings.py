@@ -8,7 +8,7 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
-from multi_robot_mapper.cli.common import CliError
+from multi_robot_mapper.cli.common import CliError, missing_input
 from multi_robot_mapper.io.bags import DEFAULT_SCAN_TOPICS, ReadReport, RobotRecording
 
 GEOMETRY_HELP = (
@@ -43,7 +43,8 @@ def add_recording_options(parser: argparse.ArgumentParser, *, truth: bool = True
             type=Path,
             metavar="CSV",
             help="reference poses (index,stamp,x,y,theta: NAME.truth.csv) of a robot's scans, "
-            "replacing its ground_truth topic; one per robot, in the robots' order (repeatable)",
+            "replacing its ground_truth topic; one per robot, in the robots' order (repeatable; "
+            "default: the bag's ground_truth topics)",
         )
 
 
@@ -66,7 +67,7 @@ def load_recordings(
     names = None if args.names is None else [n.strip() for n in args.names.split(",")]
     for path in bags:
         if not Path(path).exists():
-            raise CliError(f"no such bag: {path}")
+            raise missing_input(path, "bag")
     report = ReadReport()
     recordings = read_bags(bags, names, args.scan_topics, salvage=salvage, report=report)
     recordings = with_beam_geometry(recordings, geometry)

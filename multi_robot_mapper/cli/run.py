@@ -16,7 +16,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from multi_robot_mapper.cli.common import CliError
+from multi_robot_mapper.cli.common import CliError, missing_input
 from multi_robot_mapper.core.merger_config import METHODS
 
 
@@ -28,7 +28,10 @@ def register(subparsers: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
-        "--robots", required=True, help="comma-separated robot namespaces, e.g. robot1,robot2"
+        "--robots",
+        required=True,
+        metavar="NAME,...",
+        help="comma-separated robot namespaces, e.g. robot1,robot2",
     )
     parser.add_argument(
         "--method", choices=METHODS, default=None, help="merging method (default: the params')"
@@ -40,7 +43,8 @@ def register(subparsers: Any) -> None:
         default=[],
         type=Path,
         metavar="FILE",
-        help="ROS 2 params file (repeatable), e.g. config/multi_robot_mapper.yaml",
+        help="ROS 2 params file (repeatable), e.g. config/multi_robot_mapper.yaml (default: none, "
+        "the nodes' built-in defaults)",
     )
     parser.add_argument(
         "-p",
@@ -50,12 +54,12 @@ def register(subparsers: Any) -> None:
         default=[],
         metavar="NAME:=VALUE",
         help="a parameter, given to the nodes that have it (repeatable), e.g. "
-        "-p max_scan_rate:=10 (robot_mapper), -p merge_period:=2.0 (map_merger)",
+        "-p max_scan_rate:=10 (robot_mapper), -p merge_period:=2.0 (map_merger) (default: none)",
     )
     parser.add_argument(
         "--use-sim-time",
         action="store_true",
-        help="every node follows /clock (replaying a bag with its clock)",
+        help="every node follows /clock (replaying a bag with its clock; default: the wall clock)",
     )
     parser.set_defaults(func=run)
 
@@ -65,7 +69,7 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
     ros_args = ["mrm", "--ros-args"]
     for path in args.params_files:
         if not path.is_file():
-            raise CliError(f"no such params file: {path}")
+            raise missing_input(path, "params file")
         ros_args += ["--params-file", str(path)]
     if args.use_sim_time:
         ros_args += ["-p", "use_sim_time:=true"]

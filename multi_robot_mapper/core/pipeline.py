@@ -19,6 +19,7 @@ front end (scan -> segments), then a placement method. Methods:
 from __future__ import annotations
 
 import dataclasses
+import heapq
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 
@@ -38,8 +39,16 @@ from multi_robot_mapper.core.local_mapping import (
 from multi_robot_mapper.core.local_mapping.backend import Backend
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult, merge
 from multi_robot_mapper.core.merging.joint import JointState, place_scans
-from multi_robot_mapper.core.merging.methods import merge_method
+from multi_robot_mapper.core.merging.methods import MERGE_METHODS, merge_method
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
+from multi_robot_mapper.core.snapshots import (
+    NewestPose,
+    Snapshot,
+    SnapshotSink,
+    Timeline,
+    all_anchors,
+    newest_pose,
+)
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -86,9 +95,15 @@ class OfflineMap:
     # placed (merging only)
     probabilities: dict[str, float] = dataclasses.field(default_factory=dict)
     unmerged_reasons: dict[str, str] = dataclasses.field(default_factory=dict)
+    # robot -> its newest placed scan: T_piece_laser, the scan's stamp, the piece (local
+    # mapping only)
+    newest_poses: dict[str, NewestPose] = dataclasses.field(default_factory=dict)
+    merge_result: MergeResult | None = None  # the merge itself (merging only)
 
 
-Progress = Callable[[str, int, int], None]  # (robot, scans done, scans total)
+# (stage, done, total): stage "mapping <robot>" with scans done of every robot's scans,
+# then "merging" 0 of 1, 1 of 1.
+Progress = Callable[[str, int, int], None]
 
 
 @dataclasses.dataclass
@@ -107,20 +122,29 @@ class _FrontEnd:
     ) -> Iterator[tuple[TimedLaserScan, SegmentScan]]:
         """Each usable scan of ``robot`` with its segments; unusable ones are counted."""
         for item in items:
-            self.done += 1
-            if self.progress is not None:
-                self.progress(robot, self.done, self.total)
             if needs_reference and item.reference_pose is None:
+                self.step(robot)
                 continue
-            started = time.perf_counter()
-            try:
-                segments, _ = extract_scan(item.scan, self.extraction)
-            except ScanError as exc:
-                self.rejected[exc.kind] = self.rejected.get(exc.kind, 0) + 1
-                continue
-            finally:
-                self.seconds += time.perf_counter() - started
-            yield item, segments
+            segments = self.segments(robot, item)
+            if segments is not None:
+                yield item, segments
+
+    def step(self, robot: str) -> None:
+        self.done += 1
+        if self.progress is not None:
+            self.progress(f"mapping {robot}", self.done, self.total)
+
+    def segments(self, robot: str, item: TimedLaserScan) -> SegmentScan | None:
+        """The segments of one scan of ``robot`` (None, counted, when it is unusable)."""
+        self.step(robot)
+        started = time.perf_counter()
+        try:
+            return extract_scan(item.scan, self.extraction)[0]
+        except ScanError as exc:
+            self.rejected[exc.kind] = self.rejected.get(exc.kind, 0) + 1
+            return None
+        finally:
+            self.seconds += time.perf_counter() - started
 
 
 def require_method(method: str) -> None:
@@ -141,12 +165,38 @@ def run_offline(
     progress: Progress | None = None,
     local_mapping: LocalMapperConfig | None = None,
     merging: MergeConfig | None = None,
+    snapshots: SnapshotSink | None = None,
+    snapshot_period: float = 10.0,
 ) -> OfflineMap:
-    """Run the front end on every scan of every robot, then place them with ``method``."""
+    """Run the front end on every scan of every robot, then place them with ``method``.
+
+    The robots' scans are mapped in the order of their stamps, as the robots would have sent
+    them. With ``snapshots`` (a merging method), every ``snapshot_period`` s of bag time the
+    keyframes so far are merged, as the merger node would have merged them (each merge an
+    update of the previous one, every place matched), and handed to ``snapshots``; the last
+    snapshot is the replay's own result, which is merged from scratch as without
+    ``snapshots`` (the result never depends on whether snapshots were taken)."""
     require_method(method)
+    if snapshots is not None and method not in MERGE_METHODS:
+        raise ValueError(f"snapshots need a merging method ({', '.join(MERGE_METHODS)})")
     if method in ("local", "pivot", "ffs"):
-        local = _run_local(recordings, extraction, local_mapping or LocalMapperConfig(), progress)
-        return local if method == "local" else _merged(local, merging or MergeConfig(), method)
+        config = merging or MergeConfig()
+        timeline = None
+        if snapshots is not None:
+            timeline = Timeline(snapshots, snapshot_period, method, config)
+        local = _run_local(
+            recordings, extraction, local_mapping or LocalMapperConfig(), progress, timeline
+        )
+        if method == "local":
+            return local
+        if progress is not None:
+            progress("merging", 0, 1)
+        merged = _merged(local, config, method)
+        if progress is not None:
+            progress("merging", 1, 1)
+        if snapshots is not None and merged.merge_result is not None:
+            snapshots(final_snapshot(merged))
+        return merged
     robots = sorted(recordings)
     front_end = _FrontEnd(extraction, progress, sum(len(recordings[r]) for r in robots))
     segment_sets: list[FloatArray] = []
@@ -196,42 +246,89 @@ def _closure_record(closure: Closure, scans: Sequence[KeyframeScan]) -> dict[str
     }
 
 
+def final_snapshot(merged: OfflineMap) -> Snapshot:
+    """The last snapshot: a merging replay's own result."""
+    assert merged.merge_result is not None
+    placed = {r: t for r, t in merged.trajectories.items() if merged.robot_frames.get(r)}
+    stamps = [p.stamp for p in merged.newest_poses.values()]
+    stamps += [float(t[0][-1]) for t in merged.trajectories.values() if len(t[0])]
+    stamp = max(stamps, default=0.0)
+    return Snapshot(stamp, merged.merge_result, dict(merged.newest_poses), placed, final=True)
+
+
+@dataclasses.dataclass
+class _MappingTimes:
+    mapping_s: float = 0.0
+    errors: int = 0
+    per_scan: list[float] = dataclasses.field(default_factory=list)
+
+
+def _stamped(
+    index: int, items: Sequence[TimedLaserScan]
+) -> Iterator[tuple[float, int, TimedLaserScan]]:
+    return ((item.stamp, index, item) for item in items)
+
+
+def _map_in_time_order(
+    recordings: Mapping[str, Sequence[TimedLaserScan]],
+    front_end: _FrontEnd,
+    config: LocalMapperConfig,
+    timeline: Timeline | None,
+) -> tuple[dict[str, LocalMapper], _MappingTimes]:
+    """One :class:`LocalMapper` per robot fed its scans, every robot's scans in the order of
+    their stamps (each robot's own in its recording's order); the snapshots of ``timeline``
+    taken as bag time passes."""
+    robots = sorted(recordings)
+    mappers = {robot: LocalMapper(config) for robot in robots}
+    times = _MappingTimes()
+    streams = [_stamped(index, recordings[robot]) for index, robot in enumerate(robots)]
+    for stamp, index, item in heapq.merge(*streams, key=lambda entry: entry[:2]):
+        robot = robots[index]
+        if timeline is not None:
+            timeline.before(stamp, mappers)
+        segments = front_end.segments(robot, item)
+        if segments is None:
+            continue
+        started = time.perf_counter()
+        try:
+            mappers[robot].add_scan(item.stamp, segments, item.scan)
+        except Exception:  # as the node does: count it, keep the map built so far
+            times.errors += 1
+            continue
+        finally:
+            elapsed = time.perf_counter() - started
+        times.mapping_s += elapsed
+        times.per_scan.append(elapsed)
+        if timeline is not None:
+            timeline.mapped(stamp)
+    return mappers, times
+
+
 def _run_local(
     recordings: Mapping[str, Sequence[TimedLaserScan]],
     extraction: ExtractionConfig,
     config: LocalMapperConfig,
     progress: Progress | None,
+    timeline: Timeline | None = None,
 ) -> OfflineMap:
     """One :class:`LocalMapper` per robot, exactly as ``robot_mapper`` runs it (with the back
     end in line, so that a replay is deterministic)."""
     robots = sorted(recordings)
     front_end = _FrontEnd(extraction, progress, sum(len(recordings[r]) for r in robots))
     started = time.perf_counter()
-    mapping_s = 0.0
+    mappers, times = _map_in_time_order(recordings, front_end, config, timeline)
     segment_sets: list[FloatArray] = []
     owners: list[IntArray] = []
     trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
     keyframe_poses: dict[str, FloatArray] = {}
     all_keyframes: dict[str, list[Keyframe]] = {}
     anchors: dict[str, tuple[FloatArray, IntArray, FloatArray]] = {}
+    newest_poses: dict[str, NewestPose] = {}
     per_robot: dict[str, dict[str, object]] = {}
-    scan_times: list[float] = []
     backend_times: list[float] = []
     optimise_times: list[float] = []
-    mapping_errors = 0
     for index, robot in enumerate(robots):
-        mapper = LocalMapper(config)
-        for item, segments in front_end.scans(robot, recordings[robot]):
-            t1 = time.perf_counter()
-            try:
-                mapper.add_scan(item.stamp, segments, item.scan)
-            except Exception:  # as the node does: count it, keep the map built so far
-                mapping_errors += 1
-                continue
-            finally:
-                elapsed = time.perf_counter() - t1
-            mapping_s += elapsed
-            scan_times.append(elapsed)
+        mapper = mappers[robot]
         backend_times += mapper.backend_seconds
         optimise_times += mapper.optimise_seconds
         main = mapper.main_piece()
@@ -246,13 +343,10 @@ def _run_local(
         owners.append(np.full(len(map_segments), index, dtype=np.int64))
         trajectories[robot] = mapper.trajectory(main)
         all_keyframes[robot] = mapper.keyframes()
-        pieces = sorted({kf.piece for kf in all_keyframes[robot]})
-        placed = [mapper.anchors(piece) for piece in pieces]
-        anchors[robot] = (
-            np.concatenate([a[0] for a in placed]) if placed else np.zeros(0),
-            np.concatenate([a[1] for a in placed]) if placed else np.zeros(0, dtype=np.int64),
-            np.vstack([a[2] for a in placed]) if placed else np.zeros((0, 3)),
-        )
+        anchors[robot] = all_anchors(mapper)
+        newest = newest_pose(mapper)
+        if newest is not None:
+            newest_poses[robot] = newest
         scans = backend.map.scans
         per_robot[robot] = {
             "scans_accepted": mapper.scans_accepted,
@@ -284,7 +378,7 @@ def _run_local(
             "max_ms": round(float(array.max()) * 1e3, 3),
         }
 
-    times = summary(scan_times)
+    scan_times = summary(times.per_scan)
     stats: dict[str, object] = {
         "method": "local",
         "scans_total": front_end.total,
@@ -292,16 +386,19 @@ def _run_local(
         "scans_rejected": front_end.rejected,
         "segments": int(sum(len(s) for s in segment_sets)),
         "front_end_s": round(front_end.seconds, 4),
-        "local_mapping_s": round(mapping_s, 4),
-        "mapping_errors": mapping_errors,
-        "local_mapping_median_ms": times["median_ms"],
-        "local_mapping_p95_ms": times["p95_ms"],
+        "local_mapping_s": round(times.mapping_s, 4),
+        "mapping_errors": times.errors,
+        "local_mapping_median_ms": scan_times["median_ms"],
+        "local_mapping_p95_ms": scan_times["p95_ms"],
         "backend_per_keyframe": summary(backend_times),
         "optimisation_per_keyframe": summary(optimise_times),
         "closures_accepted": sum(int(str(r["closures_accepted"])) for r in per_robot.values()),
         "robots": per_robot,
         "total_s": round(time.perf_counter() - started, 4),
     }
+    if timeline is not None:  # merges while mapping: part of total_s, counted apart
+        stats["snapshots"] = timeline.taken
+        stats["snapshot_merges_s"] = round(timeline.merge_s, 4)
     frames: dict[str, Pose | None] = {r: None for r in robots}  # never claimed: "unmerged"
     return OfflineMap(
         robots,
@@ -313,6 +410,7 @@ def _run_local(
         keyframe_poses,
         all_keyframes,
         anchors,
+        newest_poses=newest_poses,
     )
 
 
@@ -351,6 +449,8 @@ def _merged(local: OfflineMap, config: MergeConfig, method: str = "pivot") -> Of
         dict(result.placements),
         stats,
         local.keyframe_poses,
+        newest_poses=local.newest_poses,
+        merge_result=result,
     )
 
 
@@ -423,7 +523,27 @@ def _merged_joint(local: OfflineMap, config: MergeConfig, method: str = "pivot")
         local.anchors,
         probabilities=believed,
         unmerged_reasons=reasons,
+        newest_poses=local.newest_poses,
+        merge_result=result,
     )
+
+
+def own_frame_map(offline: OfflineMap, robot: str) -> FloatArray:
+    """(N, 4) ``robot``'s map in its own map frame (its main piece): a ``local`` run's map of
+    it, or, after a merge (where an unmerged robot's segments are not in the global map), its
+    main piece's keyframe segments placed at their keyframes' poses."""
+    if offline.merge_result is None:
+        mine: FloatArray = offline.map_segments[
+            offline.segment_robot == offline.robots.index(robot)
+        ]
+        return mine
+    main = _main_piece(offline, robot)
+    placed = [
+        se2.transform_segments(se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments)
+        for kf in offline.keyframes.get(robot, [])
+        if kf.piece == main and len(kf.segments)
+    ]
+    return np.vstack(placed) if placed else np.zeros((0, 4))
 
 
 def _main_piece(local: OfflineMap, robot: str) -> int:

@@ -27,16 +27,15 @@ CHUNK_BYTES = 256 * 1024
 _DAMAGE = (McapError, CRCValidationError, struct.error, ValueError, EOFError, UnicodeError)
 
 
-def add_chunk_checksums(path: Path) -> None:
+def add_chunk_checksums(path: Path, compression: CompressionType = CompressionType.NONE) -> None:
     """Rewrite the MCAP file ``path`` with a CRC-32 on every chunk (same messages, order,
-    profile, schemas and channels; written under a temporary name, then renamed)."""
+    profile, schemas and channels; written under a temporary name, then renamed), its chunks
+    compressed by ``compression`` (default none: what the bags this project writes use)."""
     temporary = path.with_name(f".{path.name}.crc")
     with path.open("rb") as source, temporary.open("wb") as target:
         reader = make_reader(source)
         header = reader.get_header()
-        writer = Writer(
-            target, chunk_size=CHUNK_BYTES, compression=CompressionType.NONE, enable_crcs=True
-        )
+        writer = Writer(target, chunk_size=CHUNK_BYTES, compression=compression, enable_crcs=True)
         writer.start(profile=header.profile, library=header.library)
         schema_ids: dict[int, int] = {}
         channel_ids: dict[int, int] = {}

@@ -85,27 +85,54 @@ def draw_map(
     robots: Sequence[str],
     paths: dict[str, FloatArray],
     title: str,
+    unmerged: dict[str, tuple[FloatArray, FloatArray]] | None = None,
 ) -> Figure:
-    """A global segment map: a colour per robot, each robot's path, 1 m grid, scale bar."""
+    """A global segment map: a colour per robot, each robot's path, 1 m grid, scale bar.
+
+    ``unmerged``: robot -> (segments, path) in the robot's own frame, for robots placed in no
+    common frame: each gets a panel of its own beside the global map (never drawn over it at
+    the origin, which would look like a merge); their entries in ``paths`` are not drawn."""
+    unmerged = unmerged or {}
+    merged = [r for r in robots if r not in unmerged]
+    panels = ([None] if merged or not unmerged else []) + list(unmerged)
     extent = segments_extent(
-        [map_segments] + [np.hstack((p[:, :2], p[:, :2])) for p in paths.values() if len(p)]
+        [map_segments]
+        + [np.hstack((paths[r][:, :2], paths[r][:, :2])) for r in merged if len(paths.get(r, ()))]
     )
     span = max(extent[2] - extent[0], extent[3] - extent[1], 1.0)
     size = float(np.clip(span / 4.0, 6.0, 16.0))
-    fig, ax = plt.subplots(figsize=(size, size))
-    for index, robot in enumerate(robots):
-        color = PALETTE[index % len(PALETTE)]
-        mine = map_segments[segment_robot == index]
-        if len(mine):
-            draw_segments(ax, mine, color, width=0.8, label=f"{robot} ({len(mine)} segments)")
-        path = paths.get(robot)
-        if path is not None and len(path):
-            ax.plot(path[:, 0], path[:, 1], color=color, linewidth=0.8, linestyle="--", alpha=0.8)
-            ax.plot(path[0, 0], path[0, 1], "o", color=color, markersize=5)
-    if len(robots):
-        ax.legend(loc="upper right", fontsize=8, title="dashed: path, dot: start")
-    finish_metric_axes(ax, title, extent)
+    side = [size] + [6.0] * (len(panels) - 1) if panels[0] is None else [6.0] * len(panels)
+    fig, axes = plt.subplots(
+        1, len(panels), figsize=(sum(side), max(side)), width_ratios=side, squeeze=False
+    )
+    colors = robot_colors(robots)
+    for ax, panel in zip(axes[0], panels, strict=True):
+        if panel is None:
+            for index, robot in enumerate(robots):
+                if robot in unmerged:
+                    continue
+                mine = map_segments[segment_robot == index]
+                _draw_robot(ax, robot, mine, paths.get(robot), colors[robot])
+            if merged:
+                ax.legend(loc="upper right", fontsize=8, title="dashed: path, dot: start")
+            finish_metric_axes(ax, title, extent)
+            continue
+        segments, path = unmerged[panel]
+        _draw_robot(ax, panel, segments, path, colors[panel])
+        own = segments_extent([segments, np.hstack((path[:, :2], path[:, :2]))])
+        heading = f"{panel}: unmerged, in its own frame" + ("" if merged else f"\n{title}")
+        finish_metric_axes(ax, heading, own)
     return fig
+
+
+def _draw_robot(
+    ax: Axes, robot: str, segments: FloatArray, path: FloatArray | None, color: str
+) -> None:
+    if len(segments):
+        draw_segments(ax, segments, color, width=0.8, label=f"{robot} ({len(segments)} segments)")
+    if path is not None and len(path):
+        ax.plot(path[:, 0], path[:, 1], color=color, linewidth=0.8, linestyle="--", alpha=0.8)
+        ax.plot(path[0, 0], path[0, 1], "o", color=color, markersize=5)
 
 
 def robot_colors(robots: Sequence[str]) -> dict[str, str]:
