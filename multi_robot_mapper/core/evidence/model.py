@@ -1,7 +1,7 @@
 """The probability that a decision to place one map on another is right, from its evidence
 (:mod:`~multi_robot_mapper.core.evidence.placement`): a logistic model fitted on the decisions
 of generated buildings and shared logs, whose truth is known, and checked held out by
-building (``bench/fit_join.py``, docs/decisions_model.md).
+building (``bench/fit_join.py``, docs/evidence_model.md).
 
 The coefficients are data (``join_model.json`` beside this module, written by the fit), not
 code: a refit changes no line of the merger.

@@ -367,7 +367,7 @@ class MergeConfig:
         0.99,
         unit="",
         doc="the probability that a placement is right (the join model's, fitted on generated "
-        "buildings and shared logs: docs/decisions_model.md) that joining two maps needs, and "
+        "buildings and shared logs: docs/evidence_model.md) that joining two maps needs, and "
         "that a robot's placement (the product over its joins to the reference) needs to be "
         "published; below it a robot is unmerged, with the reason. The one threshold of "
         "every merge decision: lower it to merge sooner at more risk of a wrong map",
