@@ -195,6 +195,35 @@ class PlacementScorer:
         return best, score
 
 
+@dataclasses.dataclass(frozen=True)
+class Reach:
+    """Where a placement can lie at all, when the robot's own motion bounds it (a loop
+    closure: the drift since the robot was last sure; a join after a loss: how far it can have
+    driven): the patch's ``anchor`` (x, y, theta in the patch's frame) lands within ``radius``
+    of ``centre`` (in the target's frame), turned at most ``turn`` from it. A rival beyond
+    is no rival: the robot cannot have been there. Between robots nothing bounds it."""
+
+    centre: tuple[float, float, float]
+    radius: float  # m
+    anchor: tuple[float, float, float]
+    turn: float = float(np.pi)  # rad
+
+    def allows(self, row: FloatArray) -> bool:
+        """Does the placement (theta, tx, ty) put the anchor within reach?"""
+        T = se2.matrix_from_pose(float(row[1]), float(row[2]), float(row[0]))
+        x, y, theta = se2.pose_from_matrix(T @ se2.matrix_from_pose(*self.anchor))
+        shift = float(np.hypot(x - self.centre[0], y - self.centre[1]))
+        return shift <= self.radius and abs(float(se2.wrap_angle(theta - self.centre[2]))) <= (
+            self.turn
+        )
+
+    def crop(self, drawing: Drawing, patch: Drawing) -> Drawing:
+        """The target's walls and free space that a patch within reach can land on."""
+        anchor = np.asarray(self.anchor[:2])
+        extent = reach_of(patch) + float(np.hypot(*(patch.centre() - anchor)))
+        return patch_of(drawing, np.asarray([self.centre[:2]]), self.radius + extent)
+
+
 def distinct(row: FloatArray, other: FloatArray) -> bool:
     """Are two placements (theta, tx, ty) different answers?"""
     shift = float(np.hypot(row[1] - other[1], row[2] - other[2]))
@@ -209,10 +238,14 @@ def placement_evidence(
     config: CorrelationConfig,
     prepared: CorrelationTarget | None = None,
     rasters: ScoringRasters | None = None,
+    reach: Reach | None = None,
 ) -> PlacementEvidence:
     """The patch at ``T_target_patch`` (3x3) on the target map, against its best rival
-    anywhere on the target map (module doc). ``prepared``/``rasters``: the target's
-    correlation transform and scoring rasters, when the caller keeps them."""
+    anywhere on the target map, or, with ``reach``, anywhere the robot's motion allows
+    (module doc). ``prepared``/``rasters``: the target's correlation transform and scoring
+    rasters, when the caller keeps them (not with ``reach``: the target is cropped)."""
+    if reach is not None:
+        target, prepared, rasters = reach.crop(target, patch), None, None
     if len(patch.walls) == 0 or len(target.walls) == 0:
         return PlacementEvidence.nothing()
     x, y, theta = se2.pose_from_matrix(T_target_patch)
@@ -228,7 +261,7 @@ def placement_evidence(
     for row, raw in zip(peaks, values, strict=True):
         if refined == _RIVALS_REFINED:
             break
-        if not distinct(row, placed):
+        if not distinct(row, placed) or (reach is not None and not reach.allows(row)):
             continue
         if raw < _RIVAL_FLOOR * score:
             if rival_row is None or raw > rival:
@@ -236,7 +269,8 @@ def placement_evidence(
             break  # the peaks come best first: the rest are lower still
         refined += 1
         moved, value = scorer.refine(row)
-        if distinct(moved, placed) and (rival_row is None or value > rival):
+        plausible = reach is None or reach.allows(moved)
+        if plausible and distinct(moved, placed) and (rival_row is None or value > rival):
             rival, rival_row = value, moved
     matched, through = scorer.parts(placed)
     return PlacementEvidence(

@@ -23,6 +23,7 @@ from multi_robot_mapper.core.evidence.model import JoinModel, join_features
 from multi_robot_mapper.core.evidence.placement import (
     EVIDENCE_CORRELATION,
     PlacementEvidence,
+    Reach,
     placement_evidence,
 )
 from multi_robot_mapper.core.evidence.seen import scan_free_points
@@ -92,9 +93,11 @@ def decision_evidence(
     patch: IntArray,
     target: IntArray,
     T_target_patch: FloatArray,
+    reach: Reach | None = None,
 ) -> PlacementEvidence:
     """The evidence of placing keyframes ``patch`` (their piece's frame) at ``T_target_patch``
-    (3x3) on keyframes ``target`` (theirs)."""
+    (3x3) on keyframes ``target`` (theirs); rivals only where ``reach`` allows (the robot's
+    motion bounds where the patch can lie)."""
     if len(patch) == 0 or len(target) == 0:
         return PlacementEvidence.nothing()
     return placement_evidence(
@@ -102,6 +105,7 @@ def decision_evidence(
         drawing_of(keyframes, patch, own_scans=True),
         T_target_patch,
         EVIDENCE_CORRELATION,
+        reach=reach,
     )
 
 

@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.placement import Reach
 from multi_robot_mapper.core.local_mapping.attempts import close_to, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
@@ -284,9 +285,18 @@ class PieceJoins(WindowMatcher):
         ``T_first_mine`` in keyframe ``first``'s frame: ``mine``'s piece near it, on the whole
         of ``first``'s piece (:meth:`_believed`)? A join it doubts is refused."""
         keyframes = self.keyframes
-        patch = keyframes.members(keyframes.piece(mine))
-        target = keyframes.members(keyframes.piece(first))
-        if self._believed("join", patch, target, first, mine, T_first_mine):
+        piece, other = keyframes.piece(mine), keyframes.piece(first)
+        patch = keyframes.members(piece)
+        target = keyframes.members(other)
+        # Where the robot's motion since its last placed scan lets the piece lie (its first
+        # scan within the robot's reach of that scan): rivals beyond it are no rivals.
+        last = self._last_placed_scan(piece, other)
+        reach = None
+        if last is not None:
+            turn = _TURN_BETWEEN_SCANS if last.losses == 1 else float(np.pi)
+            radius = last.reach + self._join_radius(piece)
+            reach = Reach(last.pose, radius, keyframes.pose(piece), turn)
+        if self._believed("join", patch, target, first, mine, T_first_mine, reach):
             return True
         self._refuse("evidence (join)")
         return False

@@ -46,6 +46,7 @@ from typing import TypeVar
 import numpy as np
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.placement import Reach
 from multi_robot_mapper.core.local_mapping.attempts import close_to, hypotheses_of, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.joins import LostFrom, PieceJoins
@@ -233,11 +234,15 @@ class LoopCloser(PieceJoins):
                 continue
             # The recent stretch of map near the new keyframe, placed by the closure on the
             # piece's older map: believed only when no rival placement there explains about
-            # as much (the evidence model, as for a link between robots).
+            # as much (the evidence model, as for a link between robots). A rival lies within
+            # the region the closure was searched in: the drift since the last closure cannot
+            # have carried the robot farther.
             members = self.keyframes.members(piece)
             recent = members[(members > index - config.loop_window) & (members <= index)]
             older = members[members <= index - config.loop_window]
-            if not self._believed("loop", recent, older, first, index, found):
+            here = self.keyframes.pose(index)
+            reach = Reach(here, radius, here)
+            if not self._believed("loop", recent, older, first, index, found, reach):
                 self._refuse("evidence")
                 continue
             edge = self._scan_edge(first, index, found)

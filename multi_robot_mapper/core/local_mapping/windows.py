@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.model import installed_model
+from multi_robot_mapper.core.evidence.placement import Reach
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.attempts import hypotheses_of, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
@@ -195,15 +196,24 @@ class WindowMatcher:
         return Edge(first, second, pose_of_match(T_1_2), information, robust)
 
     def _believed(
-        self, kind: str, patch: IntArray, target: IntArray, first: int, mine: int, found: Pose
+        self,
+        kind: str,
+        patch: IntArray,
+        target: IntArray,
+        first: int,
+        mine: int,
+        found: Pose,
+        reach: Reach | None = None,
     ) -> bool:
         """Does the evidence model believe placing keyframes ``patch`` so that keyframe
         ``mine`` lies at ``found`` in keyframe ``first``'s frame, on keyframes ``target``
-        (:mod:`~core.local_mapping.evidence`)? Each decision weighed is kept in ``weighed``."""
+        (:mod:`~core.local_mapping.evidence`), its rivals where ``reach`` allows? Each
+        decision weighed is kept in ``weighed``."""
         keyframes = self.keyframes
         here = se2.compose(keyframes.pose(first), found)
         moved = moved_to(keyframes, mine, here)
-        evidence = decision_evidence(keyframes, patch_around(keyframes, patch, mine), target, moved)
+        near = patch_around(keyframes, patch, mine)
+        evidence = decision_evidence(keyframes, near, target, moved, reach)
         probability = probability_of(evidence, self.model)
         self.weighed.append(Weighed(kind, first, mine, found, probability, evidence))
         return probability >= self.config.join_probability
