@@ -36,10 +36,12 @@ from multi_robot_mapper.core.local_mapping import (
     LocalMapperConfig,
 )
 from multi_robot_mapper.core.local_mapping.backend import Backend
+from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult, merge
 from multi_robot_mapper.core.merging.joint import JointState, place_scans
 from multi_robot_mapper.core.merging.methods import merge_method
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
+from multi_robot_mapper.core.scan_stream import ScanStreamConfig, ScanStreamGuard
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -89,19 +91,26 @@ Progress = Callable[[str, int, int], None]  # (robot, scans done, scans total)
 
 @dataclasses.dataclass
 class _FrontEnd:
-    """Scans to segments for every placement method, with the counts they all report."""
+    """Scans to segments for every placement method, each robot's stream checked by a
+    :class:`ScanStreamGuard` as ``robot_mapper`` checks it, with the counts they all report."""
 
     extraction: ExtractionConfig
+    stream: ScanStreamConfig
     progress: Progress | None
     total: int  # scans of every robot
     done: int = 0
     seconds: float = 0.0  # spent extracting
-    rejected: dict[str, int] = dataclasses.field(default_factory=dict)  # ScanError kind -> scans
+    # scans refused, by reason: ScanError kinds and the stream's rules (core.scan_stream)
+    rejected: dict[str, int] = dataclasses.field(default_factory=dict)
+    map_resets: int = 0  # a robot's map started over (its stamps jumped back and stayed)
+    notices: list[str] = dataclasses.field(default_factory=list)  # e.g. a laser reconfigured
 
     def scans(
         self, robot: str, items: Sequence[TimedLaserScan], needs_reference: bool = False
-    ) -> Iterator[tuple[TimedLaserScan, SegmentScan]]:
-        """Each usable scan of ``robot`` with its segments; unusable ones are counted."""
+    ) -> Iterator[tuple[TimedLaserScan, SegmentScan, bool]]:
+        """Each usable scan of ``robot`` with its segments, in the order to map them, and
+        whether the robot's map starts over before it; unusable ones are counted."""
+        guard: ScanStreamGuard[tuple[TimedLaserScan, SegmentScan]] = ScanStreamGuard(self.stream)
         for item in items:
             self.done += 1
             if self.progress is not None:
@@ -112,11 +121,37 @@ class _FrontEnd:
             try:
                 segments, _ = extract_scan(item.scan, self.extraction)
             except ScanError as exc:
-                self.rejected[exc.kind] = self.rejected.get(exc.kind, 0) + 1
+                self._refused(exc.kind)
                 continue
             finally:
                 self.seconds += time.perf_counter() - started
-            yield item, segments
+            verdict = guard.check(item.stamp, item.scan, (item, segments))
+            for kind, _ in verdict.refused:
+                self._refused(kind)
+            self.notices += [f"{robot}: {notice}" for _, notice in verdict.notices]
+            if not verdict.maps:
+                continue
+            reset = verdict.action == "reset"
+            self.map_resets += reset
+            for held in verdict.release:
+                yield (*held.item, reset)
+                reset = False
+            yield item, segments, reset
+        for kind, _ in guard.finish():
+            self._refused(kind)
+
+    def _refused(self, kind: str) -> None:
+        self.rejected[kind] = self.rejected.get(kind, 0) + 1
+
+    def counts(self) -> dict[str, object]:
+        """The front end's part of ``stats.json``."""
+        return {
+            "scans_total": self.total,
+            "scans_rejected": dict(self.rejected),
+            "map_resets": self.map_resets,
+            "stream_notices": list(self.notices),
+            "front_end_s": round(self.seconds, 4),
+        }
 
 
 def require_method(method: str) -> None:
@@ -137,14 +172,21 @@ def run_offline(
     progress: Progress | None = None,
     local_mapping: LocalMapperConfig | None = None,
     merging: MergeConfig | None = None,
+    stream: ScanStreamConfig | None = None,
 ) -> OfflineMap:
-    """Run the front end on every scan of every robot, then place them with ``method``."""
+    """Run the front end on every scan of every robot, then place them with ``method``.
+    ``recordings``: each robot's scans in the order they arrived (a node's subscription
+    order), checked against their own stream by ``stream`` (default: the node's rules,
+    ``RobotMapperConfig().stream_config()``) before anything is mapped."""
     require_method(method)
+    total = sum(len(scans) for scans in recordings.values())
+    front_end = _FrontEnd(
+        extraction, stream or RobotMapperConfig().stream_config(), progress, total
+    )
     if method in ("local", "pivot", "ffs"):
-        local = _run_local(recordings, extraction, local_mapping or LocalMapperConfig(), progress)
+        local = _run_local(recordings, front_end, local_mapping or LocalMapperConfig())
         return local if method == "local" else _merged(local, merging or MergeConfig(), method)
     robots = sorted(recordings)
-    front_end = _FrontEnd(extraction, progress, sum(len(recordings[r]) for r in robots))
     segment_sets: list[FloatArray] = []
     owners: list[IntArray] = []
     trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
@@ -153,7 +195,8 @@ def run_offline(
         stamps: list[float] = []
         poses: list[Pose] = []
         # 'reference' can only place scans that have a reference pose.
-        for item, segments in front_end.scans(robot, recordings[robot], needs_reference=True):
+        # A reset changes nothing here: every scan is placed in the reference frame.
+        for item, segments, _ in front_end.scans(robot, recordings[robot], needs_reference=True):
             assert item.reference_pose is not None
             T_map_laser = se2.matrix_from_pose(*item.reference_pose)
             segment_sets.append(se2.transform_segments(T_map_laser, segments.segments))
@@ -169,11 +212,9 @@ def run_offline(
     posed = sum(len(t[0]) for t in trajectories.values())
     stats: dict[str, object] = {
         "method": method,
-        "scans_total": front_end.total,
         "scans_posed": posed,
-        "scans_rejected": front_end.rejected,
         "segments": len(map_segments),
-        "front_end_s": round(front_end.seconds, 4),
+        **front_end.counts(),
         "total_s": round(time.perf_counter() - started, 4),
     }
     # With reference poses every robot frame is the reference world frame.
@@ -194,14 +235,13 @@ def _closure_record(closure: Closure, scans: Sequence[KeyframeScan]) -> dict[str
 
 def _run_local(
     recordings: Mapping[str, Sequence[TimedLaserScan]],
-    extraction: ExtractionConfig,
+    front_end: _FrontEnd,
     config: LocalMapperConfig,
-    progress: Progress | None,
 ) -> OfflineMap:
     """One :class:`LocalMapper` per robot, exactly as ``robot_mapper`` runs it (with the back
-    end in line, so that a replay is deterministic)."""
+    end in line, so that a replay is deterministic); a robot whose stamps jumped back and
+    stayed there starts a new, empty map, as the node does."""
     robots = sorted(recordings)
-    front_end = _FrontEnd(extraction, progress, sum(len(recordings[r]) for r in robots))
     started = time.perf_counter()
     mapping_s = 0.0
     segment_sets: list[FloatArray] = []
@@ -217,7 +257,9 @@ def _run_local(
     mapping_errors = 0
     for index, robot in enumerate(robots):
         mapper = LocalMapper(config)
-        for item, segments in front_end.scans(robot, recordings[robot]):
+        for item, segments, reset in front_end.scans(robot, recordings[robot]):
+            if reset:
+                mapper = LocalMapper(config)
             t1 = time.perf_counter()
             try:
                 mapper.add_scan(item.stamp, segments, item.scan)
@@ -283,11 +325,9 @@ def _run_local(
     times = summary(scan_times)
     stats: dict[str, object] = {
         "method": "local",
-        "scans_total": front_end.total,
         "scans_posed": sum(len(t[0]) for t in trajectories.values()),
-        "scans_rejected": front_end.rejected,
         "segments": int(sum(len(s) for s in segment_sets)),
-        "front_end_s": round(front_end.seconds, 4),
+        **front_end.counts(),
         "local_mapping_s": round(mapping_s, 4),
         "mapping_errors": mapping_errors,
         "local_mapping_median_ms": times["median_ms"],
