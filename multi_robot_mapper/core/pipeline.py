@@ -299,6 +299,7 @@ def _run_local(
             "scans_placed_by": dict(mapper.scans_placed_by),
             "scans_in_main_piece": len(trajectories[robot][0]),
             "set_aside_reasons": dict(mapper.set_aside_reasons),
+            "scans_held": mapper.scans_held,  # not placed yet when the scans ended (nor set aside)
             "pieces_started": mapper.pieces_started,
             "pieces_left": len(set(backend.map.pieces.tolist())),
             "keyframes": len(keyframes),

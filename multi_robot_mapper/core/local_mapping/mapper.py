@@ -17,7 +17,11 @@ add_scan`):
 3. **integrate** when it reaches ``integrate_confidence``: the scan is placed; a scan that
    moved ``keyframe_distance`` or turned ``keyframe_angle`` from the last keyframe becomes a
    keyframe, with an edge (its information from the match) to the keyframe it was matched
-   against; **otherwise the robot is lost** and maps on in a new piece, from this scan.
+   against; **otherwise the scan is held**: when the next scan is placed from the map, the
+   held one contradicted the robot's own stream (a scan of another place, junk ranges) and is
+   set aside, the map untouched; when ``lost_confirm_scans`` scans in a row are not placed
+   and each follows the one before (a confident match), **the robot is lost** and maps on in
+   a new piece, from the first of them.
 
 The back end (:mod:`.backend`: the loop closer and the keyframe map) takes each new keyframe:
 local edges, loop closures, joins between pieces, optimisation of the pose graph, fusion into
@@ -30,6 +34,7 @@ jump when a closure moves the keyframes: that is expected.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import threading
 import time
 from collections import deque
@@ -46,6 +51,7 @@ from multi_robot_mapper.core.local_mapping.attempts import (
     Reference,
     References,
     Shapes,
+    in_context,
     match_scan,
     pose_of_match,
     reach_in,
@@ -57,6 +63,7 @@ from multi_robot_mapper.core.local_mapping.backend import (
     Runner,
 )
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.held import OUTLIER, HeldScan, follow_match
 from multi_robot_mapper.core.local_mapping.joins import LostFrom
 from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeScan
 from multi_robot_mapper.core.local_mapping.loop_closer import BackendUpdate, Closure
@@ -94,6 +101,9 @@ class LocalUpdate:
     seconds: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
+LOST = "lost: no confident match"  # why a new piece started (LocalMapper.set_aside_reasons)
+
+
 @dataclasses.dataclass
 class _Last:
     """The newest accepted scan."""
@@ -128,6 +138,8 @@ class LocalMapper:
         self.scans_placed_by: dict[str, int] = {}  # placed scans per context of their match
         self.set_aside_reasons: dict[str, int] = {}
         self.pieces_started = 0  # new pieces after the first (the robot was lost)
+        # Scans not placed from the map, held until the next ones say what they were.
+        self._held: list[HeldScan] = []
         self.stage_seconds: dict[str, float] = {}  # front-end time per stage, summed
         # The matches the newest scan was tried with (a bench judges them by the reference).
         self.last_attempts: list[Attempt] = []
@@ -179,6 +191,11 @@ class LocalMapper:
     def stamp(self) -> float | None:
         return None if self._last is None else self._last.stamp
 
+    @property
+    def scans_held(self) -> int:
+        """Scans not placed, waiting for the next scans (neither mapped nor set aside yet)."""
+        return len(self._held)
+
     def add_scan(self, stamp: float, segments: SegmentScan, view: LaserScanData) -> LocalUpdate:
         """Place one scan (its segments and the scan they came from) and extend the map."""
         started = time.perf_counter()
@@ -198,7 +215,10 @@ class LocalMapper:
         if last is None:
             return self._start_piece(stamp, new, view, "")
         dt = max(stamp - last.stamp, 0.0)
-        chosen, integrated = self._match(last, new, view, dt)
+        after_outliers = bool(self._held)
+        if self._held and (following := self._follow_held(stamp, new, view)) is not None:
+            return following
+        chosen, integrated = self._match(last, new, view, dt, after_outliers)
         result, anchor, reference = chosen.result, chosen.anchor, chosen.reference
         T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
         if not integrated:
@@ -213,7 +233,7 @@ class LocalMapper:
                 None if top_speed is None else reach_in(top_speed, dt),
                 chosen.confidence,
             )
-            return self._start_piece(stamp, new, view, "lost: no confident match", lost_from)
+            return self._hold(HeldScan(stamp, new, view, lost_from), chosen.confidence)
         pose = chosen.pose
         motion = se2.between(self._placed_pose_unlocked(last.anchor), pose)
         if dt > 0.0:
@@ -221,14 +241,10 @@ class LocalMapper:
             self._speeds.append(float(np.hypot(motion[0], motion[1])) / dt)
         placed = Anchor(anchor.keyframe, T_keyframe_new)
         keyframe_added = False
-        T_keyframe_new_arr = np.asarray(T_keyframe_new)
         known = self._known_view(pose, chosen.piece) if self.config.revisit_keyframes else None
         if known is not None:
             placed = known  # ground the map holds: tracked against that keyframe from now on
-        elif (
-            float(np.hypot(*T_keyframe_new_arr[:2])) > self.config.keyframe_distance
-            or abs(float(T_keyframe_new_arr[2])) > self.config.keyframe_angle
-        ):
+        elif self._moved_on(T_keyframe_new):
             started = time.perf_counter()
             placed = self._new_keyframe(stamp, new, view, anchor, result, reference)
             keyframe_added = True
@@ -248,11 +264,78 @@ class LocalMapper:
             chosen.context,
         )
 
+    def _moved_on(self, T_keyframe_scan: Pose) -> bool:
+        """The scan moved or turned enough from its keyframe to be a keyframe itself."""
+        x, y, theta = T_keyframe_scan
+        return bool(
+            np.hypot(x, y) > self.config.keyframe_distance
+            or abs(theta) > self.config.keyframe_angle
+        )
+
+    def _follow_held(
+        self, stamp: float, segments: FloatArray, view: LaserScanData
+    ) -> LocalUpdate | None:
+        """A scan after held ones (:mod:`.held`): when it follows them it is held too (the
+        robot may be lost: a new piece once ``lost_confirm_scans`` follow each other); when
+        it does not, they were outliers, set aside, and it is placed as usual (None)."""
+        started = time.perf_counter()
+        scan = HeldScan(stamp, segments, view)
+        follow = follow_match(self.config, self._held[-1], scan, self._top_speed())
+        self._count("search", time.perf_counter() - started)
+        if follow is None:
+            self.scans_set_aside += len(self._held)
+            count = self.set_aside_reasons.get(OUTLIER, 0) + len(self._held)
+            self.set_aside_reasons[OUTLIER] = count
+            self._held = []
+            return None
+        return self._hold(dataclasses.replace(scan, follow=follow), follow.confidence)
+
+    def _hold(self, scan: HeldScan, confidence: float) -> LocalUpdate:
+        """Hold ``scan`` (not placed from the map, or following held ones); once
+        ``lost_confirm_scans`` are held the robot is lost: a new piece from the first."""
+        self._held.append(scan)
+        if len(self._held) < self.config.lost_confirm_scans:
+            reason = "not placed: held until the next scan"
+            return LocalUpdate(False, None, False, confidence, reason, self.piece)
+        lost, self._held = self._held, []
+        first = lost[0]
+        update = self._start_piece(first.stamp, first.segments, first.view, LOST, first.lost_from)
+        for previous, later in itertools.pairwise(lost):
+            update = self._placed_after(previous, later)
+        return update
+
+    def _placed_after(self, previous: HeldScan, scan: HeldScan) -> LocalUpdate:
+        """A held scan placed in the new piece from the held scan before it (the last one
+        placed), by the match that confirmed the robot was lost."""
+        last, result = self._last, scan.follow
+        assert last is not None and result is not None
+        anchor = last.anchor
+        T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
+        placed = Anchor(anchor.keyframe, T_keyframe_new)
+        keyframe_added = self._moved_on(T_keyframe_new)
+        if keyframe_added:
+            placed = self._new_keyframe(
+                scan.stamp, scan.segments, scan.view, anchor, result, previous.segments
+            )
+        self._last = _Last(scan.stamp, scan.segments, scan.view, placed)
+        self._record(scan.stamp, placed)
+        self.scans_accepted += 1
+        self.scans_placed_by["search"] = self.scans_placed_by.get("search", 0) + 1
+        confidence = in_context(result.confidence, "search")
+        return LocalUpdate(True, self.pose, keyframe_added, confidence, LOST, self.piece, True)
+
     def _match(
-        self, last: _Last, new: FloatArray, view: LaserScanData, dt: float
+        self,
+        last: _Last,
+        new: FloatArray,
+        view: LaserScanData,
+        dt: float,
+        after_outliers: bool = False,
     ) -> tuple[Attempt, bool]:
         """The placement of the new scan and whether to integrate it (:func:`match_scan`),
-        against the references as they are now."""
+        against the references as they are now. ``after_outliers``: the scans since the last
+        placed one were set aside; the robot is then found only where it can have driven at
+        its own top speed (as a lost robot is in the pieces it left)."""
         config = self.config
         keyframe = last.anchor.keyframe
         # The constant-velocity prediction and "did not move", from the last scan.
@@ -279,8 +362,9 @@ class LocalMapper:
                 pieces={k: self._pieces[k] for k in (keyframe, *older)},
                 scans={k: self._scans[k] for k in (keyframe, *older)},
                 left=left,
-                # Only a placement in another piece is bounded by it: not computed otherwise.
-                top_speed=self._top_speed() if left else None,
+                top_speed=self._top_speed(),
+                elapsed=dt,
+                own_speed_only=after_outliers,
             )
         chosen, integrated, tracked = match_scan(
             config,
