@@ -163,8 +163,8 @@ class References:
     # how fast the robot drives at most (m/s; the 95th percentile of its placed motions)
     top_speed: float | None = None
     elapsed: float | None = None  # seconds from the last placed scan to the new one
-    # the scans since the last placed one were outliers, set aside: in its own piece too the
-    # robot is found only where its own top speed takes it (not ``plausible_speed``)
+    # the scans since the last placed one are held, not placed (core.local_mapping.held): in
+    # its own piece too the robot is found only where its own top speed takes it
     own_speed_only: bool = False
 
 
@@ -287,12 +287,12 @@ def match_scan(
         # at ``plausible_speed`` (or its own top speed, when faster) in the time since, plus
         # the correctness tolerance: a scan of another place or of another building can match
         # the last scan confidently metres away (a corridor seen from elsewhere in it), a
-        # jump no robot makes between two scans. Right after scans set aside as outliers (an
-        # anomaly: the next scan is matched across their gap) and in another piece (the
-        # placement puts the robot back where it was when it got lost there), no farther than
-        # its own top speed takes it: two attempts against neighbouring keyframes of one
-        # look-alike place agree as well as two right ones (intel: 7.2 m off at 0.64 and 0.76;
-        # intel 4 robot1, after an outlier: 7.2 m off at 0.92).
+        # jump no robot makes between two scans. Right after held scans (an anomaly: the next
+        # scan is matched across their gap) and in another piece (the placement puts the
+        # robot back where it was when it got lost there), no farther than its own top speed
+        # takes it: two attempts against neighbouring keyframes of one look-alike place agree
+        # as well as two right ones (intel: 7.2 m off at 0.64 and 0.76; intel 4 robot1, after
+        # a held scan: 7.2 m off at 0.92).
         top_speed = references.top_speed
         if a.piece == current and references.elapsed is not None:
             pose, elapsed = here, references.elapsed

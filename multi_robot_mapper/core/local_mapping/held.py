@@ -1,17 +1,20 @@
-"""Scans the front end could not place from the map, held until the next scan says what they
+"""Scans the front end could not place from the map, held until the next scans say what they
 were.
 
 A scan that no confident match places from the map (:mod:`.mapper`, step 3) is either an
 outlier, a scan that contradicts the robot's own stream (junk ranges, another building, a place
 of the building where the robot is not), or the first sign that the robot is lost. One scan
-cannot tell which; the next one can. When the next scan follows the held one
-(:func:`follow_match`: a confident match, where the robot can have driven in the time between
-them), both are the robot's: once ``lost_confirm_scans`` scans follow each other the robot is
-lost and a new piece starts from the first of them (what it did at once before it held
-scans). When the next scan does not follow it, the held scan was an outlier: it is set aside
-(:data:`OUTLIER`), and the map and the mapper's state never saw it. Two outliers in a row
-rarely follow each other: junk matches junk at random, metres apart, where no robot drives in
-the time between two scans.
+cannot tell which; the next ones can:
+
+- when a later scan is placed from the map, the held scans were outliers: they are set aside
+  (:data:`OUTLIER`), and the map and the mapper's state never saw them;
+- when ``lost_confirm_scans`` held scans in a row follow each other (:func:`follow_match`: a
+  confident match, where the robot can have driven in the time between them), or
+  ``lost_confirm_scans + 2`` are held, the robot is lost: the held scans are mapped in order
+  exactly as they were before scans were held (the first starts a new piece).
+
+Two outliers in a row rarely follow each other: junk matches junk at random, metres apart,
+where no robot drives in the time between two scans.
 """
 
 from __future__ import annotations
@@ -35,14 +38,14 @@ OUTLIER = "outlier: placed neither from the map nor by the next scan"
 
 @dataclasses.dataclass(frozen=True)
 class HeldScan:
-    """A scan held: the first of a chain not placed from the map, or one that follows it."""
+    """A scan held: not placed from the map, or following the held scan before it."""
 
     stamp: float
     segments: FloatArray
     view: LaserScanData
-    # the first of a chain: the guess of where it is, should it start a new piece
+    # not placed from the map: the guess of where it is, should it start a new piece
     lost_from: LostFrom | None = None
-    follow: MatchResult | None = None  # a later one: its placement from the one before
+    follow: MatchResult | None = None  # following: its placement from the held scan before
 
 
 def follow_match(

@@ -17,11 +17,13 @@ add_scan`):
 3. **integrate** when it reaches ``integrate_confidence``: the scan is placed; a scan that
    moved ``keyframe_distance`` or turned ``keyframe_angle`` from the last keyframe becomes a
    keyframe, with an edge (its information from the match) to the keyframe it was matched
-   against; **otherwise the scan is held**: when the next scan is placed from the map, the
-   held one contradicted the robot's own stream (a scan of another place, junk ranges) and is
-   set aside, the map untouched; when ``lost_confirm_scans`` scans in a row are not placed
-   and each follows the one before (a confident match), **the robot is lost** and maps on in
-   a new piece, from the first of them.
+   against; **otherwise the scan is held** (:mod:`.held`): when a later scan is placed from
+   the map, the held ones contradicted the robot's own stream (scans of another place, junk
+   ranges) and are set aside, the map untouched; when ``lost_confirm_scans`` held scans in a
+   row follow each other (or ``lost_confirm_scans + 2`` are held), **the robot is lost** and
+   maps on in a new piece, from the first of them. A placement in the robot's own piece is
+   never farther from its last placed scan than it can have driven since
+   (``plausible_speed``; right after held scans, its own top speed).
 
 The back end (:mod:`.backend`: the loop closer and the keyframe map) takes each new keyframe:
 local edges, loop closures, joins between pieces, optimisation of the pose graph, fusion into
@@ -34,7 +36,6 @@ jump when a closure moves the keyframes: that is expected.
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import threading
 import time
 from collections import deque
@@ -51,7 +52,6 @@ from multi_robot_mapper.core.local_mapping.attempts import (
     Reference,
     References,
     Shapes,
-    in_context,
     match_scan,
     pose_of_match,
     reach_in,
@@ -93,7 +93,8 @@ class LocalUpdate:
     confidence: float  # of the match that placed it (1 for a piece's first scan)
     reason: str  # why a scan was set aside, or why a new piece started ("" otherwise)
     piece: int = 0  # the piece the scan is in
-    new_piece: bool = False  # the robot was lost: this scan starts a new piece
+    # the robot was lost: this scan (or the scans held before it) started a new piece
+    new_piece: bool = False
     # the context of the match that placed it (attempts.CONTEXTS; "" when it starts a piece)
     placed_by: str = ""
     # seconds per stage of this scan: track / search / recent (matching), confidence,
@@ -140,6 +141,7 @@ class LocalMapper:
         self.pieces_started = 0  # new pieces after the first (the robot was lost)
         # Scans not placed from the map, held until the next ones say what they were.
         self._held: list[HeldScan] = []
+        self._replaying = False  # mapping held scans after all (the robot was lost)
         self.stage_seconds: dict[str, float] = {}  # front-end time per stage, summed
         # The matches the newest scan was tried with (a bench judges them by the reference).
         self.last_attempts: list[Attempt] = []
@@ -211,14 +213,17 @@ class LocalMapper:
         new = new[np.isfinite(new).all(axis=1)]
         if float(lines_of(new).length.sum()) < self.config.integrate.min_match_value:
             return self._set_aside("too little structure in the scan")
+        return self._place(stamp, new, view)
+
+    def _place(self, stamp: float, new: FloatArray, view: LaserScanData) -> LocalUpdate:
         last = self._last
         if last is None:
             return self._start_piece(stamp, new, view, "")
         dt = max(stamp - last.stamp, 0.0)
-        after_outliers = bool(self._held)
-        if self._held and (following := self._follow_held(stamp, new, view)) is not None:
-            return following
-        chosen, integrated = self._match(last, new, view, dt, after_outliers)
+        holding = bool(self._held) and not self._replaying
+        if holding and (follow := self._follows_held(stamp, new, view)) is not None:
+            return self._hold(HeldScan(stamp, new, view, None, follow), follow.confidence)
+        chosen, integrated = self._match(last, new, view, dt, after_held=holding)
         result, anchor, reference = chosen.result, chosen.anchor, chosen.reference
         T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
         if not integrated:
@@ -233,7 +238,10 @@ class LocalMapper:
                 None if top_speed is None else reach_in(top_speed, dt),
                 chosen.confidence,
             )
+            if self._replaying:
+                return self._start_piece(stamp, new, view, LOST, lost_from)
             return self._hold(HeldScan(stamp, new, view, lost_from), chosen.confidence)
+        self._set_aside_held()  # placed from the map: the scans held before it were outliers
         pose = chosen.pose
         motion = se2.between(self._placed_pose_unlocked(last.anchor), pose)
         if dt > 0.0:
@@ -272,57 +280,54 @@ class LocalMapper:
             or abs(theta) > self.config.keyframe_angle
         )
 
-    def _follow_held(
+    def _follows_held(
         self, stamp: float, segments: FloatArray, view: LaserScanData
-    ) -> LocalUpdate | None:
-        """A scan after held ones (:mod:`.held`): when it follows them it is held too (the
-        robot may be lost: a new piece once ``lost_confirm_scans`` follow each other); when
-        it does not, they were outliers, set aside, and it is placed as usual (None)."""
+    ) -> MatchResult | None:
+        """The placement of a scan from the newest held one (:func:`follow_match`)."""
         started = time.perf_counter()
         scan = HeldScan(stamp, segments, view)
         follow = follow_match(self.config, self._held[-1], scan, self._top_speed())
         self._count("search", time.perf_counter() - started)
-        if follow is None:
+        return follow
+
+    def _hold(self, scan: HeldScan, confidence: float) -> LocalUpdate:
+        """Hold ``scan`` (:mod:`.held`). Once the newest ``lost_confirm_scans`` held scans
+        follow each other, or ``lost_confirm_scans + 2`` are held, the robot is lost: the held
+        scans are mapped as a lost robot's (:meth:`_lost`)."""
+        self._held.append(scan)
+        chain = 1
+        while chain < len(self._held) and self._held[-chain].follow is not None:
+            chain += 1
+        confirm = self.config.lost_confirm_scans
+        if chain < confirm and len(self._held) < confirm + 2:
+            reason = "not placed: held until the next scan"
+            return LocalUpdate(False, None, False, confidence, reason, self.piece)
+        return self._lost()
+
+    def _lost(self) -> LocalUpdate:
+        """The robot is lost: the held scans are mapped in order exactly as they would have
+        been without holding (the first starts a new piece from its guess; each later one is
+        matched as usual, and starts a piece of its own when nothing places it)."""
+        held, self._held = self._held, []
+        self._replaying = True
+        try:
+            first = held[0]
+            update = self._start_piece(
+                first.stamp, first.segments, first.view, LOST, first.lost_from
+            )
+            for scan in held[1:]:
+                update = self._place(scan.stamp, scan.segments, scan.view)
+        finally:
+            self._replaying = False
+        return dataclasses.replace(update, new_piece=True)
+
+    def _set_aside_held(self) -> None:
+        """The held scans were outliers: set aside (:data:`OUTLIER`), the map untouched."""
+        if self._held:
             self.scans_set_aside += len(self._held)
             count = self.set_aside_reasons.get(OUTLIER, 0) + len(self._held)
             self.set_aside_reasons[OUTLIER] = count
             self._held = []
-            return None
-        return self._hold(dataclasses.replace(scan, follow=follow), follow.confidence)
-
-    def _hold(self, scan: HeldScan, confidence: float) -> LocalUpdate:
-        """Hold ``scan`` (not placed from the map, or following held ones); once
-        ``lost_confirm_scans`` are held the robot is lost: a new piece from the first."""
-        self._held.append(scan)
-        if len(self._held) < self.config.lost_confirm_scans:
-            reason = "not placed: held until the next scan"
-            return LocalUpdate(False, None, False, confidence, reason, self.piece)
-        lost, self._held = self._held, []
-        first = lost[0]
-        update = self._start_piece(first.stamp, first.segments, first.view, LOST, first.lost_from)
-        for previous, later in itertools.pairwise(lost):
-            update = self._placed_after(previous, later)
-        return update
-
-    def _placed_after(self, previous: HeldScan, scan: HeldScan) -> LocalUpdate:
-        """A held scan placed in the new piece from the held scan before it (the last one
-        placed), by the match that confirmed the robot was lost."""
-        last, result = self._last, scan.follow
-        assert last is not None and result is not None
-        anchor = last.anchor
-        T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
-        placed = Anchor(anchor.keyframe, T_keyframe_new)
-        keyframe_added = self._moved_on(T_keyframe_new)
-        if keyframe_added:
-            placed = self._new_keyframe(
-                scan.stamp, scan.segments, scan.view, anchor, result, previous.segments
-            )
-        self._last = _Last(scan.stamp, scan.segments, scan.view, placed)
-        self._record(scan.stamp, placed)
-        self.scans_accepted += 1
-        self.scans_placed_by["search"] = self.scans_placed_by.get("search", 0) + 1
-        confidence = in_context(result.confidence, "search")
-        return LocalUpdate(True, self.pose, keyframe_added, confidence, LOST, self.piece, True)
 
     def _match(
         self,
@@ -330,12 +335,12 @@ class LocalMapper:
         new: FloatArray,
         view: LaserScanData,
         dt: float,
-        after_outliers: bool = False,
+        after_held: bool = False,
     ) -> tuple[Attempt, bool]:
         """The placement of the new scan and whether to integrate it (:func:`match_scan`),
-        against the references as they are now. ``after_outliers``: the scans since the last
-        placed one were set aside; the robot is then found only where it can have driven at
-        its own top speed (as a lost robot is in the pieces it left)."""
+        against the references as they are now. ``after_held``: the scans since the last
+        placed one are held (not placed); the robot is then found only where it can have
+        driven at its own top speed (as a lost robot is in the pieces it left)."""
         config = self.config
         keyframe = last.anchor.keyframe
         # The constant-velocity prediction and "did not move", from the last scan.
@@ -364,8 +369,9 @@ class LocalMapper:
                 left=left,
                 top_speed=self._top_speed(),
                 elapsed=dt,
-                own_speed_only=after_outliers,
+                own_speed_only=after_held,
             )
+        self.last_attempts = []  # this scan's (a lost robot's held scans are matched in turn)
         chosen, integrated, tracked = match_scan(
             config,
             references,
