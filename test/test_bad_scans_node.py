@@ -88,15 +88,23 @@ def _distance_to_room(points: np.ndarray) -> np.ndarray:
     return np.minimum(inside_x, inside_y)
 
 
-def test_each_scan_is_processed_with_its_own_beam_count(harness: Harness) -> None:
-    # The same room seen by lasers of 361, 181, 1441, 361 and 91 beams, one after the other:
-    # every segment lies on the room's walls only if each scan got its own beam angles.
-    for t, beams in ((1.0, 361), (2.0, 181), (3.0, 1441), (4.0, 361), (5.0, 91)):
-        msg = scan_to_msg(room_scan(beams), "robot1/laser", stamp_from_seconds(t))
-        segments = segments_from_marker(harness.answer_to(msg))
-        assert len(segments) >= 4, beams
-        assert _distance_to_room(segments.reshape(-1, 2)).max() < 0.03, beams
-    assert harness.mapper.scans_rejected == 0
+def test_each_scan_is_processed_with_its_own_beam_count(ros_context) -> None:
+    # The same room seen by lasers of 361, 181, 1441, 361 and 91 beams, one after the other
+    # (each geometry taken as it comes: geometry_change_scans 1): every segment lies on the
+    # room's walls only if each scan got its own beam angles.
+    harness = Harness(
+        ros_context, parameter_overrides=[Parameter("geometry_change_scans", value=1)]
+    )
+    try:
+        for t, beams in ((1.0, 361), (2.0, 181), (3.0, 1441), (4.0, 361), (5.0, 91)):
+            msg = scan_to_msg(room_scan(beams), "robot1/laser", stamp_from_seconds(t))
+            segments = segments_from_marker(harness.answer_to(msg))
+            assert len(segments) >= 4, beams
+            assert _distance_to_room(segments.reshape(-1, 2)).max() < 0.03, beams
+        assert harness.mapper.scans_rejected == 0
+        assert sum("geometry changed" in line for line in harness.logged) == 1  # throttled
+    finally:
+        harness.close()
 
 
 def test_stamps_duplicate_stale_zero_future_and_a_bag_played_again(harness: Harness) -> None:
@@ -114,13 +122,17 @@ def test_stamps_duplicate_stale_zero_future_and_a_bag_played_again(harness: Harn
     assert any("header.stamp" in line and "ahead of this node's clock" in line for line in h.logged)
     h.send_good(100.5)  # good scans go on being mapped
     assert h.mapper.mapper.scans_accepted == 2 and h.mapper.scans_rejected == 4
-    # The bag starts again from its beginning: the map starts over, mapping resumes.
+    # The bag starts again from its beginning: once three scans stay at the new time
+    # (stamp_confirm_scans), the map starts over and all three are mapped.
     assert spin_until(h.executor, lambda: h.mapper.published_version > 0, timeout=5.0)
-    h.send_good(90.0)
-    assert h.mapper.map_resets == 1 and h.mapper.mapper.scans_accepted == 1
+    h.send(scan_to_msg(room_scan(), "robot1/laser", stamp_from_seconds(90.0)))
+    h.send(scan_to_msg(room_scan(), "robot1/laser", stamp_from_seconds(90.5)))
+    assert h.mapper.map_resets == 0 and h.mapper.stream.held == 2
+    h.send_good(91.0)
+    assert h.mapper.map_resets == 1 and h.mapper.mapper.scans_accepted == 3
     assert any("jumped back 10.5 s" in line for line in h.logged)
-    h.send_good(90.5)
-    assert h.mapper.mapper.scans_accepted == 2
+    h.send_good(91.5)
+    assert h.mapper.mapper.scans_accepted == 4
 
 
 def test_degenerate_scans_never_reach_the_mapper_and_poses_stay_right(ros_context) -> None:
@@ -157,7 +169,12 @@ def big_room_scan(beams: int) -> LaserScanData:
 
 
 def test_a_flood_of_10000_beam_scans_at_40_hz_keeps_latency_bounded(ros_context) -> None:
-    node = RobotMapper(context=ros_context, namespace="robot1")
+    # One noise-free scan sent again and again: the copy rule is off (copy_window 0).
+    node = RobotMapper(
+        context=ros_context,
+        namespace="robot1",
+        parameter_overrides=[Parameter("copy_window", value=0)],
+    )
     node.warnings.log = lambda message: None
     driver = Node("flood", context=ros_context)
     publisher = driver.create_publisher(LaserScan, "/robot1/scan", qos_profile_sensor_data)
@@ -177,18 +194,18 @@ def test_a_flood_of_10000_beam_scans_at_40_hz_keeps_latency_bounded(ros_context)
             publisher.publish(scan_to_msg(scan, "robot1/laser", stamp_from_seconds(10.0 + i / 40)))
             sent += 1
         time.sleep(1.0)  # the node catches up; then one last scan, the newest of all
-        last = scan_to_msg(scan, "robot1/laser", stamp_from_seconds(20.0))
+        last = scan_to_msg(scan, "robot1/laser", stamp_from_seconds(12.0))
         publisher.publish(last)
         sent += 1
         deadline = time.monotonic() + 10.0
-        while node.stamps.last != 20.0 and time.monotonic() < deadline:
+        while node.stream.last != 12.0 and time.monotonic() < deadline:
             time.sleep(0.05)
     finally:
         executor.shutdown()
         spinner.join(timeout=10.0)
         node.destroy_node()
         driver.destroy_node()
-    assert node.stamps.last == 20.0  # the newest scan was mapped
+    assert node.stream.last == 12.0  # the newest scan was mapped
     # Every scan is accounted for: delivered (mapped or dropped as stale), or lost on the way.
     assert node.scans_received + node.scans_lost == sent
     assert node.max_queue_delay <= node.config.scan_max_queue_delay  # bounded latency

@@ -29,6 +29,7 @@ from multi_robot_mapper.core.local_mapping import (
     context_model,
     keyframe_map,
 )
+from multi_robot_mapper.core.local_mapping.held import OUTLIER
 from multi_robot_mapper.core.matching import integrate
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import (
@@ -128,19 +129,21 @@ def test_a_scan_of_another_place_is_not_integrated_and_the_map_is_kept(office_dr
         assert feed(mapper, float(t), s).piece == 0
     before = {kf.index: kf for kf in mapper.keyframes()}
     update = feed(mapper, float(stamps[40]), stranger_scan())
-    # Not integrated: the robot is lost and the stranger starts a piece of its own.
-    assert update.new_piece and update.piece != 0
-    assert mapper.set_aside_reasons == {"lost: no confident match": 1}
-    for keyframe in mapper.keyframes():
-        if keyframe.index in before:
-            np.testing.assert_array_equal(
-                keyframe.T_robotmap_keyframe, before[keyframe.index].T_robotmap_keyframe
-            )
-            assert keyframe.piece == 0
-    # The drive goes on in the office map: the next scans match its keyframes again.
+    # Not integrated: held until the next scan says whether the robot is lost.
+    assert not update.accepted and not update.new_piece and mapper.scans_held == 1
+    for keyframe in mapper.keyframes():  # the map is as it was
+        np.testing.assert_array_equal(
+            keyframe.T_robotmap_keyframe, before[keyframe.index].T_robotmap_keyframe
+        )
+    assert len(mapper.keyframes()) == len(before)
+    # The drive goes on in the office map: the next scans are placed from it, and the
+    # stranger, which none followed, is set aside. No piece started.
     assert feed(mapper, float(stamps[41]), scans[41]).piece == 0
+    assert mapper.set_aside_reasons == {OUTLIER: 1} and mapper.scans_held == 0
     assert feed(mapper, float(stamps[42]), scans[42]).piece == 0
-    assert mapper.main_piece() == 0
+    assert mapper.main_piece() == 0 and mapper.pieces_started == 0
+    assert all(kf.piece == 0 for kf in mapper.keyframes())
+    assert float(stamps[40]) not in mapper.trajectory()[0]
 
 
 def test_a_scan_without_structure_is_set_aside_before_anything_else() -> None:
@@ -170,7 +173,8 @@ def test_a_first_scan_nothing_confirms_stays_in_a_piece_of_its_own(office_drive)
 
 def test_a_person_blocking_the_laser_does_not_break_the_map() -> None:
     # Three scans show nothing of the office (a person in front of the laser): they start a
-    # piece of their own, and the office scans after them are placed in the office map again.
+    # piece of their own (the second confirms the first), and the office scans after them are
+    # placed in the office map again.
     stamps, scans, truth = looped_drive(rate=4.0, laps=0.5, seed=4)
     blocked = range(30, 33)
     local = LocalMapper()
@@ -178,7 +182,7 @@ def test_a_person_blocking_the_laser_does_not_break_the_map() -> None:
         feed(local, float(t), stranger_scan(k) if k in blocked else s)
         for k, (t, s) in enumerate(zip(stamps, scans, strict=True))
     ]
-    assert updates[30].new_piece
+    assert not updates[30].accepted and updates[31].new_piece
     assert all(u.piece == 0 for k, u in enumerate(updates) if k not in blocked)
     times, poses = local.trajectory()
     kept = [k for k in range(len(stamps)) if k not in blocked]

@@ -70,7 +70,8 @@ def _mapped_losing_the_robot_at(
         return chosen, integrated and count["scan"] not in lost_at
 
     monkeypatch.setattr(mapper.LocalMapper, "_match", failing)
-    local = LocalMapper()
+    # Each failing scan is a loss at once (not held for the next scan to confirm it).
+    local = LocalMapper(dataclasses.replace(LocalMapperConfig(), lost_confirm_scans=1))
     updates = []
     for k, (t, s) in enumerate(zip(stamps, scans, strict=True)):
         count["scan"] = k

@@ -7,6 +7,7 @@ import dataclasses
 from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.local_mapping import LocalMapperConfig
+from multi_robot_mapper.core.scan_stream import ScanStreamConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,6 +64,44 @@ class RobotMapperConfig:
         minimum=0.0,
         maximum=1e6,
     )
+    stamp_gap_periods: float = param(
+        10.0,
+        unit="intervals",
+        doc="a scan stamped further ahead of the last mapped one than this many of the "
+        "stream's scan intervals (their recent median) is held until stamp_confirm_scans scans "
+        "confirm the new time, and refused (stamp_jump_ahead) when the next scan continues the "
+        "old one: one stamp far ahead must not make every later scan look stale",
+        minimum=1.0,
+        maximum=1e6,
+    )
+    stamp_confirm_scans: int = param(
+        3,
+        unit="scans",
+        doc="scans in a row that must continue a new time (a jump ahead of the cadence, or "
+        "back beyond stamp_reset_jump) before it is believed: then they are mapped (a jump "
+        "back first starts the map over); a corrupt stamp is one scan, a clock that jumped "
+        "stays there",
+        minimum=1,
+        maximum=1000,
+    )
+    geometry_change_scans: int = param(
+        10,
+        unit="scans",
+        doc="a scan whose angle_min, angle_max, angle_increment or beam count differ from the "
+        "laser's (its first scan's) is refused (angle_fields), unless this many scans in a row "
+        "have the new geometry: the laser was reconfigured, its new geometry is used from then "
+        "on (with a warning)",
+        minimum=1,
+        maximum=100000,
+    )
+    copy_window: int = param(
+        200,
+        unit="scans",
+        doc="a scan whose ranges are an exact copy of one of the last this many mapped scans' "
+        "is refused (copied_ranges): no laser reads the same twice; 0: not checked",
+        minimum=0,
+        maximum=1000000,
+    )
     map_frame: str = param(
         "",
         unit="",
@@ -104,3 +143,14 @@ class RobotMapperConfig:
 
     def __post_init__(self) -> None:
         validate(self)
+
+    def stream_config(self) -> ScanStreamConfig:
+        """The rules every scan of the robot's stream is checked by before it is mapped."""
+        return ScanStreamConfig(
+            reset_jump=self.stamp_reset_jump,
+            max_lead=self.max_stamp_lead,
+            gap_periods=self.stamp_gap_periods,
+            confirm_scans=self.stamp_confirm_scans,
+            geometry_scans=self.geometry_change_scans,
+            copy_window=self.copy_window,
+        )

@@ -37,10 +37,12 @@ from multi_robot_mapper.core.local_mapping import (
     LocalMapperConfig,
 )
 from multi_robot_mapper.core.local_mapping.backend import Backend
+from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult, merge
 from multi_robot_mapper.core.merging.joint import JointState, place_scans
 from multi_robot_mapper.core.merging.methods import MERGE_METHODS, merge_method
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
+from multi_robot_mapper.core.scan_stream import ScanStreamConfig, ScanStreamGuard
 from multi_robot_mapper.core.snapshots import (
     NewestPose,
     Snapshot,
@@ -108,43 +110,70 @@ Progress = Callable[[str, int, int], None]
 
 @dataclasses.dataclass
 class _FrontEnd:
-    """Scans to segments for every placement method, with the counts they all report."""
+    """Scans to segments for every placement method, each robot's stream checked by a
+    :class:`ScanStreamGuard` as ``robot_mapper`` checks it, with the counts they all report."""
 
     extraction: ExtractionConfig
+    stream: ScanStreamConfig
     progress: Progress | None
     total: int  # scans of every robot
     done: int = 0
     seconds: float = 0.0  # spent extracting
-    rejected: dict[str, int] = dataclasses.field(default_factory=dict)  # ScanError kind -> scans
+    # scans refused, by reason: ScanError kinds and the stream's rules (core.scan_stream)
+    rejected: dict[str, int] = dataclasses.field(default_factory=dict)
+    map_resets: int = 0  # a robot's map started over (its stamps jumped back and stayed)
+    notices: list[str] = dataclasses.field(default_factory=list)  # e.g. a laser reconfigured
 
     def scans(
         self, robot: str, items: Sequence[TimedLaserScan], needs_reference: bool = False
-    ) -> Iterator[tuple[TimedLaserScan, SegmentScan]]:
-        """Each usable scan of ``robot`` with its segments; unusable ones are counted."""
+    ) -> Iterator[tuple[TimedLaserScan, SegmentScan, bool]]:
+        """Each usable scan of ``robot`` with its segments, in the order to map them, and
+        whether the robot's map starts over before it; unusable ones are counted."""
+        guard: ScanStreamGuard[tuple[TimedLaserScan, SegmentScan]] = ScanStreamGuard(self.stream)
         for item in items:
+            self.step(robot)
             if needs_reference and item.reference_pose is None:
-                self.step(robot)
                 continue
-            segments = self.segments(robot, item)
-            if segments is not None:
-                yield item, segments
+            started = time.perf_counter()
+            try:
+                segments, _ = extract_scan(item.scan, self.extraction)
+            except ScanError as exc:
+                self._refused(exc.kind)
+                continue
+            finally:
+                self.seconds += time.perf_counter() - started
+            verdict = guard.check(item.stamp, item.scan, (item, segments))
+            for kind, _ in verdict.refused:
+                self._refused(kind)
+            self.notices += [f"{robot}: {notice}" for _, notice in verdict.notices]
+            if not verdict.maps:
+                continue
+            reset = verdict.action == "reset"
+            self.map_resets += reset
+            for held in verdict.release:
+                yield (*held.item, reset)
+                reset = False
+            yield item, segments, reset
+        for kind, _ in guard.finish():
+            self._refused(kind)
 
     def step(self, robot: str) -> None:
         self.done += 1
         if self.progress is not None:
             self.progress(f"mapping {robot}", self.done, self.total)
 
-    def segments(self, robot: str, item: TimedLaserScan) -> SegmentScan | None:
-        """The segments of one scan of ``robot`` (None, counted, when it is unusable)."""
-        self.step(robot)
-        started = time.perf_counter()
-        try:
-            return extract_scan(item.scan, self.extraction)[0]
-        except ScanError as exc:
-            self.rejected[exc.kind] = self.rejected.get(exc.kind, 0) + 1
-            return None
-        finally:
-            self.seconds += time.perf_counter() - started
+    def _refused(self, kind: str) -> None:
+        self.rejected[kind] = self.rejected.get(kind, 0) + 1
+
+    def counts(self) -> dict[str, object]:
+        """The front end's part of ``stats.json``."""
+        return {
+            "scans_total": self.total,
+            "scans_rejected": dict(self.rejected),
+            "map_resets": self.map_resets,
+            "stream_notices": list(self.notices),
+            "front_end_s": round(self.seconds, 4),
+        }
 
 
 def require_method(method: str) -> None:
@@ -167,6 +196,7 @@ def run_offline(
     merging: MergeConfig | None = None,
     snapshots: SnapshotSink | None = None,
     snapshot_period: float = 10.0,
+    stream: ScanStreamConfig | None = None,
 ) -> OfflineMap:
     """Run the front end on every scan of every robot, then place them with ``method``.
 
@@ -175,8 +205,15 @@ def run_offline(
     keyframes so far are merged, as the merger node would have merged them (each merge an
     update of the previous one, every place matched), and handed to ``snapshots``; the last
     snapshot is the replay's own result, which is merged from scratch as without
-    ``snapshots`` (the result never depends on whether snapshots were taken)."""
+    ``snapshots`` (the result never depends on whether snapshots were taken).
+    ``recordings``: each robot's scans in the order they arrived (a node's subscription
+    order), checked against their own stream by ``stream`` (default: the node's rules,
+    ``RobotMapperConfig().stream_config()``) before anything is mapped."""
     require_method(method)
+    total = sum(len(scans) for scans in recordings.values())
+    front_end = _FrontEnd(
+        extraction, stream or RobotMapperConfig().stream_config(), progress, total
+    )
     if snapshots is not None and method not in MERGE_METHODS:
         raise ValueError(f"snapshots need a merging method ({', '.join(MERGE_METHODS)})")
     if method in ("local", "pivot", "ffs"):
@@ -184,9 +221,7 @@ def run_offline(
         timeline = None
         if snapshots is not None:
             timeline = Timeline(snapshots, snapshot_period, method, config)
-        local = _run_local(
-            recordings, extraction, local_mapping or LocalMapperConfig(), progress, timeline
-        )
+        local = _run_local(recordings, front_end, local_mapping or LocalMapperConfig(), timeline)
         if method == "local":
             return local
         if progress is not None:
@@ -198,7 +233,6 @@ def run_offline(
             snapshots(final_snapshot(merged))
         return merged
     robots = sorted(recordings)
-    front_end = _FrontEnd(extraction, progress, sum(len(recordings[r]) for r in robots))
     segment_sets: list[FloatArray] = []
     owners: list[IntArray] = []
     trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
@@ -207,7 +241,8 @@ def run_offline(
         stamps: list[float] = []
         poses: list[Pose] = []
         # 'reference' can only place scans that have a reference pose.
-        for item, segments in front_end.scans(robot, recordings[robot], needs_reference=True):
+        # A reset changes nothing here: every scan is placed in the reference frame.
+        for item, segments, _ in front_end.scans(robot, recordings[robot], needs_reference=True):
             assert item.reference_pose is not None
             T_map_laser = se2.matrix_from_pose(*item.reference_pose)
             segment_sets.append(se2.transform_segments(T_map_laser, segments.segments))
@@ -223,11 +258,9 @@ def run_offline(
     posed = sum(len(t[0]) for t in trajectories.values())
     stats: dict[str, object] = {
         "method": method,
-        "scans_total": front_end.total,
         "scans_posed": posed,
-        "scans_rejected": front_end.rejected,
         "segments": len(map_segments),
-        "front_end_s": round(front_end.seconds, 4),
+        **front_end.counts(),
         "total_s": round(time.perf_counter() - started, 4),
     }
     # With reference poses every robot frame is the reference world frame.
@@ -263,10 +296,13 @@ class _MappingTimes:
     per_scan: list[float] = dataclasses.field(default_factory=list)
 
 
-def _stamped(
-    index: int, items: Sequence[TimedLaserScan]
-) -> Iterator[tuple[float, int, TimedLaserScan]]:
-    return ((item.stamp, index, item) for item in items)
+def _guarded(
+    index: int, robot: str, items: Sequence[TimedLaserScan], front_end: _FrontEnd
+) -> Iterator[tuple[float, int, TimedLaserScan, SegmentScan, bool]]:
+    """A robot's scans as its stream guard lets them through (:meth:`_FrontEnd.scans`), each
+    with its stamp and the robot's index, for merging robots in stamp order."""
+    for item, segments, reset in front_end.scans(robot, items):
+        yield item.stamp, index, item, segments, reset
 
 
 def _map_in_time_order(
@@ -276,19 +312,21 @@ def _map_in_time_order(
     timeline: Timeline | None,
 ) -> tuple[dict[str, LocalMapper], _MappingTimes]:
     """One :class:`LocalMapper` per robot fed its scans, every robot's scans in the order of
-    their stamps (each robot's own in its recording's order); the snapshots of ``timeline``
-    taken as bag time passes."""
+    their stamps (each robot's own in the order its stream guard lets them through); a robot
+    whose stamps jumped back and stayed there starts a new, empty map, as the node does; the
+    snapshots of ``timeline`` taken as bag time passes."""
     robots = sorted(recordings)
     mappers = {robot: LocalMapper(config) for robot in robots}
     times = _MappingTimes()
-    streams = [_stamped(index, recordings[robot]) for index, robot in enumerate(robots)]
-    for stamp, index, item in heapq.merge(*streams, key=lambda entry: entry[:2]):
+    streams = [
+        _guarded(index, robot, recordings[robot], front_end) for index, robot in enumerate(robots)
+    ]
+    for stamp, index, item, segments, reset in heapq.merge(*streams, key=lambda e: e[:2]):
         robot = robots[index]
         if timeline is not None:
             timeline.before(stamp, mappers)
-        segments = front_end.segments(robot, item)
-        if segments is None:
-            continue
+        if reset:
+            mappers[robot] = LocalMapper(config)
         started = time.perf_counter()
         try:
             mappers[robot].add_scan(item.stamp, segments, item.scan)
@@ -306,15 +344,13 @@ def _map_in_time_order(
 
 def _run_local(
     recordings: Mapping[str, Sequence[TimedLaserScan]],
-    extraction: ExtractionConfig,
+    front_end: _FrontEnd,
     config: LocalMapperConfig,
-    progress: Progress | None,
     timeline: Timeline | None = None,
 ) -> OfflineMap:
     """One :class:`LocalMapper` per robot, exactly as ``robot_mapper`` runs it (with the back
     end in line, so that a replay is deterministic)."""
     robots = sorted(recordings)
-    front_end = _FrontEnd(extraction, progress, sum(len(recordings[r]) for r in robots))
     started = time.perf_counter()
     mappers, times = _map_in_time_order(recordings, front_end, config, timeline)
     segment_sets: list[FloatArray] = []
@@ -354,6 +390,7 @@ def _run_local(
             "scans_tracked": mapper.scans_tracked,
             "scans_placed_by": dict(mapper.scans_placed_by),
             "scans_in_main_piece": len(trajectories[robot][0]),
+            "scans_held": mapper.scans_held,  # not placed yet when the scans ended (nor set aside)
             "set_aside_reasons": dict(mapper.set_aside_reasons),
             "pieces_started": mapper.pieces_started,
             "pieces_left": len(set(backend.map.pieces.tolist())),
@@ -381,11 +418,9 @@ def _run_local(
     scan_times = summary(times.per_scan)
     stats: dict[str, object] = {
         "method": "local",
-        "scans_total": front_end.total,
         "scans_posed": sum(len(t[0]) for t in trajectories.values()),
-        "scans_rejected": front_end.rejected,
         "segments": int(sum(len(s) for s in segment_sets)),
-        "front_end_s": round(front_end.seconds, 4),
+        **front_end.counts(),
         "local_mapping_s": round(times.mapping_s, 4),
         "mapping_errors": times.errors,
         "local_mapping_median_ms": scan_times["median_ms"],

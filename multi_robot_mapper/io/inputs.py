@@ -4,8 +4,9 @@ Each check returns clean data (finite numbers, sizes within the limits given) or
 :class:`InputError` naming the kind of problem (a stable key for counters and throttled
 warnings), the message field at fault and what was wrong, before any work is done with it.
 The core never sees NaN, inf or an unbounded size. A LaserScan's own fields are checked by
-:func:`multi_robot_mapper.core.scan.scan_points` (the same for the node and for replay); the
-order of a robot's scan stamps by :class:`ScanStampGate`.
+:func:`multi_robot_mapper.core.scan.scan_points`, and each scan against its robot's own stream
+(geometry, stamps, copied ranges) by :class:`multi_robot_mapper.core.scan_stream.
+ScanStreamGuard`: both in the core, the same for the node and for replay.
 """
 
 from __future__ import annotations
@@ -149,68 +150,3 @@ def pose_from_checked_msg(pose: Pose, max_extent: float, field: str = "pose") ->
             "map_too_large", field, f"the pose lies {max(abs(x), abs(y)):.3g} m from the origin"
         )
     return np.array([x, y, theta], dtype=np.float64)
-
-
-# --- scan stamps -----------------------------------------------------------------------------
-
-
-@dataclasses.dataclass(frozen=True)
-class StampVerdict:
-    """What to do with a scan, by its stamp: ``accept``, ``reject`` or ``reset`` (start over)."""
-
-    action: str
-    kind: str = ""
-    message: str = ""
-
-
-class ScanStampGate:
-    """The order of one robot's scan stamps.
-
-    A zero stamp (never set) or one more than ``max_lead`` seconds ahead of the node's clock is
-    refused; the same stamp twice is a duplicate; a step back is a stale scan, refused, unless
-    it jumps back more than ``reset_jump`` seconds: a bag played in a loop or a clock that was
-    reset, after which the robot's map starts over. :meth:`accepted` records a scan that was
-    used (a scan refused for its fields does not move the gate).
-    """
-
-    def __init__(self, reset_jump: float, max_lead: float) -> None:
-        self.reset_jump = reset_jump
-        self.max_lead = max_lead
-        self.last: float | None = None
-
-    def check(self, stamp: float, now: float | None) -> StampVerdict:
-        """``now``: the node's clock in seconds, None (or 0) when it is not running yet."""
-        if stamp == 0.0:
-            return StampVerdict("reject", "zero_stamp", "header.stamp is zero (never set)")
-        if now and stamp > now + self.max_lead:
-            return StampVerdict(
-                "reject",
-                "future_stamp",
-                f"header.stamp {stamp:.3f} s is {stamp - now:.3g} s ahead of this node's clock "
-                f"(max_stamp_lead {self.max_lead:g} s)",
-            )
-        last = self.last
-        if last is None or stamp > last:
-            return StampVerdict("accept")
-        if stamp == last:
-            return StampVerdict(
-                "reject", "duplicate_stamp", f"header.stamp {stamp:.3f} s repeats the last scan's"
-            )
-        if last - stamp <= self.reset_jump:
-            return StampVerdict(
-                "reject",
-                "stale_stamp",
-                f"header.stamp {stamp:.3f} s is {last - stamp:.3g} s older than the last scan's",
-            )
-        return StampVerdict(
-            "reset",
-            "stamp_jump_back",
-            f"header.stamp jumped back {last - stamp:.3g} s (more than stamp_reset_jump "
-            f"{self.reset_jump:g} s: a bag played again, a clock reset): the map starts over",
-        )
-
-    def accepted(self, stamp: float) -> None:
-        self.last = stamp
-
-    def reset(self) -> None:
-        self.last = None

@@ -18,6 +18,7 @@ Parameters: the fields of :class:`RobotMapperConfig` (``config/robot_mapper.yaml
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 import traceback
@@ -38,11 +39,11 @@ from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from multi_robot_mapper.core.extraction import extract_scan
+from multi_robot_mapper.core.extraction import SegmentScan, extract_scan
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalUpdate
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.scan import ScanError
-from multi_robot_mapper.io.inputs import ScanStampGate
+from multi_robot_mapper.core.scan import LaserScanData, ScanError, ScanPoints
+from multi_robot_mapper.core.scan_stream import REASON_FIELDS, ScanStreamGuard, StreamVerdict
 from multi_robot_mapper.io.messages import (
     keyframe_marker,
     piece_frame,
@@ -62,6 +63,19 @@ from multi_robot_mapper.ros.worker_process import WorkerProcess
 # Notices about the laser itself (it is mounted upside down, its intensities are of another
 # length): one warning, then only counted.
 _ONCE = frozenset({"negative_increment", "intensities_length"})
+
+
+@dataclasses.dataclass(frozen=True)
+class _Extracted:
+    """A scan through the front end, ready to map (now, or once the stream guard releases
+    it)."""
+
+    msg: LaserScan
+    stamp: float
+    view: LaserScanData
+    segments: SegmentScan
+    valid: ScanPoints
+
 
 POSE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 PARTIAL_MAP_QOS = QoSProfile(
@@ -89,11 +103,13 @@ class RobotMapper(Node):
         # exception escapes a callback.
         self.rejections = Rejections(self.warnings)
         self.guard = CallbackGuard(self.warnings, running=self.context.ok)
-        self.stamps = ScanStampGate(self.config.stamp_reset_jump, self.config.max_stamp_lead)
+        # Every scan is checked against the robot's own stream (core.scan_stream) before it
+        # is mapped: the same guard replay uses.
+        self.stream: ScanStreamGuard[_Extracted] = ScanStreamGuard(self.config.stream_config())
         self.scans_received = 0
         self.scans_rejected = 0  # dropped before mapping: bad scan or front-end error
         self.mapping_errors = 0  # scans the local mapper failed on (map kept as it was)
-        self.map_resets = 0  # maps started over after the stamps jumped back
+        self.map_resets = 0  # maps started over after the stamps jumped back and stayed
         self.beams_dropped: Counter[str] = Counter()  # beams without a return, by kind
         self.scans_lost = 0  # never delivered (gaps in the publisher's sequence numbers)
         self.max_queue_delay = 0.0  # longest wait in the queue of a scan that was mapped, s
@@ -149,10 +165,7 @@ class RobotMapper(Node):
         old = self.config
         self.config = config
         self.warnings.period = config.warning_period
-        self.stamps.reset_jump, self.stamps.max_lead = (
-            config.stamp_reset_jump,
-            config.max_stamp_lead,
-        )
+        self.stream.reconfigure(config.stream_config())
         self.mapper.reconfigure(config.local_mapping)  # from the next scan; the map is kept
         if config.partial_map_period != old.partial_map_period:
             self.destroy_timer(self._map_timer)
@@ -184,6 +197,7 @@ class RobotMapper(Node):
         delay = (time.time_ns() - received) * 1e-9 if received else 0.0
         if delay > self.config.scan_max_queue_delay:
             self.scans_received += 1
+            self.stream.skipped(seconds_from_stamp(msg.header.stamp))
             self._reject(
                 "stale_in_queue",
                 "",
@@ -208,12 +222,9 @@ class RobotMapper(Node):
         self._last_scan_ns = self.get_clock().now().nanoseconds
         self._last_stamp = msg.header.stamp
         self._scan_rate.add(stamp)
-        verdict = self.stamps.check(stamp, self._clock_seconds())
-        if verdict.action == "reject":
-            self._reject(verdict.kind, "header.stamp", verdict.message)
-            return
         if self._throttled(stamp):
             self.scans_skipped += 1
+            self.stream.skipped(stamp)
             return
         try:
             view = scan_from_msg(msg)
@@ -230,9 +241,28 @@ class RobotMapper(Node):
                 f"{traceback.format_exc()}",
             )
             return
+        scan = _Extracted(msg, stamp, view, segments, valid)
+        verdict = self.stream.check(stamp, view, scan, self._clock_seconds())
+        self._act_on(verdict, scan)
+
+    def _act_on(self, verdict: StreamVerdict[_Extracted], scan: _Extracted) -> None:
+        """The stream guard's verdict: scans refused are counted and named, a map whose
+        stamps jumped back (and stayed there) starts over, the scans released are mapped."""
+        for kind, message in verdict.refused:
+            self._reject(kind, REASON_FIELDS.get(kind, ""), message)
+        for kind, notice in verdict.notices:
+            self.warnings.warn(kind, f"{self.robot}: {notice}")
+        if not verdict.maps:
+            return
         if verdict.action == "reset":
-            self._start_over(verdict.message)
-        self.stamps.accepted(stamp)
+            self._start_over()
+        for held in verdict.release:
+            self._map_scan(held.item)
+        self._map_scan(scan)
+
+    def _map_scan(self, scan: _Extracted) -> None:
+        """One scan the stream accepted: its segments out, then the local mapper."""
+        stamp, msg, valid = scan.stamp, scan.msg, scan.valid
         for kind, count in valid.dropped:
             self.beams_dropped[kind] += count
         for notice in valid.notices:
@@ -243,7 +273,7 @@ class RobotMapper(Node):
                 self.warnings.warn(notice.kind, text)
         self._segments_pub.publish(
             segments_marker(
-                segments.segments,
+                scan.segments.segments,
                 msg.header,
                 namespace="scan_segments",
                 width=self.config.segment_marker_width,
@@ -252,7 +282,7 @@ class RobotMapper(Node):
         try:
             # A scan changes the mapper only once it is placed: a failure leaves the map as
             # it was.
-            update = self.mapper.add_scan(stamp, segments, view)
+            update = self.mapper.add_scan(stamp, scan.segments, scan.view)
         except Exception:  # the map built so far stays; the next scan is tried as usual
             self.mapping_errors += 1
             self.last_update = None
@@ -302,10 +332,10 @@ class RobotMapper(Node):
                 f"so far; the map is kept):\n{self.mapper.last_backend_error}",
             )
 
-    def _start_over(self, why: str) -> None:
-        """A new, empty map (the old one stays published until the new one has a keyframe)."""
+    def _start_over(self) -> None:
+        """A new, empty map (the old one stays published until the new one has a keyframe);
+        the stream guard's notice has said why."""
         self.map_resets += 1
-        self.warnings.warn("map_reset", f"{self.robot}: {why}")
         self.mapper.stop_worker()
         self.mapper = self._new_mapper()
         self._backend_errors_logged = 0

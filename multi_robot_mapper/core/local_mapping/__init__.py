@@ -1,7 +1,9 @@
 """Pipeline stage 4: odometry-free local mapping, one robot's scans in, its partial map out.
 
 Modules, in the order a scan meets them: ``config`` (LocalMapperConfig), ``mapper`` (the front
-end: match, confidence, integrate or start a new piece; LocalMapper), ``keyframe_map``
+end: match, confidence, integrate or start a new piece; LocalMapper; ``attempts``, its match
+attempts; ``held``, the scans it could not place, until the next ones say whether they were
+outliers or the robot is lost), ``keyframe_map``
 (keyframes and the fused partial map they own), the back end: ``windows`` (keyframe windows
 matched, what a closure records), ``joins`` (joins between pieces), ``loop_closer`` (local
 edges, loop closures, one keyframe's whole step), ``backend`` (where it runs); the keyframe

@@ -162,6 +162,10 @@ class References:
     left: dict[int, tuple[Pose, float]] = dataclasses.field(default_factory=dict)
     # how fast the robot drives at most (m/s; the 95th percentile of its placed motions)
     top_speed: float | None = None
+    elapsed: float | None = None  # seconds from the last placed scan to the new one
+    # the scans since the last placed one are held, not placed (core.local_mapping.held): in
+    # its own piece too the robot is found only where its own top speed takes it
+    own_speed_only: bool = False
 
 
 class Shapes:
@@ -279,15 +283,26 @@ def match_scan(
         return done
 
     def reachable(a: Attempt) -> bool:
-        # A placement in another piece puts the robot back where it was when it got lost
-        # there: no farther from its last scan in that piece than it drives (``top_speed``)
-        # in the time since, plus the correctness tolerance. Two attempts
-        # against neighbouring keyframes of one look-alike place agree as well as two
-        # right ones (intel: 7.2 m off at 0.64 and 0.76).
-        if a.piece == current or references.top_speed is None or a.piece not in references.left:
+        # In its own piece, the robot is no farther from its last placed scan than it drives
+        # at ``plausible_speed`` (or its own top speed, when faster) in the time since, plus
+        # the correctness tolerance: a scan of another place or of another building can match
+        # the last scan confidently metres away (a corridor seen from elsewhere in it), a
+        # jump no robot makes between two scans. Right after held scans (an anomaly: the next
+        # scan is matched across their gap) and in another piece (the placement puts the
+        # robot back where it was when it got lost there), no farther than its own top speed
+        # takes it: two attempts against neighbouring keyframes of one look-alike place agree
+        # as well as two right ones (intel: 7.2 m off at 0.64 and 0.76; intel 4 robot1, after
+        # a held scan: 7.2 m off at 0.92).
+        top_speed = references.top_speed
+        if a.piece == current and references.elapsed is not None:
+            pose, elapsed = here, references.elapsed
+            if not (references.own_speed_only and top_speed is not None):
+                top_speed = max(top_speed or 0.0, config.plausible_speed)
+        elif a.piece != current and top_speed is not None and a.piece in references.left:
+            pose, elapsed = references.left[a.piece]
+        else:
             return True
-        pose, elapsed = references.left[a.piece]
-        reach = reach_in(references.top_speed, elapsed)
+        reach = reach_in(top_speed, elapsed)
         return bool(np.hypot(a.pose[0] - pose[0], a.pose[1] - pose[1]) <= reach)
 
     rivals_disagree = False
@@ -299,7 +314,7 @@ def match_scan(
         # match once two likely ones disagree, only with another match that corroborates it.
         if rivals_disagree:
             return corroborated(attempts, reachable)
-        recent = [a for a in attempts if a.stage != "recent"]
+        recent = [a for a in attempts if a.stage != "recent" and reachable(a)]
         best = max(recent, key=lambda a: a.confidence, default=None)
         if best is not None and best.confidence >= threshold:
             return best
@@ -325,15 +340,17 @@ def match_scan(
         # robots (bench/track_near.py, its fourth table) the 1 599 sure ones there were all
         # right; the 0.81 that stayed 17 deg off on aces (below) is far from sure.
         near = (NEAR, NEAR_ANGLE) if quick.confidence < SURE else (RIGHT_DISTANCE, RIGHT_ANGLE)
-        if quick.confidence >= threshold and close_to(
-            se2.between(here, quick.pose), motions[0], *near
+        if (
+            quick.confidence >= threshold
+            and close_to(se2.between(here, quick.pose), motions[0], *near)
+            and reachable(quick)
         ):
             return quick, True, True
         attempts.remove(quick)
         x, y, theta = motions[0]
         rivals = [(x, y, theta + d) for d in (*TRACK_TURNS, *LOOK_ALIKE_TURNS) if d]
         track = attempt("track", start, False, motions + rivals)
-        if track.confidence >= threshold:
+        if track.confidence >= threshold and reachable(track):
             if track.confidence >= SURE or close_to(
                 se2.between(here, track.pose), motions[0], RIGHT_DISTANCE, RIGHT_ANGLE
             ):
@@ -348,8 +365,10 @@ def match_scan(
             # to: the search with no guess confirms it, or finds a likely rival, and then
             # neither settles alone.
             search = attempt("search", references.last, True, motions)
-            rivals_disagree = search.confidence >= LIKELY and not close_to(
-                search.pose, track.pose, RIGHT_DISTANCE, RIGHT_ANGLE
+            rivals_disagree = (
+                search.confidence >= LIKELY
+                and reachable(search)
+                and not close_to(search.pose, track.pose, RIGHT_DISTANCE, RIGHT_ANGLE)
             )
             if not rivals_disagree:
                 return track, True, True

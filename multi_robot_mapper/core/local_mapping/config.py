@@ -74,6 +74,28 @@ class LocalMapperConfig:
         minimum=0,
         maximum=50,
     )
+    lost_confirm_scans: int = param(
+        2,
+        unit="scans",
+        doc="a scan no confident match places is held, not mapped: when the next scan is "
+        "placed from the map it was an outlier (a scan of another place, junk ranges), set "
+        "aside; the robot counts as lost (a new piece starts from the held scan) only when "
+        "this many scans in a row are not placed and each is placed from the one before it. "
+        "1: the first such scan starts a new piece",
+        minimum=1,
+        maximum=100,
+    )
+    plausible_speed: float = param(
+        3.0,
+        unit="m/s",
+        doc="the front end never places a scan in the robot's own piece farther from the "
+        "last placed scan than the robot drives at this speed (or at its own 95th percentile "
+        "speed, if faster) in the time between their stamps, plus 0.3 m: a scan of another "
+        "place that matches the last scan metres away (a corridor seen from elsewhere in "
+        "it) is not where the robot is. Set it above the robot's top speed",
+        minimum=0.01,
+        maximum=1000.0,
+    )
     local_edges: int = param(
         3,
         unit="keyframes",

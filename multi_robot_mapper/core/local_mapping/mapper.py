@@ -17,7 +17,13 @@ add_scan`):
 3. **integrate** when it reaches ``integrate_confidence``: the scan is placed; a scan that
    moved ``keyframe_distance`` or turned ``keyframe_angle`` from the last keyframe becomes a
    keyframe, with an edge (its information from the match) to the keyframe it was matched
-   against; **otherwise the robot is lost** and maps on in a new piece, from this scan.
+   against; **otherwise the scan is held** (:mod:`.held`): when a later scan is placed from
+   the map, the held ones contradicted the robot's own stream (scans of another place, junk
+   ranges) and are set aside, the map untouched; when ``lost_confirm_scans`` held scans in a
+   row follow each other (or ``lost_confirm_scans + 2`` are held), **the robot is lost** and
+   maps on in a new piece, from the first of them. A placement in the robot's own piece is
+   never farther from its last placed scan than it can have driven since
+   (``plausible_speed``; right after held scans, its own top speed).
 
 The back end (:mod:`.backend`: the loop closer and the keyframe map) takes each new keyframe:
 local edges, loop closures, joins between pieces, optimisation of the pose graph, fusion into
@@ -57,6 +63,7 @@ from multi_robot_mapper.core.local_mapping.backend import (
     Runner,
 )
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.held import OUTLIER, HeldScan, follow_match
 from multi_robot_mapper.core.local_mapping.joins import LostFrom
 from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeScan
 from multi_robot_mapper.core.local_mapping.loop_closer import BackendUpdate, Closure
@@ -86,12 +93,16 @@ class LocalUpdate:
     confidence: float  # of the match that placed it (1 for a piece's first scan)
     reason: str  # why a scan was set aside, or why a new piece started ("" otherwise)
     piece: int = 0  # the piece the scan is in
-    new_piece: bool = False  # the robot was lost: this scan starts a new piece
+    # the robot was lost: this scan (or the scans held before it) started a new piece
+    new_piece: bool = False
     # the context of the match that placed it (attempts.CONTEXTS; "" when it starts a piece)
     placed_by: str = ""
     # seconds per stage of this scan: track / search / recent (matching), confidence,
     # handoff (a keyframe's edge to the back end), integrate (the rest)
     seconds: dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+LOST = "lost: no confident match"  # why a new piece started (LocalMapper.set_aside_reasons)
 
 
 @dataclasses.dataclass
@@ -128,6 +139,9 @@ class LocalMapper:
         self.scans_placed_by: dict[str, int] = {}  # placed scans per context of their match
         self.set_aside_reasons: dict[str, int] = {}
         self.pieces_started = 0  # new pieces after the first (the robot was lost)
+        # Scans not placed from the map, held until the next ones say what they were.
+        self._held: list[HeldScan] = []
+        self._replaying = False  # mapping held scans after all (the robot was lost)
         self.stage_seconds: dict[str, float] = {}  # front-end time per stage, summed
         # The matches the newest scan was tried with (a bench judges them by the reference).
         self.last_attempts: list[Attempt] = []
@@ -179,6 +193,11 @@ class LocalMapper:
     def stamp(self) -> float | None:
         return None if self._last is None else self._last.stamp
 
+    @property
+    def scans_held(self) -> int:
+        """Scans not placed, waiting for the next scans (neither mapped nor set aside yet)."""
+        return len(self._held)
+
     def add_scan(self, stamp: float, segments: SegmentScan, view: LaserScanData) -> LocalUpdate:
         """Place one scan (its segments and the scan they came from) and extend the map."""
         started = time.perf_counter()
@@ -194,11 +213,17 @@ class LocalMapper:
         new = new[np.isfinite(new).all(axis=1)]
         if float(lines_of(new).length.sum()) < self.config.integrate.min_match_value:
             return self._set_aside("too little structure in the scan")
+        return self._place(stamp, new, view)
+
+    def _place(self, stamp: float, new: FloatArray, view: LaserScanData) -> LocalUpdate:
         last = self._last
         if last is None:
             return self._start_piece(stamp, new, view, "")
         dt = max(stamp - last.stamp, 0.0)
-        chosen, integrated = self._match(last, new, view, dt)
+        holding = bool(self._held) and not self._replaying
+        if holding and (follow := self._follows_held(stamp, new, view)) is not None:
+            return self._hold(HeldScan(stamp, new, view, None, follow), follow.confidence)
+        chosen, integrated = self._match(last, new, view, dt, after_held=holding)
         result, anchor, reference = chosen.result, chosen.anchor, chosen.reference
         T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
         if not integrated:
@@ -213,7 +238,10 @@ class LocalMapper:
                 None if top_speed is None else reach_in(top_speed, dt),
                 chosen.confidence,
             )
-            return self._start_piece(stamp, new, view, "lost: no confident match", lost_from)
+            if self._replaying:
+                return self._start_piece(stamp, new, view, LOST, lost_from)
+            return self._hold(HeldScan(stamp, new, view, lost_from), chosen.confidence)
+        self._set_aside_held()  # placed from the map: the scans held before it were outliers
         pose = chosen.pose
         motion = se2.between(self._placed_pose_unlocked(last.anchor), pose)
         if dt > 0.0:
@@ -221,14 +249,10 @@ class LocalMapper:
             self._speeds.append(float(np.hypot(motion[0], motion[1])) / dt)
         placed = Anchor(anchor.keyframe, T_keyframe_new)
         keyframe_added = False
-        T_keyframe_new_arr = np.asarray(T_keyframe_new)
         known = self._known_view(pose, chosen.piece) if self.config.revisit_keyframes else None
         if known is not None:
             placed = known  # ground the map holds: tracked against that keyframe from now on
-        elif (
-            float(np.hypot(*T_keyframe_new_arr[:2])) > self.config.keyframe_distance
-            or abs(float(T_keyframe_new_arr[2])) > self.config.keyframe_angle
-        ):
+        elif self._moved_on(T_keyframe_new):
             started = time.perf_counter()
             placed = self._new_keyframe(stamp, new, view, anchor, result, reference)
             keyframe_added = True
@@ -248,11 +272,75 @@ class LocalMapper:
             chosen.context,
         )
 
+    def _moved_on(self, T_keyframe_scan: Pose) -> bool:
+        """The scan moved or turned enough from its keyframe to be a keyframe itself."""
+        x, y, theta = T_keyframe_scan
+        return bool(
+            np.hypot(x, y) > self.config.keyframe_distance
+            or abs(theta) > self.config.keyframe_angle
+        )
+
+    def _follows_held(
+        self, stamp: float, segments: FloatArray, view: LaserScanData
+    ) -> MatchResult | None:
+        """The placement of a scan from the newest held one (:func:`follow_match`)."""
+        started = time.perf_counter()
+        scan = HeldScan(stamp, segments, view)
+        follow = follow_match(self.config, self._held[-1], scan, self._top_speed())
+        self._count("search", time.perf_counter() - started)
+        return follow
+
+    def _hold(self, scan: HeldScan, confidence: float) -> LocalUpdate:
+        """Hold ``scan`` (:mod:`.held`). Once the newest ``lost_confirm_scans`` held scans
+        follow each other, or ``lost_confirm_scans + 2`` are held, the robot is lost: the held
+        scans are mapped as a lost robot's (:meth:`_lost`)."""
+        self._held.append(scan)
+        chain = 1
+        while chain < len(self._held) and self._held[-chain].follow is not None:
+            chain += 1
+        confirm = self.config.lost_confirm_scans
+        if chain < confirm and len(self._held) < confirm + 2:
+            reason = "not placed: held until the next scan"
+            return LocalUpdate(False, None, False, confidence, reason, self.piece)
+        return self._lost()
+
+    def _lost(self) -> LocalUpdate:
+        """The robot is lost: the held scans are mapped in order exactly as they would have
+        been without holding (the first starts a new piece from its guess; each later one is
+        matched as usual, and starts a piece of its own when nothing places it)."""
+        held, self._held = self._held, []
+        self._replaying = True
+        try:
+            first = held[0]
+            update = self._start_piece(
+                first.stamp, first.segments, first.view, LOST, first.lost_from
+            )
+            for scan in held[1:]:
+                update = self._place(scan.stamp, scan.segments, scan.view)
+        finally:
+            self._replaying = False
+        return dataclasses.replace(update, new_piece=True)
+
+    def _set_aside_held(self) -> None:
+        """The held scans were outliers: set aside (:data:`OUTLIER`), the map untouched."""
+        if self._held:
+            self.scans_set_aside += len(self._held)
+            count = self.set_aside_reasons.get(OUTLIER, 0) + len(self._held)
+            self.set_aside_reasons[OUTLIER] = count
+            self._held = []
+
     def _match(
-        self, last: _Last, new: FloatArray, view: LaserScanData, dt: float
+        self,
+        last: _Last,
+        new: FloatArray,
+        view: LaserScanData,
+        dt: float,
+        after_held: bool = False,
     ) -> tuple[Attempt, bool]:
         """The placement of the new scan and whether to integrate it (:func:`match_scan`),
-        against the references as they are now."""
+        against the references as they are now. ``after_held``: the scans since the last
+        placed one are held (not placed); the robot is then found only where it can have
+        driven at its own top speed (as a lost robot is in the pieces it left)."""
         config = self.config
         keyframe = last.anchor.keyframe
         # The constant-velocity prediction and "did not move", from the last scan.
@@ -279,9 +367,11 @@ class LocalMapper:
                 pieces={k: self._pieces[k] for k in (keyframe, *older)},
                 scans={k: self._scans[k] for k in (keyframe, *older)},
                 left=left,
-                # Only a placement in another piece is bounded by it: not computed otherwise.
-                top_speed=self._top_speed() if left else None,
+                top_speed=self._top_speed(),
+                elapsed=dt,
+                own_speed_only=after_held,
             )
+        self.last_attempts = []  # this scan's (a lost robot's held scans are matched in turn)
         chosen, integrated, tracked = match_scan(
             config,
             references,
