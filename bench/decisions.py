@@ -201,9 +201,15 @@ def _frames_in_world(units: dict[UnitKey, MapUnit], truth: Truth) -> dict[UnitKe
 
 
 def judge_verdict(
-    verdict: PairVerdict, units: dict[UnitKey, MapUnit], truth: Truth
+    verdict: PairVerdict,
+    units: dict[UnitKey, MapUnit],
+    truth: Truth,
+    symmetry: np.ndarray | None = None,
 ) -> tuple[float, float]:
-    """The median error of a consistent set's placement at its linked keyframes (m, rad)."""
+    """The median error of a consistent set's placement at its linked keyframes (m, rad);
+    with ``symmetry`` (a rigid motion of the building onto itself), against the truth of B
+    moved by it."""
+    S = np.eye(3) if symmetry is None else symmetry
     a, b = verdict.pair
     T_a_b = placement(verdict, a, units)
     errors = []
@@ -214,7 +220,7 @@ def judge_verdict(
         pa = se2.matrix_from_pose(*units[a].poses[units[a].row(link.k_first)])
         pb = se2.matrix_from_pose(*units[b].poses[units[b].row(link.k_second)])
         estimate = se2.invert(pa) @ T_a_b @ pb
-        real = se2.invert(truth.poses[a][link.k_first]) @ truth.poses[b][link.k_second]
+        real = se2.invert(truth.poses[a][link.k_first]) @ S @ truth.poses[b][link.k_second]
         errors.append(_error(estimate, real))
     if not errors:
         return float("nan"), float("nan")
@@ -222,10 +228,17 @@ def judge_verdict(
 
 
 def verdict_record(
-    verdict: PairVerdict, units: dict[UnitKey, MapUnit], truth: Truth
+    verdict: PairVerdict,
+    units: dict[UnitKey, MapUnit],
+    truth: Truth,
+    symmetries: list[np.ndarray] | None = None,
 ) -> dict[str, Any]:
-    """A pair's consistent set: its evidence and its truth (module doc)."""
+    """A pair's consistent set: its evidence and its truth (module doc); whether a wrong one
+    is the truth moved by the building's own symmetry (no map can tell it from the truth)."""
     error = judge_verdict(verdict, units, truth)
+    image = _wrong(error) and any(
+        not _wrong(judge_verdict(verdict, units, truth, S)) for S in symmetries or []
+    )
     record: dict[str, Any] = {
         "pair": [f"{k[0]}/{k[1]}" for k in verdict.pair],
         "places": verdict.places,
@@ -240,6 +253,7 @@ def verdict_record(
         "error_deg": round(math.degrees(error[1]), 2),
         "right": not _wrong(error),
         "judged": bool(np.isfinite(error[0])),  # false: no keyframe of it has a reference
+        "symmetry_image": image,
     }
     if verdict.evidence is not None:
         for name, ev in (("b_on_a", verdict.evidence.b_on_a), ("a_on_b", verdict.evidence.a_on_b)):
@@ -357,7 +371,7 @@ def run_updates(
                 "placements": judge_placements(result, units, truth, scenario.symmetries()),
                 "overlapping": sorted(overlap_component(walls_truth)),
                 "verdicts": [
-                    verdict_record(v, units, truth)
+                    verdict_record(v, units, truth, scenario.symmetries())
                     for v in result.verdicts.values()
                     if isinstance(v, PairVerdict) and v.links
                 ],

@@ -6,7 +6,11 @@ another is right, from its evidence (``core/evidence/model.py``).
 
 Reads every pair of maps' consistent set that ``bench/decisions.py collect`` (or ``judge``)
 recorded, each with its evidence and whether its placement is right by the truth; a set seen
-at several updates with the same evidence counts once. Fits a logistic model (L2 penalty on
+at several updates with the same evidence counts once. A wrong set that is the truth moved by
+the building's own symmetry (a generated building whose wings are exact copies: robots in
+two copies see the same walls, and no map can tell which copy is which) is left out: the
+model is the probability that a placement is right where the maps can tell, and the
+benchmark counts such placements apart (``bench/decisions.py``). Fits a logistic model (L2 penalty on
 standardised features, the penalty chosen by held-out log loss) and checks it **held out by
 building**: each scenario's sets are predicted by the fit on the other scenarios (ten folds
 of whole scenarios). Prints, held out: the reliability table (predicted against observed, in
@@ -100,6 +104,8 @@ def load(works: list[str]) -> tuple[np.ndarray, np.ndarray, list[str], list[str]
                     values = features_of(record)
                     if values is None or not record.get("judged", True):
                         continue
+                    if record.get("symmetry_image", False):
+                        continue  # the building's own symmetry: no map can tell (module doc)
                     key = (path.stem, tuple(record["pair"]), tuple(np.round(values, 3)))
                     if key in seen:
                         continue
