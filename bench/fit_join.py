@@ -10,7 +10,8 @@ at several updates with the same evidence counts once. A wrong set that is the t
 the building's own symmetry (a generated building whose wings are exact copies: robots in
 two copies see the same walls, and no map can tell which copy is which) is left out: the
 model is the probability that a placement is right where the maps can tell, and the
-benchmark counts such placements apart (``bench/decisions.py``). Fits a logistic model (L2 penalty on
+benchmark counts such placements apart (``bench/decisions.py``). Fits a logistic model (L2
+penalty on
 standardised features, the penalty chosen by held-out log loss) and checks it **held out by
 building**: each scenario's sets are predicted by the fit on the other scenarios (ten folds
 of whole scenarios). Prints, held out: the reliability table (predicted against observed, in
