@@ -203,7 +203,7 @@ def _replay(
 
 
 def _write_outputs(args: argparse.Namespace, folder: Path, offline: OfflineMap) -> None:
-    from multi_robot_mapper.core.pipeline import own_frame_map
+    from multi_robot_mapper.core.merge_stage import own_frame_map
     from multi_robot_mapper.io import pictures
     from multi_robot_mapper.io.results import ReplayResult, write_results
 

@@ -38,10 +38,11 @@ from multi_robot_mapper.core.local_mapping import (
 )
 from multi_robot_mapper.core.local_mapping.backend import Backend
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.merging import MergeConfig, MergeResult, merge
-from multi_robot_mapper.core.merging.joint import JointState, place_scans
-from multi_robot_mapper.core.merging.methods import MERGE_METHODS, merge_method
-from multi_robot_mapper.core.scan import LaserScanData, ScanError
+from multi_robot_mapper.core.merge_stage import merged as merged_map
+from multi_robot_mapper.core.merging import MergeConfig
+from multi_robot_mapper.core.merging.methods import MERGE_METHODS
+from multi_robot_mapper.core.offline import OfflineMap, TimedLaserScan
+from multi_robot_mapper.core.scan import ScanError
 from multi_robot_mapper.core.scan_stream import ScanStreamConfig, ScanStreamGuard
 from multi_robot_mapper.core.snapshots import (
     NewestPose,
@@ -62,45 +63,6 @@ IMPLEMENTED_METHODS = ("reference", "local", "pivot", "ffs")
 
 class MethodNotImplementedError(NotImplementedError):
     """The requested placement method is not built yet."""
-
-
-@dataclasses.dataclass(frozen=True)
-class TimedLaserScan:
-    """One scan of a robot's recording, with its reference pose when the recording has one."""
-
-    stamp: float
-    scan: LaserScanData
-    reference_pose: Pose | None = None
-
-
-@dataclasses.dataclass
-class OfflineMap:
-    """The pipeline's output, in the global ``map`` frame."""
-
-    robots: list[str]
-    map_segments: FloatArray  # (M, 4)
-    segment_robot: IntArray  # (M,) index into robots
-    trajectories: dict[str, tuple[FloatArray, FloatArray]]  # robot -> stamps (N,), poses (N, 3)
-    robot_frames: dict[str, Pose | None]  # T_map_robotmap as (x, y, theta); None = unmerged
-    stats: dict[str, object]
-    # robot -> (K, 3) keyframe poses in the robot's own map frame (local mapping only)
-    keyframe_poses: dict[str, FloatArray] = dataclasses.field(default_factory=dict)
-    # robot -> every keyframe of every piece (pose in its piece's frame, segments in its own),
-    # what the robot's partial_map carries (local mapping only)
-    keyframes: dict[str, list[Keyframe]] = dataclasses.field(default_factory=dict)
-    # robot -> every placed scan of every piece: stamps (N,), keyframe (N,), T_keyframe_scan
-    # (N, 3) (LocalMapper.anchors; local mapping only)
-    anchors: dict[str, tuple[FloatArray, IntArray, FloatArray]] = dataclasses.field(
-        default_factory=dict
-    )
-    # robot -> the probability that its placement is right, and why an unmerged robot is not
-    # placed (merging only)
-    probabilities: dict[str, float] = dataclasses.field(default_factory=dict)
-    unmerged_reasons: dict[str, str] = dataclasses.field(default_factory=dict)
-    # robot -> its newest placed scan: T_piece_laser, the scan's stamp, the piece (local
-    # mapping only)
-    newest_poses: dict[str, NewestPose] = dataclasses.field(default_factory=dict)
-    merge_result: MergeResult | None = None  # the merge itself (merging only)
 
 
 # (stage, done, total): stage "mapping <robot>" with scans done of every robot's scans,
@@ -226,7 +188,7 @@ def run_offline(
             return local
         if progress is not None:
             progress("merging", 0, 1)
-        merged = _merged(local, config, method)
+        merged = merged_map(local, config, method)
         if progress is not None:
             progress("merging", 1, 1)
         if snapshots is not None and merged.merge_result is not None:
@@ -447,171 +409,3 @@ def _run_local(
         anchors,
         newest_poses=newest_poses,
     )
-
-
-def _merged(local: OfflineMap, config: MergeConfig, method: str = "pivot") -> OfflineMap:
-    """Place the robots of a ``local`` run in one ``map`` frame (the merging stage): the joint
-    graph of every robot's keyframes (:func:`merge_joint`, every place matched), or, for maps
-    without keyframes, every map moved as one rigid body (:func:`merge`)."""
-    if local.keyframes:
-        return _merged_joint(local, config, method)
-    started = time.perf_counter()
-    maps = {
-        robot: local.map_segments[local.segment_robot == index]
-        for index, robot in enumerate(local.robots)
-    }
-    result = merge(maps, config, viewpoints=local.keyframe_poses)
-    trajectories = {}
-    for robot, (stamps, poses) in local.trajectories.items():
-        T_map_robot = result.matrix(robot)
-        if T_map_robot is None or len(poses) == 0:
-            trajectories[robot] = (stamps, poses)  # unmerged: still in its own frame
-            continue
-        turn = float(np.arctan2(T_map_robot[1, 0], T_map_robot[0, 0]))
-        placed = np.column_stack(
-            (se2.transform_points(T_map_robot, poses[:, :2]), se2.wrap_angle(poses[:, 2] + turn))
-        )
-        trajectories[robot] = (stamps, placed)
-    # Both robot lists are sorted names: merge's owner indices are ours (asserted, not assumed).
-    assert result.robots == local.robots
-    segment_robot = np.asarray(result.segment_robot, dtype=np.int64)
-    stats = _merge_stats(local, result, time.perf_counter() - started, result.stats["links_valid"])
-    return OfflineMap(
-        local.robots,
-        result.segments,
-        segment_robot.reshape(-1),
-        trajectories,
-        dict(result.placements),
-        stats,
-        local.keyframe_poses,
-        newest_poses=local.newest_poses,
-        merge_result=result,
-    )
-
-
-def _merged_joint(local: OfflineMap, config: MergeConfig, method: str = "pivot") -> OfflineMap:
-    """The joint merge of a ``local`` run: every place matched (no time budget), then one more
-    update with nothing changed (what a merger pays per update once its matches are made).
-    A merged robot's trajectory is every scan whose keyframe was merged, placed through its
-    keyframe's optimised pose; an unmerged robot keeps its own frame. ``method``: 'pivot' or
-    'ffs' (:data:`MERGE_METHODS`)."""
-    merge_keyframes = merge_method(method)
-    started = time.perf_counter()
-    result = merge_keyframes(local.keyframes, config, budget=0.0)
-    first_s = time.perf_counter() - started
-    again = time.perf_counter()
-    merge_keyframes(local.keyframes, config, previous=result, budget=0.0)
-    update_s = time.perf_counter() - again
-    # A robot's frame is its main piece's (local mapping's trajectory and map are in it).
-    frames: dict[str, Pose | None] = {}
-    trajectories = {}
-    for robot, own in local.trajectories.items():
-        frames[robot] = result.frames.get(robot, {}).get(_main_piece(local, robot))
-        placed = None
-        if frames[robot] is not None and robot in local.anchors:
-            placed = place_scans(result, robot, local.anchors[robot])
-        trajectories[robot] = own if placed is None else placed
-    assert result.robots == local.robots
-    stamp = {(r, kf.index): kf.stamp for r, frames in local.keyframes.items() for kf in frames}
-    graph_links = result.state.links if isinstance(result.state, JointState) else []
-    stats = _merge_stats(local, result, first_s, result.stats["links_accepted"])
-    stats.update(
-        {
-            "robots_unmerged": [robot for robot in local.robots if frames.get(robot) is None],
-            # Every link in the joint graph: keyframe (robot, stamp) a, keyframe b and T_a_b,
-            # so that a bench holding the reference can judge each one.
-            "merge_graph_links": [
-                [
-                    link.target[0],
-                    stamp[(link.target[0], link.keyframe)],
-                    link.source[0],
-                    stamp[(link.source[0], link.centre)],
-                    *(round(float(v), 5) for v in link.T_keyframe_centre),
-                ]
-                for link in graph_links
-            ],
-            "merge_update_s": round(update_s, 4),
-            "merge_timings": {k: round(v, 4) for k, v in result.timings.items()},
-            "merge_stats": dict(result.stats),
-        }
-    )
-    believed = {
-        robot: result.frame_probabilities[robot][_main_piece(local, robot)]
-        for robot in local.robots
-        if frames.get(robot) is not None
-    }
-    reasons = {
-        robot: result.unmerged_reasons.get(robot, "its main piece of map is not placed")
-        for robot in local.robots
-        if frames.get(robot) is None
-    }
-    stats["unmerged_reasons"] = reasons
-    return OfflineMap(
-        local.robots,
-        result.segments,
-        np.asarray(result.segment_robot, dtype=np.int64).reshape(-1),
-        trajectories,
-        frames,
-        stats,
-        local.keyframe_poses,
-        local.keyframes,
-        local.anchors,
-        probabilities=believed,
-        unmerged_reasons=reasons,
-        newest_poses=local.newest_poses,
-        merge_result=result,
-    )
-
-
-def own_frame_map(offline: OfflineMap, robot: str) -> FloatArray:
-    """(N, 4) ``robot``'s map in its own map frame (its main piece): a ``local`` run's map of
-    it, or, after a merge (where an unmerged robot's segments are not in the global map), its
-    main piece's keyframe segments placed at their keyframes' poses."""
-    if offline.merge_result is None:
-        mine: FloatArray = offline.map_segments[
-            offline.segment_robot == offline.robots.index(robot)
-        ]
-        return mine
-    main = _main_piece(offline, robot)
-    placed = [
-        se2.transform_segments(se2.matrix_from_pose(*kf.T_robotmap_keyframe), kf.segments)
-        for kf in offline.keyframes.get(robot, [])
-        if kf.piece == main and len(kf.segments)
-    ]
-    return np.vstack(placed) if placed else np.zeros((0, 4))
-
-
-def _main_piece(local: OfflineMap, robot: str) -> int:
-    """The piece of ``robot``'s map holding the most placed scans (ties: the oldest), as
-    :meth:`LocalMapper.main_piece` chose it."""
-    piece_of = {kf.index: kf.piece for kf in local.keyframes.get(robot, [])}
-    anchors = local.anchors.get(robot)
-    if anchors is None or not piece_of:
-        return 0
-    pieces = np.array([piece_of.get(int(k), -1) for k in anchors[1]], dtype=np.int64)
-    found, counts = np.unique(pieces[pieces >= 0], return_counts=True)
-    return int(found[np.argmax(counts)]) if len(found) else 0
-
-
-def _merge_stats(
-    local: OfflineMap, result: MergeResult, seconds: float, links: int
-) -> dict[str, object]:
-    """The ``local`` run's stats with the merge's (``seconds`` it took, ``links`` it used)."""
-    stats = dict(local.stats)
-    stats.update(
-        {
-            "method": "pivot",
-            "segments": len(result.segments),
-            "merge_reference": result.reference,
-            "merge_links": [
-                {"a": link.robot_a, "b": link.robot_b, "value": round(link.value, 3)}
-                for link in result.links
-            ],
-            "merge_links_valid": links,
-            "merge_pairs": len(result.pairs),
-            "merge_s": round(seconds, 4),
-            "robots_unmerged": result.unmerged,
-        }
-    )
-    stats["total_s"] = round(float(str(stats["total_s"])) + seconds, 4)
-    return stats

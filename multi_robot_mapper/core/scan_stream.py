@@ -173,6 +173,7 @@ class ScanStreamGuard(Generic[T]):
         self._intervals: deque[float] = deque(maxlen=_CADENCE_INTERVALS)
         self._held: list[Held[T]] = []
         self._held_back = False  # the held scans jumped back (a reset if confirmed)
+        self._held_step = 0.0  # how far ahead the held scans jumped (a new cadence, maybe)
         self._digests: deque[bytes] = deque()
         self._digest_set: set[bytes] = set()
         self._held_digests: list[bytes | None] = []  # of the held scans, in order
@@ -311,6 +312,9 @@ class ScanStreamGuard(Generic[T]):
         self._held = [Held(stamp, item)]
         self._held_digests = [digest]
         self._held_back = stamp < last
+        # A step ahead may be a new cadence (a laser slowed down, or one whose intervals vary
+        # more than gap() allows): later scans as far apart continue it.
+        self._held_step = 0.0 if self._held_back else stamp - last
         return self._confirmed(dropped)
 
     def _jumps_back(self, stamp: float) -> bool:
@@ -324,7 +328,7 @@ class ScanStreamGuard(Generic[T]):
 
     def _continues_held(self, stamp: float) -> bool:
         newest = self._held[-1].stamp
-        return newest < stamp <= newest + self.gap()
+        return newest < stamp <= newest + max(self.gap(), self._held_step)
 
     def _confirmed(self, dropped: tuple[tuple[str, str], ...]) -> StreamVerdict[T]:
         """Hold, or release once ``confirm_scans`` scans continue the new time."""
