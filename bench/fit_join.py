@@ -204,6 +204,9 @@ def main() -> None:
     parser.add_argument("--work", nargs="*", default=["bench_output/decisions"])
     parser.add_argument("--write", action="store_true")
     parser.add_argument("--figure", default="")
+    parser.add_argument(
+        "--show", type=float, default=0.99, help="list the wrong sets held out at least this sure"
+    )
     args = parser.parse_args()
     x, y, groups, sources = load(args.work)
     if len(y) == 0:
@@ -232,7 +235,7 @@ def main() -> None:
             wrong = int((accepted & ~y).sum())
             recall = (accepted & y).sum() / max(1, (mine & y).sum())
             print(f"| {source} | {threshold:g} | {int(accepted.sum())} | {wrong} | {recall:.3f} |")
-    doubtful = np.flatnonzero((p >= 0.99) & ~y)
+    doubtful = np.flatnonzero((p >= args.show) & ~y)
     for k in doubtful:
         print(
             f"held out, P {p[k]:.4f} but wrong: {groups[k]} ({sources[k]}), features "
