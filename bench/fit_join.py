@@ -122,7 +122,14 @@ def load(works: list[str]) -> tuple[np.ndarray, np.ndarray, list[str], list[str]
 # placement less likely, a rival closer in score or more wall in free space never more likely.
 # Without it, correlated features (the conflict and its share) took opposite signs and a fit
 # held out gave P 0.994 to a placement its rival outscored (aces 8).
-SIGNS = {"margin": 1, "log_score": 0, "rival_ratio": -1, "conflict": -1, "conflict_share": -1}
+SIGNS = {
+    "margin": 1,
+    "log_margin": 1,
+    "log_score": 0,
+    "rival_ratio": -1,
+    "conflict": -1,
+    "conflict_share": -1,
+}
 
 
 def fit(x: np.ndarray, y: np.ndarray, l2: float) -> tuple[float, np.ndarray]:

@@ -22,6 +22,10 @@ MODEL_FILE = "join_model.json"
 # The features, in the model's order (each a number of the decision's evidence):
 FEATURES = (
     "margin",  # m of wall the placement explains and its best rival does not (weaker way)
+    # log(1 + that margin, 0 when negative): the first metres no rival explains say more
+    # than the hundredth (a model linear in the margin alone was under-sure above 0.9 and
+    # over-sure below: bench/fit_join.py's reliability table)
+    "log_margin",
     "log_score",  # log(1 + m of wall the placement explains, weaker way)
     "rival_ratio",  # the larger share of the placement's score a rival reaches (0-1+)
     "conflict",  # m of wall the placement puts in free space the robots saw, either way
@@ -72,8 +76,10 @@ def join_features(ways: Sequence[PlacementEvidence], conflict: float = 0.0) -> d
     in free space (m; the larger of the ways' and ``conflict``, measured over more of the
     maps: of every map of the groups a join makes) and their share of the wall matched."""
     score = min(w.score for w in ways)
+    margin = min(w.margin for w in ways)
     return {
-        "margin": min(w.margin for w in ways),
+        "margin": margin,
+        "log_margin": math.log1p(max(margin, 0.0)),
         "log_score": math.log1p(max(score, 0.0)),
         "rival_ratio": max(w.rival_ratio for w in ways),
         "conflict": max(conflict, *(w.conflict for w in ways)),
