@@ -263,6 +263,7 @@ def verdict_record(
                 "wall": round(ev.wall, 3),
                 "conflict": round(ev.conflict, 3),
                 "matched": round(ev.matched, 3),
+                "pinned": round(ev.pinned, 3),
             }
         record["probability"] = verdict.probability
     return record
@@ -303,6 +304,7 @@ def snapshots_of(
                     "wall": round(ev.wall, 3),
                     "conflict": round(ev.conflict, 3),
                     "matched": round(ev.matched, 3),
+                    "pinned": round(ev.pinned, 3),
                     "error_m": round(error[0], 3),
                     "right": not _wrong(error),
                 }

@@ -11,6 +11,7 @@ Keyframes are made as a robot's ``partial_map`` carries them (test_joint_merging
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 import pytest
@@ -151,12 +152,13 @@ def test_the_join_model_is_data_the_package_ships() -> None:
     # More wall that no rival explains never makes a placement less likely.
     weak = {
         "margin": 2.0,
+        "log_margin": math.log1p(2.0),
         "log_score": 3.0,
         "rival_ratio": 0.9,
         "conflict": 0.0,
         "conflict_share": 0.0,
     }
-    strong = dict(weak, margin=40.0, rival_ratio=0.3)
+    strong = dict(weak, margin=40.0, log_margin=math.log1p(40.0), rival_ratio=0.3)
     assert model.probability(strong) > model.probability(weak)
 
 

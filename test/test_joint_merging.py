@@ -339,7 +339,9 @@ def certain(probability: float = 0.999) -> JoinModel:
     """A join model that gives every placement ``probability`` (its evidence aside): the
     tests of sets, cycles and motion below are about links, not the evidence model
     (test_evidence.py)."""
-    return JoinModel(FEATURES, float(np.log(probability / (1.0 - probability))), (0.0,) * 4, "")
+    return JoinModel(
+        FEATURES, float(np.log(probability / (1.0 - probability))), (0.0,) * len(FEATURES), ""
+    )
 
 
 def weighed(
