@@ -263,7 +263,6 @@ def verdict_record(
                 "wall": round(ev.wall, 3),
                 "conflict": round(ev.conflict, 3),
                 "matched": round(ev.matched, 3),
-                "pinned": round(ev.pinned, 3),
             }
         record["probability"] = verdict.probability
     return record
@@ -304,7 +303,6 @@ def snapshots_of(
                     "wall": round(ev.wall, 3),
                     "conflict": round(ev.conflict, 3),
                     "matched": round(ev.matched, 3),
-                    "pinned": round(ev.pinned, 3),
                     "error_m": round(error[0], 3),
                     "right": not _wrong(error),
                 }

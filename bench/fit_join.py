@@ -76,7 +76,6 @@ def _features(ways: list[dict[str, float]], conflict: float) -> list[float]:
             None,
             w.get("conflict", 0.0),
             w.get("matched", w["score"] + weight * w.get("conflict", 0.0)),
-            w.get("pinned", 0.0),
         )
         for w in ways
     ]

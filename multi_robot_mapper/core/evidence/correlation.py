@@ -438,33 +438,6 @@ def score_parts(
     return np.asarray(matched), np.asarray(through)
 
 
-def pinned_wall(
-    a: Drawing, b: Drawing, row: FloatArray, rasters_a: ScoringRasters, config: CorrelationConfig
-) -> float:
-    """Metres of b's wall matched on a at the placement ``row`` (theta, tx, ty) across its
-    weakest direction: the smaller eigenvalue of sum_p m_p n_p n_p^T over b's wall points (m_p
-    the metres point p matches, n_p its wall's normal, turned by theta). A placement along a
-    bare corridor matches many metres, all with one normal: it is pinned across the corridor
-    and free along it, where a slide of a metre changes little of its score."""
-    if len(b.walls) == 0:
-        return 0.0
-    assert rasters_a.walls is not None
-    theta, tx, ty = (float(v) for v in np.asarray(row, dtype=np.float64).reshape(3))
-    c, s = np.cos(theta), np.sin(theta)
-    on_a = b.walls @ np.array([[c, s], [-s, c]]) + np.array([tx, ty])
-    read = rasters_a.grid.bilinear(rasters_a.walls, on_a).reshape(_CHANNELS, -1)  # (C, P)
-    # As score_parts: channel k weighs a point of direction phi by (1 + cos 2(phi - k pi/C)).
-    k = np.arange(_CHANNELS)[:, None] * (np.pi / _CHANNELS)
-    turned = b.direction[None, :] + theta
-    share = (read * (1.0 + np.cos(2.0 * (turned - k)))).sum(axis=0) / _CHANNELS
-    blur, cell = config.blur, config.cell
-    scale = np.sqrt(2.0 * np.pi * (blur**2 + _DRAWN + _READ)) / (0.5 * cell)
-    metres = np.clip(share * scale, 0.0, 1.0) * b.weight
-    normal = np.stack((-np.sin(turned[0]), np.cos(turned[0])), axis=1)  # (P, 2)
-    information = (normal * metres[:, None]).T @ normal
-    return float(np.linalg.eigvalsh(information)[0])
-
-
 def _turned_channel_sum(read: FloatArray, b: Drawing, theta: FloatArray) -> FloatArray:
     """(N,) sum over channels and points of ``read`` (C, N, P) times each point's channel
     weight with b turned by ``theta`` (N,), times its metres. The weights 2/3 cos^2(phi +

@@ -30,9 +30,6 @@ FEATURES = (
     "rival_ratio",  # the larger share of the placement's score a rival reaches (0-1+)
     "conflict",  # m of wall the placement puts in free space the robots saw, either way
     "conflict_share",  # that, as a share of the wall it matches (the larger way)
-    # log(1 + m of matched wall across the placement's weakest direction, weaker way): a
-    # placement along a bare corridor is sure across it and not along it (placement.pinned)
-    "log_pinned",
 )
 
 
@@ -87,5 +84,4 @@ def join_features(ways: Sequence[PlacementEvidence], conflict: float = 0.0) -> d
         "rival_ratio": max(w.rival_ratio for w in ways),
         "conflict": max(conflict, *(w.conflict for w in ways)),
         "conflict_share": max(w.conflict_share for w in ways),
-        "log_pinned": math.log1p(max(min(w.pinned for w in ways), 0.0)),
     }

@@ -41,7 +41,6 @@ from multi_robot_mapper.core.evidence.correlation import (
     Drawing,
     ScoringRasters,
     correlation_peaks,
-    pinned_wall,
     reach_of,
     rotation_candidates_of_drawings,
     score_parts,
@@ -84,7 +83,6 @@ class PlacementEvidence:
     rival_placement: FloatArray | None  # (theta, tx, ty) of the rival
     conflict: float = 0.0  # m of wall in the other's free space at the placement, either way
     matched: float = 0.0  # m of wall on a wall of the same direction at the placement
-    pinned: float = 0.0  # m of that wall across its weakest direction (correlation.pinned_wall)
 
     @property
     def margin(self) -> float:
@@ -169,10 +167,6 @@ class PlacementScorer:
         return score_parts(
             self.a, self.b, rows, self.config, self.rasters_a, self.rasters_b, walls_a
         )
-
-    def pinned(self, row: FloatArray) -> float:
-        """Metres of matched wall across the placement's weakest direction."""
-        return pinned_wall(self.a, self.b, row, self.rasters_a, self.config)
 
     def refine(self, row: FloatArray) -> tuple[FloatArray, float]:
         """The best placement near ``row`` (a pattern search: half a cell and one degree
@@ -287,7 +281,6 @@ def placement_evidence(
         rival_row,
         float(through[0]),
         float(matched[0]),
-        scorer.pinned(placed),
     )
 
 

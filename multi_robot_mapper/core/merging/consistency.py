@@ -392,10 +392,10 @@ TOO_FAST = "a robot would drive"
 GROUP_DOUBT = "joined with every map of both groups"
 # metres of wall a join puts in free space: (every map of the joined group placed in the
 # root's frame, the maps of one side, those of the other) -> metres
-# the evidence of joining two groups: (group A's maps placed in its root's frame, group B's in
-# its root's, T_roota_rootb) -> the evidence (pair_evidence.group_evidence)
-GroupEvidence = Callable[
-    [Mapping[UnitKey, FloatArray], Mapping[UnitKey, FloatArray], FloatArray], PairEvidence
+# the walls in free space of joining two groups: (group A's maps placed in its root's frame,
+# group B's in its root's, T_roota_rootb) -> metres (pair_evidence.group_conflict)
+GroupConflict = Callable[
+    [Mapping[UnitKey, FloatArray], Mapping[UnitKey, FloatArray], FloatArray], float
 ]
 
 
@@ -405,14 +405,15 @@ def accept_pairs(
     config: MergeConfig,
     model: JoinModel,
     reaches: Mapping[str, RobotReach] | None = None,
-    group_evidence: GroupEvidence | None = None,
+    group_conflict: GroupConflict | None = None,
 ) -> Accepted:
     """Candidate pairs, most probable first: a pair joining two groups joins them, one inside
     a group must close the cycle through the group's tree (module doc). With ``reaches``
     (:mod:`~multi_robot_mapper.core.merging.motion`) a join is refused when the joined group
     would need a robot to drive faster than ``max_speed`` between two of its pieces; with
-    ``group_evidence`` (:func:`~core.merging.pair_evidence.group_evidence`), a join of groups
-    of more than one map is weighed again on every map of both."""
+    ``group_conflict`` (:func:`~core.merging.pair_evidence.group_conflict`), a join of groups
+    of more than one map is weighed again with its walls in free space measured on every map
+    of both."""
     order = sorted(
         (v for v in verdicts if v.accepted), key=lambda v: (-v.probability, -v.weight, v.pair)
     )
@@ -451,7 +452,7 @@ def accept_pairs(
             config,
             model,
             reaches,
-            group_evidence,
+            group_conflict,
         )
         if not judged.accepted:
             refused.append(judged)
@@ -480,13 +481,13 @@ def _judge_join(
     config: MergeConfig,
     model: JoinModel,
     reaches: Mapping[str, RobotReach] | None,
-    group_evidence: GroupEvidence | None,
+    group_conflict: GroupConflict | None,
 ) -> PairVerdict:
     """The pair's verdict as a join of its two groups (``groups``: each group's maps in its
     root's frame and T_roota_rootb; ``joined``: every map of both in A's root frame, as the
     join places them): refused when a robot would have to drive too fast, or, for groups of
-    more than one map, when the evidence on every map of both falls below
-    ``join_probability``."""
+    more than one map, when the pair's evidence with the walls it puts in the free space of
+    every map of both falls below ``join_probability``."""
     excess = (
         0.0 if reaches is None else motion_excess(joined, units, reaches, config.link_pair_slack)
     )
@@ -494,18 +495,22 @@ def _judge_join(
         reason = f"{TOO_FAST} {excess:.1f} m beyond max_speed"
         return dataclasses.replace(verdict, accepted=False, reason=reason)
     group_a, group_b, T_ra_rb = groups
-    if group_evidence is None or len(group_a) + len(group_b) <= 2:
+    if group_conflict is None or len(group_a) + len(group_b) <= 2:
         return verdict  # two maps alone: the pair's own probability
-    evidence = group_evidence(group_a, group_b, T_ra_rb)
-    probability = model.probability(evidence.features())
-    doubted = doubt(probability, evidence, evidence.conflict, config)
+    evidence = verdict.evidence
+    if evidence is None:
+        return verdict
+    # The pair's own evidence, its walls in free space now measured on every map of both
+    # groups (pair_evidence.group_conflict).
+    conflict = max(verdict.conflict, group_conflict(group_a, group_b, T_ra_rb))
+    probability = model.probability(evidence.features(conflict))
+    doubted = doubt(probability, evidence, conflict, config)
     return dataclasses.replace(
         verdict,
         accepted=not doubted,
         reason=f"{GROUP_DOUBT}: {doubted}" if doubted else "",
         probability=probability,
-        evidence=evidence,
-        conflict=evidence.conflict,
+        conflict=conflict,
     )
 
 

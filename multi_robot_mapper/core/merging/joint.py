@@ -65,7 +65,7 @@ from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.motion import robot_reaches
 from multi_robot_mapper.core.merging.pair_evidence import (
     PairEvidence,
-    group_evidence,
+    group_conflict,
     pair_evidence,
 )
 from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
@@ -151,7 +151,7 @@ def merge_joint(
         config,
         model,
         robot_reaches(units, config.max_speed),
-        lambda group_a, group_b, T: group_evidence(
+        lambda group_a, group_b, T: group_conflict(
             group_a,
             group_b,
             T,

@@ -25,6 +25,7 @@ from multi_robot_mapper.core.evidence.model import join_features
 from multi_robot_mapper.core.evidence.placement import (
     EVIDENCE_CORRELATION,
     PlacementEvidence,
+    PlacementScorer,
     patch_of,
     placement_evidence,
 )
@@ -98,28 +99,38 @@ def pair_evidence(
     return PairEvidence(b_on_a, a_on_b)
 
 
-def group_evidence(
+def group_conflict(
     group_a: Mapping[UnitKey, np.ndarray],
     group_b: Mapping[UnitKey, np.ndarray],
     T_a_b: np.ndarray,
     units: Mapping[UnitKey, MapUnit],
     targets: Mapping[UnitKey, Target],
     config: MergeConfig,
-) -> PairEvidence:
-    """The evidence of joining two groups of maps: group B (each map at its ``T_rootb_map``)
-    placed at ``T_a_b`` on group A (each at its ``T_roota_map``), measured as between two maps
-    (:func:`pair_evidence`) on the groups' maps drawn together, each wall once: the patch of
-    every map of B on the shared ground, its rival searched on every map of A, the free space
-    of every robot of both counting against (issue 46: a join is checked against every member
-    of the group it creates)."""
+) -> float:
+    """Metres of wall that joining two groups of maps puts in free space a robot of the other
+    group saw, the larger way: group B (each map at its ``T_rootb_map``) placed at ``T_a_b``
+    on group A (each at its ``T_roota_map``), the groups' maps drawn together, each wall once,
+    the patch of every map of B on the shared ground and of A likewise, each placement
+    refined (issue 46: a join is checked against every member of the group it creates).
+
+    Only the free space: whether the pair's placement is right is the pair's own evidence
+    (its rivals searched over the whole of the other map); a join of groups is right when
+    its pair is, and the other members can only add walls where their robots saw through."""
     drawing_a, positions_a = _group_drawing(group_a, units, targets)
     drawing_b, positions_b = _group_drawing(group_b, units, targets)
     shared_a, shared_b = _shared_ground(positions_a, positions_b, T_a_b, 0.5 * config.place_radius)
     patch_b = patch_of(drawing_b, shared_b, config.place_radius)
     patch_a = patch_of(drawing_a, shared_a, config.place_radius)
-    b_on_a = placement_evidence(drawing_a, patch_b, T_a_b, EVIDENCE_CORRELATION)
-    a_on_b = placement_evidence(drawing_b, patch_a, se2.invert(T_a_b), EVIDENCE_CORRELATION)
-    return PairEvidence(b_on_a, a_on_b)
+    worst = 0.0
+    for target, patch, T in ((drawing_a, patch_b, T_a_b), (drawing_b, patch_a, se2.invert(T_a_b))):
+        if len(patch.walls) == 0 or len(target.walls) == 0:
+            continue
+        scorer = PlacementScorer(target, patch, EVIDENCE_CORRELATION)
+        x, y, theta = se2.pose_from_matrix(T)
+        placed, _ = scorer.refine(np.array([theta, x, y]))
+        _, through = scorer.parts(placed)
+        worst = max(worst, float(through[0]))
+    return worst
 
 
 # A wall point of a group's map within this of an earlier map's is the same wall (drawn once).
