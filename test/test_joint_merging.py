@@ -52,7 +52,12 @@ from multi_robot_mapper.core.simulation import (
 )
 from multi_robot_mapper.core.worlds import ROUTES, WORLDS
 
-CONFIG = MergeConfig()
+# The simulated worlds repeat their rooms and corridors: the join model (calibrated on
+# generated buildings, issue 46) gives their right joins P 0.96-0.98 at 40 m of drive, below
+# the default 0.99. These tests are about links, sets and the graph, so they merge at 0.9
+# (test_evidence.py tests the model and its default threshold).
+SIMULATED_WORLD_JOIN_PROBABILITY = 0.9
+CONFIG = MergeConfig(join_probability=SIMULATED_WORLD_JOIN_PROBABILITY)
 DISTANCE = 40.0  # m driven per robot
 TOLERANCE_M, TOLERANCE_RAD = 0.10, np.radians(1.0)
 
@@ -142,6 +147,7 @@ def merged(
 ) -> tuple[MergeResult, dict[str, np.ndarray]]:
     """The robots' keyframes (world frame) moved into map frames anywhere and merged (every
     place matched); their true ``T_world_robotmap``."""
+    settings.setdefault("join_probability", SIMULATED_WORLD_JOIN_PROBABILITY)
     names = sorted(world)
     frames = dict(zip(names, random_frames(len(names), seed=seed), strict=True))
     keyframes = {name: moved(world[name], frames[name]) for name in names}

@@ -31,6 +31,17 @@ from multi_robot_mapper.core.local_mapping import joins as piece_joins
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.pose_graph import ReachBound
 
+# The simulated office repeats its rooms: the join model (calibrated on generated buildings,
+# issue 46) gives the right joins of these short drives' pieces P 0.98 (36-54 m of wall, no
+# rival within the robot's reach), below the default 0.99. These tests are about pieces,
+# losses and bounds, so their joins are made at 0.9 (test_evidence.py tests the model).
+PIECES = dataclasses.replace(LocalMapperConfig(), join_probability=0.9)
+# Where a loss's guess is off, the join is found at the loss, where the piece's first
+# keyframes explain 11 m of their 35-47 m of wall: P 0.85. The tests of where the search looks
+# take that join (in the default configuration the piece stays apart until more of it
+# matches: the safe outcome).
+SEARCHED = dataclasses.replace(LocalMapperConfig(), join_probability=0.8)
+
 
 def test_a_heading_bias_is_straightened_by_loop_closures(monkeypatch) -> None:  # type: ignore[no-untyped-def]
     # Every match the front end accepts turns 1 degree per metre of motion too far: the map
@@ -58,7 +69,11 @@ def test_a_heading_bias_is_straightened_by_loop_closures(monkeypatch) -> None:  
 
 
 def _mapped_losing_the_robot_at(
-    monkeypatch: pytest.MonkeyPatch, stamps: np.ndarray, scans: list, lost_at: set[int]
+    monkeypatch: pytest.MonkeyPatch,
+    stamps: np.ndarray,
+    scans: list,
+    lost_at: set[int],
+    config: LocalMapperConfig = PIECES,
 ) -> tuple[LocalMapper, list[LocalUpdate]]:
     """The scans mapped by a LocalMapper whose front end fails on the scans ``lost_at`` (a
     match not confident enough: each starts a new piece from its best match's guess)."""
@@ -71,7 +86,7 @@ def _mapped_losing_the_robot_at(
 
     monkeypatch.setattr(mapper.LocalMapper, "_match", failing)
     # Each failing scan is a loss at once (not held for the next scan to confirm it).
-    local = LocalMapper(dataclasses.replace(LocalMapperConfig(), lost_confirm_scans=1))
+    local = LocalMapper(dataclasses.replace(config, lost_confirm_scans=1))
     updates = []
     for k, (t, s) in enumerate(zip(stamps, scans, strict=True)):
         count["scan"] = k
@@ -176,7 +191,7 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
     # look-alike of the right one (the piece turned round about its first scan, consistently,
     # confidence 0.99): what a symmetric corridor offers. The robot turned far less than a
     # quarter turn between its last placed scan and the piece's first, so the joins are refused
-    # and the piece stays apart; without the limit (2 pi) the look-alike joins the map.
+    # and the piece stays apart; without the limit (2 pi) the evidence model refuses them.
     stamps, scans, truth = looped_drive(rate=4.0, laps=0.5, seed=4)
     original_windows = loop_closer.LoopCloser._match_windows
 
@@ -197,15 +212,15 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
     local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
     assert local.pieces_started == 1
     joins = [c for c in local.closures if c.kind == "join"]
+    assert joins == []
+    assert len(set(local.backend.map.pieces.tolist())) == 2
+    refused = local.backend.closer.refused
     if turn_limit < np.pi:
-        assert joins == []
-        assert local.backend.closer.refused["turned round from the robot's last pose (join)"] > 0
-        assert len(set(local.backend.map.pieces.tolist())) == 2
+        assert refused["turned round from the robot's last pose (join)"] > 0
     else:
-        # The look-alike joined: the map is decimetres off (the right join: under 2 cm, the
-        # test above).
-        assert len(joins) == 1
-        assert _ate_of_one_map(local, stamps, truth) > 0.1
+        # Without the limit the evidence model refuses the look-alike (issue 46): turned
+        # round, the piece's walls miss the map's.
+        assert refused["evidence (join)"] > 0
 
 
 def _guessing_wrong(monkeypatch: pytest.MonkeyPatch, reach_known: bool) -> None:
@@ -237,7 +252,7 @@ def test_a_piece_whose_guess_is_wrong_joins_where_the_robot_can_have_driven(
     # speed yet) only the guess is searched, and the piece stays apart.
     stamps, scans, truth = looped_drive(rate=4.0, laps=0.5, seed=4)
     _guessing_wrong(monkeypatch, reach_known)
-    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25})
+    local, _ = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {25}, SEARCHED)
     assert local.pieces_started == 1
     joins = [c for c in local.closures if c.kind == "join"]
     if reach_known:
@@ -343,7 +358,9 @@ def test_a_piece_joins_through_a_chain_of_losses_where_the_robot_can_have_driven
     blocked = 25
     scans = [stranger_scan(k) if k == blocked else s for k, s in enumerate(scans)]
     _guessing_wrong(monkeypatch, reach_known)
-    local, updates = _mapped_losing_the_robot_at(monkeypatch, stamps, scans, {blocked, blocked + 1})
+    local, updates = _mapped_losing_the_robot_at(
+        monkeypatch, stamps, scans, {blocked, blocked + 1}, SEARCHED
+    )
     assert local.pieces_started == 2
     pieces = local.backend.map.pieces
     kept = [k for k in range(len(stamps)) if k != blocked]
@@ -363,7 +380,7 @@ def test_closures_of_one_new_keyframe_are_not_each_others_partner() -> None:
     # Pairwise consistency needs independent matches: the new keyframe's window matched to
     # two neighbouring old keyframes is one scan's evidence twice (a look-alike place fools
     # both alike), so neither is the other's partner, however well they agree.
-    local = LocalMapper()
+    local = LocalMapper(PIECES)
     closure = loop_closer.Closure(10, 50, (1.0, 0.0, 0.0), 0.99, "loop", True, "", found_by=50)
     neighbour = dataclasses.replace(closure, first=11, T_first_second=(0.5, 0.0, 0.0))
     assert local.backend.closer._pairwise(closure, neighbour) is None
