@@ -438,6 +438,31 @@ def score_parts(
     return np.asarray(matched), np.asarray(through)
 
 
+def weakest_direction(
+    a: Drawing, b: Drawing, row: FloatArray, rasters_a: ScoringRasters, config: CorrelationConfig
+) -> FloatArray:
+    """The unit vector (in a's frame) along which b's walls matched on a at the placement
+    ``row`` (theta, tx, ty) hold it least: the eigenvector of the smaller eigenvalue of
+    sum_p m_p n_p n_p^T over b's wall points (m_p the metres point p matches, n_p its wall's
+    normal, turned by theta). Along a bare corridor it is the corridor's direction: a slide
+    along it keeps most of the wall on wall."""
+    theta, tx, ty = (float(v) for v in np.asarray(row, dtype=np.float64).reshape(3))
+    if len(b.walls) == 0:
+        return np.array([1.0, 0.0])
+    assert rasters_a.walls is not None
+    c, s = np.cos(theta), np.sin(theta)
+    on_a = b.walls @ np.array([[c, s], [-s, c]]) + np.array([tx, ty])
+    read = rasters_a.grid.bilinear(rasters_a.walls, on_a).reshape(_CHANNELS, -1)  # (C, P)
+    # As score_parts: channel k weighs a point of direction phi by (1 + cos 2(phi - k pi/C)).
+    k = np.arange(_CHANNELS)[:, None] * (np.pi / _CHANNELS)
+    turned = b.direction + theta
+    share = (read * (1.0 + np.cos(2.0 * (turned[None, :] - k)))).sum(axis=0)
+    metres = np.clip(share, 0.0, None) * b.weight
+    normal = np.stack((-np.sin(turned), np.cos(turned)), axis=1)  # (P, 2)
+    _, vectors = np.linalg.eigh((normal * metres[:, None]).T @ normal)
+    return np.asarray(vectors[:, 0])
+
+
 def _turned_channel_sum(read: FloatArray, b: Drawing, theta: FloatArray) -> FloatArray:
     """(N,) sum over channels and points of ``read`` (C, N, P) times each point's channel
     weight with b turned by ``theta`` (N,), times its metres. The weights 2/3 cos^2(phi +

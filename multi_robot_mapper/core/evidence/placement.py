@@ -45,6 +45,7 @@ from multi_robot_mapper.core.evidence.correlation import (
     rotation_candidates_of_drawings,
     score_parts,
     scorer_rasters,
+    weakest_direction,
 )
 
 FloatArray = NDArray[np.float64]
@@ -64,6 +65,12 @@ DISTINCT_TURN = float(np.radians(10.0))
 # tenths of it, and a rival that far below leaves a margin the model reads as certain anyway.
 _RIVALS_REFINED = 6
 _RIVAL_FLOOR = 0.5
+# Slides searched as rivals: the placement moved along the direction its matched walls hold it
+# least (a corridor's length), every cell, from DISTINCT_SHIFT to as far as the target map
+# reaches that way (at most _MAX_SLIDE). The correlation's peaks along a corridor form a ridge,
+# not peaks, and a corridor whose doors repeat every few metres fits as well slid by one
+# period: a rival only this finds.
+_MAX_SLIDE = 60.0  # m
 # Rotations searched: the wall-direction histograms' best peaks (each also turned by pi), and
 # the placement's own rotation turned by 0, 90, 180 and 270 degrees (symmetric wings).
 _HISTOGRAM_TURNS = 2
@@ -168,6 +175,22 @@ class PlacementScorer:
             self.a, self.b, rows, self.config, self.rasters_a, self.rasters_b, walls_a
         )
 
+    def slides(self, row: FloatArray) -> FloatArray:
+        """(N, 3) placements: ``row`` slid each way along its weakest direction
+        (:func:`~.correlation.weakest_direction`), a cell apart, from DISTINCT_SHIFT to as
+        far as a's walls reach that way."""
+        row = np.asarray(row, dtype=np.float64)
+        along = weakest_direction(self.a, self.b, row, self.rasters_a, self.config)
+        span = np.ptp(self.a.walls @ along) if len(self.a.walls) else 0.0
+        far = min(float(span), _MAX_SLIDE)
+        if far <= DISTINCT_SHIFT:
+            return np.zeros((0, 3))
+        steps = np.arange(DISTINCT_SHIFT, far, self.config.cell)
+        steps = np.concatenate((steps, -steps))
+        moved = np.tile(row, (len(steps), 1))
+        moved[:, 1:] += steps[:, None] * along[None, :]
+        return moved
+
     def refine(self, row: FloatArray) -> tuple[FloatArray, float]:
         """The best placement near ``row`` (a pattern search: half a cell and one degree
         steps, halved when none helps) and its score."""
@@ -256,6 +279,42 @@ def placement_evidence(
         (rotation_candidates_of_drawings(target, patch, _HISTOGRAM_TURNS), turns)
     )
     peaks, values = correlation_peaks(target, patch, _unique_turns(rotations), config, prepared)
+    rival, rival_row = _best_rival(scorer, placed, score, peaks, values, reach)
+    slides = scorer.slides(placed)
+    if reach is not None:
+        slides = slides[[reach.allows(row) for row in slides]] if len(slides) else slides
+    if len(slides):
+        values = scorer.scores(slides)
+        best = int(np.argmax(values))
+        # Refined, a slide along a uniform corridor creeps back towards the placement: it
+        # counts as refined only while it stays a different answer.
+        moved, value = scorer.refine(slides[best])
+        if not distinct(moved, placed) or (reach is not None and not reach.allows(moved)):
+            moved, value = slides[best], float(values[best])
+        if value > rival:
+            rival, rival_row = value, moved
+    matched, through = scorer.parts(placed)
+    return PlacementEvidence(
+        score,
+        rival,
+        float(patch.weight.sum()),
+        placed,
+        rival_row,
+        float(through[0]),
+        float(matched[0]),
+    )
+
+
+def _best_rival(
+    scorer: PlacementScorer,
+    placed: FloatArray,
+    score: float,
+    peaks: FloatArray,
+    values: FloatArray,
+    reach: Reach | None,
+) -> tuple[float, FloatArray | None]:
+    """The best of the correlation's peaks distinct from ``placed`` (and within ``reach``),
+    the best few refined: its score and placement (0, None when there is none)."""
     rival, rival_row = 0.0, None
     refined = 0
     for row, raw in zip(peaks, values, strict=True):
@@ -272,16 +331,7 @@ def placement_evidence(
         plausible = reach is None or reach.allows(moved)
         if plausible and distinct(moved, placed) and (rival_row is None or value > rival):
             rival, rival_row = value, moved
-    matched, through = scorer.parts(placed)
-    return PlacementEvidence(
-        score,
-        rival,
-        float(patch.weight.sum()),
-        placed,
-        rival_row,
-        float(through[0]),
-        float(matched[0]),
-    )
+    return rival, rival_row
 
 
 def _unique_turns(turns: FloatArray, tolerance: float = float(np.radians(2.0))) -> FloatArray:
