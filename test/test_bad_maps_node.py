@@ -17,6 +17,7 @@ import pytest
 from geometry_msgs.msg import Point, PoseStamped
 from rclpy.parameter import Parameter
 from test_map_merger_node import _partial_map_message
+from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.io.messages import pose_stamped, stamp_from_seconds
@@ -53,6 +54,7 @@ def merger(ros_context) -> Iterator[MapMerger]:
             Parameter("robots", value=",".join(NAMES)),
             Parameter("merge_worker", value=False),  # merges in this process: deterministic
             Parameter("merge.update_budget", value=0.0),  # every place matched: deterministic
+            Parameter("merge.join_probability", value=SIMULATED_WORLD_JOIN_PROBABILITY),
             Parameter("max_keyframes_per_map", value=500),
             Parameter("max_segments_per_map", value=5000),
         ],

@@ -3,12 +3,14 @@ Algorithm 1 on synthetic geometry with a known answer, and the 'ffs' merging met
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError
@@ -202,10 +204,12 @@ def test_method_ffs_merges_simulated_robots_where_the_truth_has_them(
     # Two office robots mapped offline without odometry, merged by 'ffs': the joint graph
     # places them, FFS moves every body; both robots' trajectories stay on the truth.
     from multi_robot_mapper.core.extraction_config import ExtractionConfig
+    from multi_robot_mapper.core.merging import MergeConfig
     from multi_robot_mapper.core.pipeline import run_offline
 
     recordings = office_recordings
-    out = run_offline(recordings, "ffs", ExtractionConfig())
+    merging = MergeConfig(join_probability=SIMULATED_WORLD_JOIN_PROBABILITY)
+    out = run_offline(recordings, "ffs", ExtractionConfig(), merging=merging)
     assert all(out.robot_frames[r] is not None for r in recordings), out.robot_frames
     assert out.stats["merge_stats"]["ffs_iterations"] > 0
     truth = {
@@ -235,7 +239,8 @@ def test_ffs_updates_resume_where_the_last_one_stopped(
     from multi_robot_mapper.core.pipeline import run_offline
 
     local = run_offline(office_recordings, "local", ExtractionConfig())
-    short = MergeConfig(ffs=FfsConfig(max_iterations=3))
+    plain = MergeConfig(join_probability=SIMULATED_WORLD_JOIN_PROBABILITY)
+    short = dataclasses.replace(plain, ffs=FfsConfig(max_iterations=3))
     first = merge_ffs(local.keyframes, short, budget=0.0)
     state = first.refinement
     assert isinstance(state, FfsState) and set(state.keyframes) == set(first.robots)
@@ -248,15 +253,15 @@ def test_ffs_updates_resume_where_the_last_one_stopped(
     second = merge_ffs(local.keyframes, short, previous=first, budget=0.0)
     assert isinstance(second.refinement, FfsState)
     assert second.refinement.sigma == pytest.approx(state.sigma - 3 * short.ffs.sigma_step)
-    settled = merge_ffs(local.keyframes, budget=0.0)
+    settled = merge_ffs(local.keyframes, plain, budget=0.0)
     assert settled.stats["ffs_converged"] == 1
-    again = merge_ffs(local.keyframes, previous=settled, budget=0.0)
+    again = merge_ffs(local.keyframes, plain, previous=settled, budget=0.0)
     assert again.stats["ffs_converged"] == 1 and again.stats["ffs_iterations"] == 1
     for robot in again.robots:
         moved = again.keyframe_poses[robot] - settled.keyframe_poses[robot]
         assert np.abs(moved).max() < 1e-3, robot
     fewer = {robot: frames[:-1] for robot, frames in local.keyframes.items()}
-    fresh = merge_ffs(fewer, previous=settled, budget=0.0)
+    fresh = merge_ffs(fewer, plain, previous=settled, budget=0.0)
     cooling = (FfsConfig().sigma_start - FfsConfig().sigma_end) / FfsConfig().sigma_step
     assert fresh.stats["ffs_iterations"] >= cooling
 

@@ -40,6 +40,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 from test_bad_maps_node import NAMES, message
+from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 from test_robot_mapper_node import room_scan
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -308,6 +309,7 @@ def merger_node() -> Iterator[tuple[MapMerger, list[object], dict]]:
                 # Every place matched in each merge: a time budget would make what a merge
                 # links (and so the good robots' placements) depend on the machine's load.
                 Parameter("merge.update_budget", value=0.0),
+                Parameter("merge.join_probability", value=SIMULATED_WORLD_JOIN_PROBABILITY),
             ],
         )
         node.warnings.log = node.notes.log = lambda message: None

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_merging import LASER, random_frames, stranger_walls
+from test_merging import LASER, SIMULATED_WORLD_JOIN_PROBABILITY, random_frames, stranger_walls
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.model import FEATURES, JoinModel
@@ -52,11 +52,6 @@ from multi_robot_mapper.core.simulation import (
 )
 from multi_robot_mapper.core.worlds import ROUTES, WORLDS
 
-# The simulated worlds repeat their rooms and corridors: the join model (calibrated on
-# generated buildings, issue 46) gives their right joins P 0.96-0.98 at 40 m of drive, below
-# the default 0.99. These tests are about links, sets and the graph, so they merge at 0.9
-# (test_evidence.py tests the model and its default threshold).
-SIMULATED_WORLD_JOIN_PROBABILITY = 0.9
 CONFIG = MergeConfig(join_probability=SIMULATED_WORLD_JOIN_PROBABILITY)
 DISTANCE = 40.0  # m driven per robot
 TOLERANCE_M, TOLERANCE_RAD = 0.10, np.radians(1.0)

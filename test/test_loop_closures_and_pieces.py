@@ -192,7 +192,7 @@ def test_a_join_that_turns_the_robot_round_is_refused(monkeypatch, turn_limit) -
     # confidence 0.99): what a symmetric corridor offers. The robot turned far less than a
     # quarter turn between its last placed scan and the piece's first, so the joins are refused
     # and the piece stays apart; without the limit (2 pi) the evidence model refuses them.
-    stamps, scans, truth = looped_drive(rate=4.0, laps=0.5, seed=4)
+    stamps, scans, _ = looped_drive(rate=4.0, laps=0.5, seed=4)
     original_windows = loop_closer.LoopCloser._match_windows
 
     def turned_round(self, first, second, predicted, search=True):  # type: ignore[no-untyped-def]

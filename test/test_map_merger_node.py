@@ -24,6 +24,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
+from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core import se2
@@ -60,7 +61,7 @@ pytestmark = pytest.mark.ros
 
 OFFICE_ROBOTS = ("robot1", "robot2", "robot3")
 STRANGER = "robot4"
-DURATION = 12.0  # s of driving per robot (about 10 m; neighbours share about 3 m of it)
+DURATION = 20.0  # s of driving per robot (about 16 m; neighbours share about 5 m of it)
 EVERY = 4  # every 4th scan of the 40 Hz drive: 10 Hz, as test_robot_mapper_node feeds it
 TIME_LIMIT = 45.0  # s from the first scan until every office robot is merged
 
@@ -128,6 +129,7 @@ def outcome(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Outcome]:
             parameter_overrides=[
                 Parameter("discovery_period", value=0.3),
                 Parameter("merge_period", value=0.5),
+                Parameter("merge.join_probability", value=SIMULATED_WORLD_JOIN_PROBABILITY),
             ],
         )
         logged: list[str] = []
@@ -436,6 +438,7 @@ def test_a_merge_in_the_worker_process_is_the_merge_in_the_node(ros_context, met
                 Parameter("merge.update_budget", value=0.0),
                 Parameter("method", value=method),
                 Parameter("merge.ffs.time_budget", value=0.0),
+                Parameter("merge.join_probability", value=SIMULATED_WORLD_JOIN_PROBABILITY),
             ],
         )
         try:

@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 from conftest import carmen_log
 from test_bags import raw_bag
+from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.cli.main import main
 
@@ -97,10 +98,13 @@ def replayed_and_evaluated(capsys, tmp_path: Path, method: str) -> tuple[Path, d
     """Two simulated robots replayed by ``method`` (every robot must be merged) and evaluated:
     the bag and the metrics."""
     bag = tmp_path / "sim"
-    args = ("--robots", 2, "--out", bag, "--duration", 8, "--rate", 10, "--seed", 3)
+    args = ("--robots", 2, "--out", bag, "--duration", 20, "--rate", 10, "--seed", 3)
     assert mrm(capsys, "simulate", *args)[0] == 0
     out = tmp_path / method
-    code, _, err = mrm(capsys, "replay", bag, "--out", out, "--method", method)
+    # 20 s in the simulated office give the right join P 0.95 (test_merging's
+    # SIMULATED_WORLD_JOIN_PROBABILITY): merged at 0.9 through --set.
+    bar = f"merge.join_probability={SIMULATED_WORLD_JOIN_PROBABILITY}"
+    code, _, err = mrm(capsys, "replay", bag, "--out", out, "--method", method, "--set", bar)
     assert code == 0, err
     robots = json.loads((out / "robots.json").read_text())
     assert all(frame != "unmerged" for frame in robots.values()), robots
@@ -121,10 +125,12 @@ def test_simulate_replay_pivot_evaluate_merges_the_robots(capsys, tmp_path: Path
         capsys,
         *("replay", bag, "--out", strict, "--method", "pivot", "--merger-config", shipped),
         *("--set", "merge.link_min_wall=1000", "--set", "local_mapping.keyframe_distance=0.5"),
+        *("--set", f"merge.join_probability={SIMULATED_WORLD_JOIN_PROBABILITY}"),
     )
     assert code == 0, err
     frames = json.loads((strict / "robots.json").read_text())
-    assert sorted(frames.values(), key=str).count("unmerged") == 1, frames
+    unmerged = [v for v in frames.values() if isinstance(v, str) and v.startswith("unmerged")]
+    assert len(unmerged) == 1, frames
     code, _, err = mrm(capsys, "replay", bag, "--out", strict, "--set", "merge.link_min_value=-1")
     assert code == 2 and "merge.link_min_value" in err
 
