@@ -654,7 +654,10 @@ def _run(function: Any, jobs: list[tuple[Any, ...]], workers: int) -> None:
     workers is reported and skipped)."""
     if workers <= 1:
         for job in jobs:
-            print(function(*job), flush=True)
+            try:
+                print(function(*job), flush=True)
+            except Exception as exc:  # one scenario's failure costs that scenario only
+                print(f"{job[0]}: failed: {type(exc).__name__}: {exc}", flush=True)
         return
     pending = list(jobs)
     deaths: dict[int, int] = {}

@@ -33,7 +33,7 @@ from multi_robot_mapper.core.geometry import sample_segments
 from multi_robot_mapper.core.local_mapping import Closure, Keyframe, LocalMapper, LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.evidence import Weighed
 from multi_robot_mapper.core.matching import IntegrateConfig
-from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.scan import LaserScanData, ScanError
 
 FloatArray = NDArray[np.float64]
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -310,7 +310,10 @@ def truth_snapshots(drive: Drive, times: Sequence[float]) -> list[list[Keyframe]
     for time in times:
         while done < len(rows) and elapsed[done] <= time:
             row = rows[done]
-            found = extract_scan(drive.scans[row], extraction)[0].segments
+            try:
+                found = extract_scan(drive.scans[row], extraction)[0].segments
+            except ScanError:  # a scan of open space or glass: no return, no wall
+                found = np.zeros((0, 4))
             T_world_keyframe = se2.matrix_from_pose(*drive.T_world_laser[row])
             placed = se2.transform_segments(T_world_keyframe, found)
             mine = np.full(len(placed), done, dtype=np.int64)

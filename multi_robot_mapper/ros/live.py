@@ -23,6 +23,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
+from std_msgs.msg import Float64
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core import se2
@@ -179,6 +180,9 @@ class Observer(Node):
         self.global_maps: list[GlobalMapView] = []  # every one, when keep_maps, else the last
         self.grid: OccupancyGridMsg | None = None
         self.frames: dict[str, list[PoseStamped]] = {r: [] for r in robots}
+        # The newest placement probability per robot (robot_frames/<ns>/probability): 0 once
+        # the merger withdrew a placement (its last frame stays latched, but no longer holds).
+        self.probabilities: dict[str, float] = {}
         self.frame_times: dict[str, float] = {}  # monotonic time of each robot's first frame
         self.poses: dict[str, list[tuple[float, FloatArray]]] = {r: [] for r in robots}
         self.partial_maps: dict[str, MarkerArray] = {}
@@ -195,6 +199,12 @@ class Observer(Node):
                 PoseStamped,
                 f"/robot_frames/{robot}",
                 lambda msg, r=robot: self._on_frame(r, msg),
+                LATCHED_QOS,
+            )
+            self.create_subscription(
+                Float64,
+                f"/robot_frames/{robot}/probability",
+                lambda msg, r=robot: self.probabilities.__setitem__(r, float(msg.data)),
                 LATCHED_QOS,
             )
             if poses:
@@ -244,12 +254,15 @@ class Observer(Node):
         return next((kv.value for kv in status.values if kv.key == key), None)
 
     def merged(self) -> list[str]:
-        """Robots that have a frame in ``map``."""
-        return [r for r in self.robots if self.frames[r]]
+        """Robots that have a frame in ``map`` now (not withdrawn since)."""
+        return [r for r in self.robots if self.placement(r) is not None]
 
     def placement(self, robot: str) -> FloatArray | None:
-        """The newest ``T_map_robotmap`` of a robot, None while it has none."""
-        return pose_from_msg(self.frames[robot][-1].pose) if self.frames[robot] else None
+        """The newest ``T_map_robotmap`` of a robot, None while it has none or once the
+        merger withdrew it (its probability 0)."""
+        if not self.frames[robot] or self.probabilities.get(robot, 1.0) <= 0.0:
+            return None
+        return pose_from_msg(self.frames[robot][-1].pose)
 
     def partial_map(self, robot: str) -> FloatArray:
         """A robot's newest partial map, ``(N, 4)`` in its own map frame."""
