@@ -37,6 +37,7 @@ segments in its own frame). Each piece of each robot is a map of its own (a
 from __future__ import annotations
 
 import dataclasses
+import heapq
 import time
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
@@ -314,19 +315,29 @@ def _reference(
 
 
 def _chain_probabilities(ref_unit: UnitKey | None, accepted: Accepted) -> dict[UnitKey, float]:
-    """The probability that each map joined to the reference is placed right: the product of
-    the join probabilities along the tree from the reference (each join's evidence is its
-    own). A map below ``join_probability`` is not placed (nor what hangs from it)."""
+    """The probability that each map joined to the reference is placed right: the largest
+    product of join probabilities along a path of accepted joins from the reference (the
+    tree's, and those that close its cycles: each agrees with the tree, so every path puts
+    the map in the same place, and the map is right when every join of one path is; each
+    join's evidence is its own). A map below ``join_probability`` is not placed."""
     if ref_unit is None:
         return {}
-    chains = {ref_unit: 1.0}
-    queue = [ref_unit]
-    while queue:
-        key = queue.pop(0)
-        for other, verdict in accepted.tree[key]:
+    neighbours: dict[UnitKey, list[tuple[UnitKey, float]]] = {}
+    for verdict in accepted.pairs:
+        a, b = verdict.pair
+        neighbours.setdefault(a, []).append((b, verdict.probability))
+        neighbours.setdefault(b, []).append((a, verdict.probability))
+    # Dijkstra on -log P: the most probable path first.
+    chains: dict[UnitKey, float] = {}
+    frontier: list[tuple[float, UnitKey]] = [(-1.0, ref_unit)]
+    while frontier:
+        negative, key = heapq.heappop(frontier)
+        if key in chains:
+            continue
+        chains[key] = -negative
+        for other, probability in neighbours.get(key, []):
             if other not in chains:
-                chains[other] = chains[key] * verdict.probability
-                queue.append(other)
+                heapq.heappush(frontier, (negative * probability, other))
     return chains
 
 
