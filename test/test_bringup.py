@@ -14,6 +14,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.core.config import ConfigError, config_to_flat
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
@@ -127,6 +128,9 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) ->
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     command = [sys.executable, "-m", "multi_robot_mapper.cli.main", "run"]
     command += ["--robots", ",".join(robots), "--params-file", str(PARAMS)]
+    # The simulated office's right join gets P 0.95-0.97 from 20 s of driving: merged at
+    # test_merging's SIMULATED_WORLD_JOIN_PROBABILITY (-p reaches the merger).
+    command += ["-p", f"merge.join_probability:={SIMULATED_WORLD_JOIN_PROBABILITY}"]
     process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         with isolated_context() as context:
@@ -139,12 +143,10 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) ->
             try:
                 assert spin_until(executor, player.subscribed, 30.0), process.poll()
                 if stop == signal.SIGINT:
-                    # The office: two robots, 12 s each sharing 45 % of their stretches (as
-                    # the demo), every 4th scan (10 Hz), played live. With 8 s and 30 % the
-                    # maps held two agreeing places only once nearly every scan was in: scans
-                    # dropped under load left the robots unmerged in about 1 run in 3.
+                    # The office: two robots, 20 s each sharing 45 % of their stretches (as
+                    # the demo), every 4th scan (10 Hz), played live.
                     runs = simulate_robots(
-                        "office", 2, LaserModel(), seed=1, duration=12.0, overlap=0.45
+                        "office", 2, LaserModel(), seed=1, duration=20.0, overlap=0.45
                     )
                     scans = {
                         r: recording_of(r, run).scans[::4]

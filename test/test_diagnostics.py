@@ -100,6 +100,11 @@ def merger(**changes: object) -> MergerRobotHealth:
         ({"reference": True, "placement": (0.0, 0.0, 0.0)}, OK, "reference"),
         ({"placement": None, "link_value": None, "best_value": 9.0}, WARN, "best pair value 9.0"),
         ({"silent_for": 8.0}, STALE, "its map stays in the global map"),
+        (
+            {"silent_for": 8.0, "placement": None, "why_unmerged": "with robot1: P 0.97 < 0.99"},
+            STALE,
+            "silent for 8.0 s; unmerged: with robot1: P 0.97 < 0.99",
+        ),
         ({"silent_for": None, "segments": 0}, STALE, "nothing received"),
         ({"session_of": "robot2", "silent_for": 99.0}, OK, "earlier session"),
     ],

@@ -144,7 +144,12 @@ def merger_status(health: MergerRobotHealth) -> DiagnosticStatus:
             if health.silent_for is None
             else (f"silent for {health.silent_for:.1f} s")
         )
-        message = f"{silent}; its map stays in the global map" if health.segments else silent
+        if not health.segments:
+            message = silent
+        elif merged:
+            message = f"{silent}; its map stays in the global map"
+        else:  # not drawn: say why, as for a robot still talking
+            message = f"{silent}; unmerged: {health.why_unmerged or 'no valid link yet'}"
     elif health.reference:
         level, message = OK, "merged (reference: its map frame is the global map frame)"
     elif merged:
