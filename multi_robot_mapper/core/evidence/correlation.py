@@ -426,7 +426,7 @@ def score_parts(
     on_a = np.matmul(b.walls[None, :, :], T[:, :2, :2].transpose(0, 2, 1)) + T[:, None, :2, 2]
     flat = on_a.reshape(-1, 2)
     read = rasters_a.grid.bilinear(rasters_a.walls, flat)
-    matched = _turned_channel_sum(read.reshape(_CHANNELS, len(rows), -1), b, rows[:, 0]) * scale
+    matched = _matched_metres(read.reshape(_CHANNELS, len(rows), -1), b, rows[:, 0], scale)
     through = rasters_a.grid.nearest(rasters_a.free, flat).reshape(len(rows), -1) @ b.weight
     points_a, weight_a = (a.walls, a.weight) if walls_a is None else walls_a
     if len(points_a):
@@ -463,19 +463,24 @@ def weakest_direction(
     return np.asarray(vectors[:, 0])
 
 
-def _turned_channel_sum(read: FloatArray, b: Drawing, theta: FloatArray) -> FloatArray:
-    """(N,) sum over channels and points of ``read`` (C, N, P) times each point's channel
-    weight with b turned by ``theta`` (N,), times its metres. The weights 2/3 cos^2(phi +
-    theta - k pi/3) are 1/3 (1 + cos 2(phi - k pi/3) cos 2 theta - sin 2(phi - k pi/3) sin 2
-    theta): three sums per channel instead of a cosine per point and placement."""
+def _matched_metres(read: FloatArray, b: Drawing, theta: FloatArray, scale: float) -> FloatArray:
+    """(N,) metres of b's wall matched under each of N rotations ``theta``: each point's
+    channel reads ``read`` (C, N, P) weighted by 2/3 cos^2 of its direction turned by theta
+    against the channel's (1/3 (1 + cos 2(phi + theta - k pi/3))), times ``scale``, at most
+    one metre per metre of wall. Where a's walls are drawn twice
+    (two parallel walls within the blur, a map that holds a wall twice) a point reads more than
+    one: uncapped, a patch matched more metres than it has (generated building 180: 90 m of
+    a 49 m patch, placed 11 m off at P 0.992)."""
     k = np.arange(_CHANNELS)[:, None] * (np.pi / _CHANNELS)
     double = 2.0 * (b.direction[None, :] - k)  # (C, P)
-    weighted = read * b.weight[None, None, :]  # (C, N, P)
-    plain = weighted.sum(axis=2)  # (C, N)
-    cosine = np.einsum("cnp,cp->cn", weighted, np.cos(double))
-    sine = np.einsum("cnp,cp->cn", weighted, np.sin(double))
-    c, s = np.cos(2.0 * theta), np.sin(2.0 * theta)
-    return np.asarray((plain + cosine * c[None, :] - sine * s[None, :]).sum(axis=0) / _CHANNELS)
+    c, s = np.cos(2.0 * theta), np.sin(2.0 * theta)  # (N,)
+    weights = (
+        1.0
+        + np.cos(double)[:, None, :] * c[None, :, None]
+        - np.sin(double)[:, None, :] * s[None, :, None]
+    )  # (C, N, P): 3/2 cos^2 of each point's direction against each channel's, turned
+    per_metre = (read * weights).sum(axis=0) * (scale / _CHANNELS)  # (N, P)
+    return np.asarray(np.clip(per_metre, 0.0, 1.0) @ b.weight)
 
 
 def placement_scores(
