@@ -20,7 +20,12 @@ from test_merging import random_frames
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig, Drawing
-from multi_robot_mapper.core.evidence.model import FEATURES, JoinModel, installed_model
+from multi_robot_mapper.core.evidence.model import (
+    FEATURES,
+    JoinModel,
+    installed_model,
+    join_features,
+)
 from multi_robot_mapper.core.evidence.placement import placement_evidence
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult
 from multi_robot_mapper.core.merging.joint import merge_joint
@@ -121,6 +126,39 @@ def test_one_door_that_tells_the_ends_apart_is_enough_to_merge(seed: int) -> Non
             assert placement_error(result, frames, robot) < 0.10
     if not result.unmerged:
         assert min(result.probabilities.values()) >= CONFIG.join_probability
+
+
+def test_a_corridor_slid_by_one_room_is_a_rival_the_margin_sees() -> None:
+    # The corridor's rooms repeat every ROOM metres: a stretch of it from the middle, slid by
+    # one room along the corridor, puts every wall on a wall. The correlation's peaks along a
+    # corridor form a ridge; the slide along the weakest direction finds the rival.
+    walls = corridor_of_rooms()
+    drawing = Drawing.of(walls, np.zeros((0, 2)), 0.3)
+    middle = walls[(walls[:, [0, 2]].min(axis=1) >= 15.0) & (walls[:, [0, 2]].max(axis=1) <= 25.0)]
+    middle = middle[np.abs(middle[:, 1] - middle[:, 3]) < 1e-9]  # its walls along the corridor
+    patch = Drawing.of(middle, np.zeros((0, 2)), 0.3)
+    evidence = placement_evidence(drawing, patch, np.eye(3), CorrelationConfig(cell=0.3))
+    assert evidence.rival_placement is not None
+    shift = float(np.hypot(*evidence.rival_placement[1:]))
+    assert abs(float(evidence.rival_placement[0])) < np.radians(2.0)
+    assert shift > 1.0 and abs(shift / ROOM - round(shift / ROOM)) < 0.1, evidence.rival_placement
+    assert evidence.margin < 0.1 * evidence.score
+    assert installed_model().probability(join_features([evidence])) < 0.5
+
+
+def test_a_wall_drawn_twice_is_matched_once() -> None:
+    # A target that holds its walls twice reads two metres per metre: a patch matches at
+    # most the metres of wall it has.
+    walls = corridor_of_rooms(rooms=3)
+    once = Drawing.of(walls, np.zeros((0, 2)), 0.3)
+    beside = walls + np.array([0.05, 0.0, 0.05, 0.0])
+    twice = Drawing.of(np.vstack((walls, beside)), np.zeros((0, 2)), 0.3)
+    config = CorrelationConfig(cell=0.3)
+    single = placement_evidence(once, once, np.eye(3), config)
+    double = placement_evidence(twice, once, np.eye(3), config)
+    assert single.score <= once.weight.sum() + 1e-6
+    assert double.matched <= once.weight.sum() + 1e-6
+    assert double.matched == pytest.approx(single.matched, rel=0.05)
 
 
 def test_equal_rooms_seen_one_each_are_not_merged() -> None:
