@@ -31,9 +31,12 @@ def _scene() -> tuple[list[str], dict, list, dict]:
     return names, units, order, poses
 
 
+CACHE = global_map.FusionCache()
+
+
 def _fresh(names, units, order, poses):  # type: ignore[no-untyped-def]
-    global_map._LAST_FUSION = None
-    return fuse_keyframes(names, units, order, poses, CONFIG)
+    CACHE.last = None
+    return fuse_keyframes(names, units, order, poses, CONFIG, CACHE)
 
 
 def test_keyframes_fused_at_their_poses_cover_the_corridor_once() -> None:
@@ -49,11 +52,11 @@ def test_keyframes_fused_at_their_poses_cover_the_corridor_once() -> None:
 def test_an_update_reuses_the_fusion_of_unchanged_maps_and_fuses_the_rest_again() -> None:
     names, units, order, poses = _scene()
     first = _fresh(names, units, order, poses)
-    cached = global_map._LAST_FUSION
+    cached = CACHE.last
     assert cached is not None
     # The same maps, keyframes moved by far less than a millimetre: the result is reused.
     nudged = {k: v + np.array([1e-5, -1e-5, 1e-6]) for k, v in poses.items()}
-    again = fuse_keyframes(names, units, order, nudged, CONFIG)
+    again = fuse_keyframes(names, units, order, nudged, CONFIG, CACHE)
     assert again[0] is cached[2][-1].segments
     for got, want in zip(again, first, strict=True):
         np.testing.assert_array_equal(got, want)
@@ -61,25 +64,25 @@ def test_an_update_reuses_the_fusion_of_unchanged_maps_and_fuses_the_rest_again(
     # and the result is what a fusion from nothing gives.
     moved = dict(poses)
     moved[order[-1]] = poses[order[-1]] + np.array([0.05, 0.0, 0.0])
-    update = fuse_keyframes(names, units, order, moved, CONFIG)
-    assert global_map._LAST_FUSION is not None
-    assert global_map._LAST_FUSION[2][1] is cached[2][1]
-    assert global_map._LAST_FUSION[2][2] is not cached[2][2]
+    update = fuse_keyframes(names, units, order, moved, CONFIG, CACHE)
+    assert CACHE.last is not None
+    assert CACHE.last[2][1] is cached[2][1]
+    assert CACHE.last[2][2] is not cached[2][2]
     for got, want in zip(update, _fresh(names, units, order, moved), strict=True):
         np.testing.assert_allclose(got, want)
     # A keyframe turned by 3 mrad barely moves, but its walls 1.1 m away move by 3.4 mm:
     # within a quarter of fusion_tolerance (12.5 mm), reused. Turned by 20 mrad they move
     # 22 mm: that map is fused again.
     for turn, reused in ((0.003, True), (0.02, False)):
-        fuse_keyframes(names, units, order, moved, CONFIG)
-        kept = global_map._LAST_FUSION
+        fuse_keyframes(names, units, order, moved, CONFIG, CACHE)
+        kept = CACHE.last
         turned = dict(moved)
         turned[order[-1]] = moved[order[-1]] + np.array([0.0, 0.0, turn])
-        fuse_keyframes(names, units, order, turned, CONFIG)
-        assert (global_map._LAST_FUSION[2][2] is kept[2][2]) is reused  # type: ignore[index]
+        fuse_keyframes(names, units, order, turned, CONFIG, CACHE)
+        assert (CACHE.last[2][2] is kept[2][2]) is reused  # type: ignore[index]
     # Another config, or another set of robots: nothing is reused.
-    fuse_keyframes(names, units, order, moved, CONFIG)
-    kept = global_map._LAST_FUSION
-    other = fuse_keyframes(names, units, order, moved, MergeConfig(fusion_tolerance=0.04))
-    assert global_map._LAST_FUSION[2][0] is not kept[2][0]  # type: ignore[index]
+    fuse_keyframes(names, units, order, moved, CONFIG, CACHE)
+    kept = CACHE.last
+    other = fuse_keyframes(names, units, order, moved, MergeConfig(fusion_tolerance=0.04), CACHE)
+    assert CACHE.last[2][0] is not kept[2][0]  # type: ignore[index]
     assert len(other[0]) > 0

@@ -18,15 +18,19 @@ class WorkerDiedError(RuntimeError):
 
 
 def _serve(jobs: Connection) -> None:
-    """The worker's loop: a job ``(function, args)`` in, ``(True, result)`` or
-    ``(False, exception)`` out, until the pipe closes."""
+    """The worker's loop: a job ``(function, args, with_state)`` in, ``(True, result)`` or
+    ``(False, exception)`` out, until the pipe closes. ``with_state``: the function gets the
+    worker's own state first (a dict it may keep things in between jobs, e.g. the back end
+    it hosts), a local of this loop, not a module global."""
+    state: dict[str, Any] = {}
     while True:
         try:
-            function, args = jobs.recv()
+            function, args, with_state = jobs.recv()
         except (EOFError, OSError, KeyboardInterrupt):
             return
         try:
-            answer: tuple[bool, Any] = (True, function(*args))
+            result = function(state, *args) if with_state else function(*args)
+            answer: tuple[bool, Any] = (True, result)
         except Exception as exc:  # the caller re-raises it
             answer = (False, exc)
         try:
@@ -53,10 +57,18 @@ class WorkerProcess:
     def run(self, function: Callable[..., R], *args: object) -> R:
         """``function(*args)`` in the worker; this thread waits without holding the lock.
         Raises what the function raised, or :class:`WorkerDiedError`."""
+        return self._call(function, args, False)
+
+    def run_with_state(self, function: Callable[..., R], *args: object) -> R:
+        """``function(state, *args)`` in the worker, ``state`` the worker's own dict, kept
+        between jobs (empty in a new worker); as :meth:`run` otherwise."""
+        return self._call(function, args, True)
+
+    def _call(self, function: Callable[..., R], args: tuple[object, ...], with_state: bool) -> R:
         with self._lock:
             pipe = self._started()
             try:
-                pipe.send((function, args))
+                pipe.send((function, args, with_state))
                 ok, value = pipe.recv()
             except (EOFError, OSError) as exc:
                 self._stop()  # a new one next time

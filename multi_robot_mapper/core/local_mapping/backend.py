@@ -44,6 +44,10 @@ class Runner(Protocol):
 
     def run(self, function: Any, *args: object) -> Any: ...
 
+    def run_with_state(self, function: Any, *args: object) -> Any:
+        """``function(state, *args)``, ``state`` a dict the worker keeps between calls."""
+        ...
+
     def shutdown(self) -> None: ...
 
 
@@ -78,22 +82,22 @@ class NotHostedError(RuntimeError):
     """The worker process hosts no back end yet (a new one, or one that replaced a dead one)."""
 
 
-# The back end this worker process hosts (one per process; None in the node's own process).
-_hosted: Backend | None = None
+# The key of the back end a worker process hosts in its state (None in the node's process).
+_HOSTED = "backend"
 
 
-def _hosted_backend() -> Backend:
-    if _hosted is None:
+def _hosted_backend(state: dict[str, Any]) -> Backend:
+    backend = state.get(_HOSTED)
+    if backend is None:
         raise NotHostedError("this worker process hosts no back end")
-    return _hosted
+    return cast(Backend, backend)
 
 
-def _host(config: LocalMapperConfig, jobs: list[KeyframeJob]) -> Changes:
+def _host(state: dict[str, Any], config: LocalMapperConfig, jobs: list[KeyframeJob]) -> Changes:
     """In the worker: a new back end, given ``jobs`` in order; their updates summed into one
     (a keyframe that fails, a bug, is skipped with its traceback, as on a thread), and every
     keyframe rebuilt."""
-    global _hosted
-    _hosted = backend = Backend(config)
+    state[_HOSTED] = backend = Backend(config)
     updates, errors = [], []
     for job in jobs:
         try:
@@ -106,15 +110,17 @@ def _host(config: LocalMapperConfig, jobs: list[KeyframeJob]) -> Changes:
     return summed, backend.map.keyframes()
 
 
-def _hosted_add_keyframe(config: LocalMapperConfig, job: KeyframeJob) -> Changes:
-    backend = _hosted_backend()
+def _hosted_add_keyframe(
+    state: dict[str, Any], config: LocalMapperConfig, job: KeyframeJob
+) -> Changes:
+    backend = _hosted_backend(state)
     if config != backend.config:
         backend.reconfigure(config)
     return backend.add_keyframe(job)
 
 
-def _hosted_closures() -> list[Closure]:
-    return _hosted_backend().closures
+def _hosted_closures(state: dict[str, Any]) -> list[Closure]:
+    return _hosted_backend(state).closures
 
 
 def _summed(updates: list[BackendUpdate]) -> BackendUpdate:
@@ -147,10 +153,10 @@ class HostedBackend:
         """As :meth:`Backend.add_keyframe`. A new worker is given every keyframe so far."""
         self._given.append(job)
         try:
-            return cast(Changes, self.runner.run(_hosted_add_keyframe, self.config, job))
+            return cast(Changes, self.runner.run_with_state(_hosted_add_keyframe, self.config, job))
         except NotHostedError:
             self.hosted += 1
-            return cast(Changes, self.runner.run(_host, self.config, list(self._given)))
+            return cast(Changes, self.runner.run_with_state(_host, self.config, list(self._given)))
 
     def reconfigure(self, config: LocalMapperConfig) -> None:
         """New settings, sent with the next keyframe (this never waits for the worker)."""
@@ -160,7 +166,7 @@ class HostedBackend:
     def closures(self) -> list[Closure]:
         """The worker's closures (waits for the keyframe it is on)."""
         try:
-            return cast(list[Closure], self.runner.run(_hosted_closures))
+            return cast(list[Closure], self.runner.run_with_state(_hosted_closures))
         except NotHostedError:
             return []
 

@@ -42,9 +42,16 @@ class _Fused:
     owner: IntArray
 
 
-# The last global map's fusion, map by map: (robots, config, prefix states). An update fuses
-# again only from the first map in the placing order that changed or moved (module doc).
-_LAST_FUSION: tuple[tuple[str, ...], MergeConfig, tuple[_Fused, ...]] | None = None
+@dataclasses.dataclass
+class FusionCache:
+    """The last global map's fusion, map by map: (robots, config, prefix states). An update
+    fuses again only from the first map in the placing order that changed or moved (module
+    doc). It travels with the merge's state (``JointState.fusion``): two mergers in one
+    process share nothing."""
+
+    last: tuple[tuple[str, ...], MergeConfig, tuple[_Fused, ...]] | None = None
+
+
 # A keyframe whose walls moved less than this share of fusion_tolerance since the last
 # fusion is not fused again (module doc).
 _STILL_SHARE = 0.25
@@ -56,13 +63,14 @@ def fuse_keyframes(
     order: Sequence[UnitKey],
     poses: Mapping[UnitKey, FloatArray],
     config: MergeConfig,
+    cache: FusionCache | None = None,
 ) -> tuple[FloatArray, IntArray, IntArray]:
     """Every merged keyframe's segments at its optimised pose, fused map by map in placing
-    order; each fused segment's robot (index into ``robots``) and owning keyframe. The
-    fusion of the maps before the first one that changed (content, or a keyframe whose walls
-    moved by more than a quarter of ``fusion_tolerance``) is the previous update's."""
-    global _LAST_FUSION
-    last = _LAST_FUSION
+    order; each fused segment's robot (index into ``robots``) and owning keyframe. With
+    ``cache``, the fusion of the maps before the first one that changed (content, or a
+    keyframe whose walls moved by more than a quarter of ``fusion_tolerance``) is the
+    previous update's, and this one's is left in it."""
+    last = None if cache is None else cache.last
     previous = last[2] if last is not None and last[:2] == (tuple(robots), config) else ()
     segments = np.zeros((0, 4))
     owner = np.zeros(0, dtype=np.int64)
@@ -93,7 +101,8 @@ def fuse_keyframes(
             moved = se2.transform_segments_each(placed[unit.owner], stacked)
             segments, owner = fuse_maps(segments, owner, moved, ids.astype(np.int64), config)
         states.append(_Fused(key, content, placed, segments, owner))
-    _LAST_FUSION = (tuple(robots), config, tuple(states))
+    if cache is not None:
+        cache.last = (tuple(robots), config, tuple(states))
     table = np.array(base, dtype=np.int64).reshape(-1, 2)
     if len(owner) == 0:
         return segments.reshape(-1, 4), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)

@@ -60,7 +60,7 @@ from multi_robot_mapper.core.merging.consistency import (
     seen_through_near,
 )
 from multi_robot_mapper.core.merging.free_space import MapViews
-from multi_robot_mapper.core.merging.global_map import fuse_keyframes
+from multi_robot_mapper.core.merging.global_map import FusionCache, fuse_keyframes
 from multi_robot_mapper.core.merging.joint_graph import Solution, solved
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.motion import robot_reaches
@@ -108,6 +108,8 @@ class JointState:
     # Each map's intra-map edges and each set's walls in free space, per content.
     intra: OrderedDict[Any, Any] = dataclasses.field(default_factory=OrderedDict)
     seen: OrderedDict[Any, tuple[float, float]] = dataclasses.field(default_factory=OrderedDict)
+    # The global map's fusion, map by map (global_map.fuse_keyframes).
+    fusion: FusionCache = dataclasses.field(default_factory=FusionCache)
 
 
 def merge_joint(
@@ -145,6 +147,7 @@ def merge_joint(
     new_state = JointState(matches)
     if state is not None:
         new_state.intra, new_state.seen = state.intra, state.seen
+        new_state.fusion = state.fusion
     verdicts = _verdicts(units, matches, config, model, state, new_state)
     accepted = accept_pairs(
         list(verdicts.values()),
@@ -177,7 +180,9 @@ def merge_joint(
     )
     solution = new_state.solution[1]
     optimised = time.perf_counter()
-    result = _result(robots, units, accepted, verdicts, solution, ref_unit, chains, config)
+    result = _result(
+        robots, units, accepted, verdicts, solution, ref_unit, chains, config, new_state.fusion
+    )
     finished = time.perf_counter()
     contents = {key: content_digest(unit) for key, unit in units.items()}
     rest = finished - matched
@@ -353,6 +358,7 @@ def _result(
     ref_unit: UnitKey | None,
     chains: Mapping[UnitKey, float],
     config: MergeConfig,
+    fusion: FusionCache,
 ) -> MergeResult:
     """The merge as a :class:`MergeResult`: frames, keyframe poses, links, global map, and
     each robot's probability of being placed right or why it is not placed."""
@@ -371,7 +377,7 @@ def _result(
         order = np.argsort(index, kind="stable")
         keyframe_index[robot], keyframe_poses[robot] = index[order], poses[order]
     segments, owner_robot, owner_keyframe = fuse_keyframes(
-        robots, units, solved.order, solved.poses, config
+        robots, units, solved.order, solved.poses, config, fusion
     )
     links = _robot_links(accepted, solved, units)
     pairs = _robot_pairs(verdicts, units)
