@@ -128,7 +128,7 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) ->
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     command = [sys.executable, "-m", "multi_robot_mapper.cli.main", "run"]
     command += ["--robots", ",".join(robots), "--params-file", str(PARAMS)]
-    # The simulated office's right join gets P 0.95-0.97 from 20 s of driving: merged at
+    # The simulated office's right join gets P 0.95-0.99 from 30 s of driving: merged at
     # test_merging's SIMULATED_WORLD_JOIN_PROBABILITY (-p reaches the merger).
     command += ["-p", f"merge.join_probability:={SIMULATED_WORLD_JOIN_PROBABILITY}"]
     process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
@@ -143,10 +143,10 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) ->
             try:
                 assert spin_until(executor, player.subscribed, 30.0), process.poll()
                 if stop == signal.SIGINT:
-                    # The office: two robots, 20 s each sharing 45 % of their stretches (as
+                    # The office: two robots, 30 s each sharing 45 % of their stretches (as
                     # the demo), every 4th scan (10 Hz), played live.
                     runs = simulate_robots(
-                        "office", 2, LaserModel(), seed=1, duration=20.0, overlap=0.45
+                        "office", 2, LaserModel(), seed=1, duration=30.0, overlap=0.45
                     )
                     scans = {
                         r: recording_of(r, run).scans[::4]
@@ -163,7 +163,7 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) ->
                             and bool(observer.global_maps)
                             and len(observer.global_maps[-1].segments) == 2
                         ),
-                        60.0,
+                        90.0,
                     ), (observer.merged(), player.stats.published)
                     assert spin_until(executor, lambda: observer.grid is not None, 10.0)
             finally:
