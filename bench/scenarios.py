@@ -284,26 +284,32 @@ def generated_scenario(seed: int, own: bool = False) -> Scenario:
 
 def keyframe_rows(poses: FloatArray) -> list[int]:
     """Rows of the drive that become keyframes: the first, then each scan 0.5 m or 0.35 rad
-    from the last keyframe."""
-    rows = [0]
-    for row in range(1, len(poses)):
+    from the last keyframe. Only rows with a true pose (a dense bag's scans between its
+    reference poses have NaN) can be keyframes of a truth map."""
+    posed = np.flatnonzero(np.isfinite(poses).all(axis=1))
+    if len(posed) == 0:
+        return []
+    rows = [int(posed[0])]
+    for row in posed[1:]:
         last = poses[rows[-1]]
         moved = math.hypot(*(poses[row, :2] - last[:2]))
         if moved >= KEYFRAME_DISTANCE or abs(float(se2.wrap_angle(poses[row, 2] - last[2]))) >= (
             KEYFRAME_TURN
         ):
-            rows.append(row)
+            rows.append(int(row))
     return rows
 
 
 def truth_snapshots(drive: Drive, times: Sequence[float]) -> list[list[Keyframe]]:
     """The robot's truth map (module doc) as it stood at each of ``times`` (seconds from its
     first scan): its keyframes, poses in its own frame, segments in each keyframe's."""
-    T_robot_world = se2.invert(se2.matrix_from_pose(*drive.T_world_laser[0]))
-    world = np.zeros((0, 4))
-    owner = np.zeros(0, dtype=np.int64)
     config, extraction = IntegrateConfig(), ExtractionConfig()
     rows = keyframe_rows(drive.T_world_laser)
+    if not rows:  # no scan of this run has a true pose: no truth map
+        return [[] for _ in times]
+    T_robot_world = se2.invert(se2.matrix_from_pose(*drive.T_world_laser[rows[0]]))
+    world = np.zeros((0, 4))
+    owner = np.zeros(0, dtype=np.int64)
     elapsed = drive.stamps[rows] - drive.stamps[0]
     snapshots: list[list[Keyframe]] = []
     done = 0
