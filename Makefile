@@ -43,10 +43,10 @@ demo: $(STAMP)
 	$(BIN)/mrm demo --out demo_output
 
 bench: $(STAMP)
-	$(BIN)/python bench/frontend_throughput.py
-	$(BIN)/python bench/pair_test.py --limit 200
-	$(BIN)/python bench/merge_speed.py
-	$(BIN)/python bench/live_rate.py --seconds 20
+	$(BIN)/python -m bench.frontend_throughput
+	$(BIN)/python -m bench.pair_test --limit 200
+	$(BIN)/python -m bench.merge_speed
+	$(BIN)/python -m bench.live_rate --seconds 20
 
 # Rewrite config/*.yaml and docs/parameters.md from the documented dataclass defaults.
 config: $(STAMP)

@@ -10,8 +10,11 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "bench"]),
-    # Fitted models are data the code loads (core/evidence/join_model.json).
-    package_data={PACKAGE: ["core/evidence/*.json"]},
+    # Fitted models are data the code loads (core/evidence/join_model.json,
+    # core/matching/confidence_model.json, core/local_mapping/context_model.json).
+    package_data={
+        PACKAGE: ["core/evidence/*.json", "core/matching/*.json", "core/local_mapping/*.json"]
+    },
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -6,9 +6,10 @@ FLASER convention is one beam per degree from -90 deg (last beam at +89 deg). Th
 their reference poses (``NAME.truth.csv``) agree best under the geometry the poses were made
 with: for pairs of scans that turned at least ``--min-turn`` degrees within 1.5 m of each other,
 every point of the second scan is compared with the line through its nearest neighbours in the
-first (``bench/carmen_geometry.py``'s measure), for each candidate geometry.
+first (``bench/carmen_geometry.py``'s measure, :func:`bench.harness.point_to_line_rms`), for each
+candidate geometry.
 
-    .venv/bin/python bench/bag_geometry.py [--bag intel] [--min-turn 20]
+    .venv/bin/python -m bench.bag_geometry [--bag intel] [--min-turn 20]
 
 Candidates: the bag's, CARMEN's, CARMEN's step centred on the axis (-89.5 .. +89.5 deg at 180
 beams), and CARMEN's with its step scaled by 0.994-1.009 or its first beam moved by up to 0.25
@@ -23,21 +24,11 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
-from carmen_geometry import point_to_line_rms, scan_pairs
 
+from bench.harness import BAGS, point_to_line_rms, scan_pairs
 from multi_robot_mapper.io.bags import read_recordings
 from multi_robot_mapper.io.carmen import beam_geometry
 from multi_robot_mapper.io.recordings import attach_truth, read_truth_csv
-
-# ../shared/data/bags beside the clone (or beside the folder of worktrees holding it).
-BAGS = next(
-    (
-        folder / "shared" / "data" / "bags"
-        for folder in Path(__file__).resolve().parents[2:4]
-        if (folder / "shared" / "data" / "bags").is_dir()
-    ),
-    Path(__file__).resolve().parents[2] / "shared" / "data" / "bags",
-)
 
 
 def posed_scans(bag: Path, truth: Path) -> tuple[list[SimpleNamespace], float, float]:

@@ -2,7 +2,7 @@
 the trajectory estimates between consecutive reference-posed scans (10-20 scans apart) against
 the reference poses' own, from the poses ``bench/bag_replay.py --out DIR`` saved.
 
-    .venv/bin/python bench/bag_local_error.py DIR [DIR ...]
+    .venv/bin/python -m bench.bag_local_error DIR [DIR ...]
 
 Per saved run (``NAME_GEOMETRY.npz``): the median and the mean (below 0.3 m / 5 deg) of the
 translational and rotational errors of those motions, and every pair off by more than 0.3 m or
@@ -16,8 +16,8 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from bag_geometry import BAGS
 
+from bench.harness import BAGS
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.io.recordings import read_truth_csv
 

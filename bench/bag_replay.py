@@ -2,7 +2,7 @@
 on one core: scans per second, and, where a bag allows it, the trajectory's error against its
 reference poses (ATE after a rigid fit) and on the benchmark's relations.
 
-    taskset -c 1 nice -n 10 .venv/bin/python bench/bag_replay.py [--bags intel aces ...]
+    taskset -c 1 nice -n 10 .venv/bin/python -m bench.bag_replay [--bags intel aces ...]
         [--scans N] [--beam-geometry carmen] [--json FILE]
 
 Timing covers what ``mrm replay`` runs between reading the bag and writing the result (front
@@ -41,8 +41,8 @@ from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
-from bag_geometry import BAGS  # noqa: E402
 
+from bench.harness import BAGS  # noqa: E402
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig  # noqa: E402
 from multi_robot_mapper.core.pipeline import TimedLaserScan, run_offline  # noqa: E402
 from multi_robot_mapper.evaluation.metrics import align_se2  # noqa: E402

@@ -8,7 +8,7 @@ first heading. Titles give the kind, size, symmetry, overlap level and the groun
 really share (:func:`shared_ground`: each robot's share of its route within 0.5 m of
 another's, the mean over robots of the largest share).
 
-    .venv/bin/python bench/building_gallery.py [--out docs/figures/generated_buildings.png]
+    .venv/bin/python -m bench.building_gallery [--out docs/figures/generated_buildings.png]
 """
 
 from __future__ import annotations

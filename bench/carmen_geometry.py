@@ -8,7 +8,7 @@ geometry with the smallest point-to-line RMS is the one the poses were made with
 reference poses' own noise (a few centimetres) dominates the RMS, so differences are small;
 what counts is where the minimum lies.
 
-    .venv/bin/python bench/carmen_geometry.py [--log freiburg-079] [--min-range 4]
+    .venv/bin/python -m bench.carmen_geometry [--log freiburg-079] [--min-range 4]
 
 Default sweep: first angle -90 deg +- 0.1 deg, step 0.998-1.002 times CARMEN's (1 deg for
 180/181 beams, 0.5 deg for 360/361), and 180 deg / (n - 1) (a step spreading n beams over
@@ -19,59 +19,11 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from bench.harness import point_to_line_rms, require_log, scan_pairs
 from multi_robot_mapper.io.carmen import beam_geometry, read_carmen
-
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
-
-
-def scan_pairs(poses: np.ndarray, min_turn_deg: float, max_gap: int, limit: int) -> list:
-    """For each scan the first later scan (within ``max_gap``) turned enough and close by."""
-    pairs = []
-    for i in range(len(poses)):
-        for j in range(i + 1, min(len(poses), i + max_gap + 1)):
-            turn = abs((poses[i, 2] - poses[j, 2] + math.pi) % (2 * math.pi) - math.pi)
-            if (
-                math.degrees(turn) >= min_turn_deg
-                and np.hypot(*(poses[i, :2] - poses[j, :2])) < 1.5
-            ):
-                pairs.append((i, j))
-                break
-    return pairs[:: max(1, len(pairs) // limit)]
-
-
-def world_points(ranges, pose, first, step, near, far) -> np.ndarray:
-    angles = first + step * np.arange(ranges.size)
-    keep = (ranges > near) & (ranges < far)
-    x, y, theta = pose
-    local_x, local_y = ranges[keep] * np.cos(angles[keep]), ranges[keep] * np.sin(angles[keep])
-    c, s = math.cos(theta), math.sin(theta)
-    return np.c_[x + c * local_x - s * local_y, y + s * local_x + c * local_y]
-
-
-def point_to_line_rms(scans, pairs, first, step, near, far) -> tuple[float, int]:
-    errors = []
-    for i, j in pairs:
-        a = world_points(scans[i].ranges, scans[i].reference_pose, first, step, near, far)
-        b = world_points(scans[j].ranges, scans[j].reference_pose, first, step, near, far)
-        if len(a) < 20 or len(b) < 20:
-            continue
-        tree = cKDTree(a)
-        distance, nearest = tree.query(b, distance_upper_bound=0.3)
-        found = np.isfinite(distance)
-        _, neighbours = tree.query(a[nearest[found]], k=5)
-        centred = a[neighbours] - a[neighbours].mean(axis=1, keepdims=True)
-        eigenvalues, eigenvectors = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))
-        straight = eigenvalues[:, 0] < 0.05 * eigenvalues[:, 1]  # neighbours on a line
-        normal = eigenvectors[:, :, 0]
-        offset = np.abs(np.einsum("ni,ni->n", b[found] - a[nearest[found]], normal))[straight]
-        errors.append(offset[offset < 0.1])
-    e = np.concatenate(errors)
-    return float(np.sqrt(np.mean(e**2))), e.size
 
 
 def main() -> None:
@@ -83,7 +35,7 @@ def main() -> None:
     parser.add_argument("--min-range", type=float, default=0.05, help="m")
     parser.add_argument("--max-range", type=float, default=15.0, help="m")
     args = parser.parse_args()
-    log = read_carmen(DATA / f"{args.log}.log.gz")
+    log = read_carmen(require_log(args.log, "carmen_geometry"))
     beams = {s.ranges.size for s in log}
     if len(beams) != 1:
         raise SystemExit(f"{args.log} mixes beam counts {sorted(beams)}")

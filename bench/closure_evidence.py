@@ -16,7 +16,7 @@ wrong only because the reference is wrong at one of its scans is told apart, as 
   it moved from the windows' placement, also in Mahalanobis units of the edge's information
   (a chi-square with 3 degrees of freedom: 16.3 at 99.9 %).
 
-    .venv/bin/python bench/closure_evidence.py [--logs intel aces fhw csail edmonton]
+    .venv/bin/python -m bench.closure_evidence [--logs intel aces fhw csail edmonton]
         [--robots 4 2] [--jobs 2] [--set NAME=VALUE ...]
 
 Prints every closure that is wrong by the reference with its evidence, then for each rule
@@ -33,9 +33,9 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
-from reference_check import ReferenceJudge  # noqa: E402
-from unposed_pieces import judge_every_run, map_run  # noqa: E402
 
+from bench.harness import judge_every_run, map_run  # noqa: E402
+from bench.reference_check import ReferenceJudge  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.local_mapping.attempts import pose_of_match  # noqa: E402
 from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan  # noqa: E402

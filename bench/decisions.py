@@ -2,12 +2,12 @@
 wrong, how many overlapping robots it merges, how soon, and how often local mapping accepts
 a wrong closure or join -- over many scenarios, live and at the end.
 
-    .venv/bin/python bench/decisions.py collect --source generated --first 0 --count 200
+    .venv/bin/python -m bench.decisions collect --source generated --first 0 --count 200
         [--maps truth own] [--updates 8] [--jobs 2] [--work bench_output/decisions]
-    .venv/bin/python bench/decisions.py collect --source carmen --logs intel aces ...
+    .venv/bin/python -m bench.decisions collect --source carmen --logs intel aces ...
         --robots 2 4 8 [--maps truth own]
-    .venv/bin/python bench/decisions.py judge [--work ...] [--set NAME=VALUE ...]
-    .venv/bin/python bench/decisions.py table [--work ...]
+    .venv/bin/python -m bench.decisions judge [--work ...] [--set NAME=VALUE ...]
+    .venv/bin/python -m bench.decisions table [--work ...]
 
 ``collect`` builds each scenario (``bench/scenarios.py``), its robots' partial maps as they
 grow (truth maps and/or own maps), and runs the merger as the node does (``merge_joint``,
@@ -50,7 +50,6 @@ import dataclasses  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import pickle  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
 from concurrent.futures.process import BrokenProcessPool  # noqa: E402
@@ -59,9 +58,8 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from scenarios import (  # noqa: E402
+from bench.harness import OUTPUT, RIGHT_ANGLE, RIGHT_DISTANCE  # noqa: E402
+from bench.scenarios import (  # noqa: E402
     DENSE_BAGS,
     Scenario,
     TruthTable,
@@ -74,7 +72,6 @@ from scenarios import (  # noqa: E402
     world_scenario,
     world_walls,
 )
-
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.local_mapping import Keyframe  # noqa: E402
@@ -82,10 +79,6 @@ from multi_robot_mapper.core.merging import MergeConfig, MergeResult  # noqa: E4
 from multi_robot_mapper.core.merging.consistency import PairVerdict, oriented, placement  # noqa: E402
 from multi_robot_mapper.core.merging.joint import JointState, merge_joint  # noqa: E402
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey, units_of  # noqa: E402
-
-RIGHT_DISTANCE = 0.30  # m
-RIGHT_ANGLE = math.radians(5.0)
-
 
 # --- judging --------------------------------------------------------------------------------
 
@@ -400,7 +393,7 @@ def scenario_of(name: str) -> Scenario | None:
     ``carmen:LOG:K``, ``bag:BAG:K``."""
     kind, *rest = name.split(":")
     if kind in ("generated", "generated_own"):
-        from scenarios import generated_scenario
+        from bench.scenarios import generated_scenario
 
         return generated_scenario(int(rest[0]), own=kind == "generated_own")
     if kind == "world":
@@ -624,14 +617,14 @@ def main() -> None:
     collect.add_argument("--maps", nargs="*", choices=("truth", "own"), default=["truth"])
     collect.add_argument("--updates", type=int, default=8, help="merger updates per scenario")
     collect.add_argument("--jobs", type=int, default=1)
-    collect.add_argument("--work", default="bench_output/decisions")
+    collect.add_argument("--work", default=str(OUTPUT / "decisions"))
     judge = sub.add_parser("judge")
-    judge.add_argument("--work", default="bench_output/decisions")
+    judge.add_argument("--work", default=str(OUTPUT / "decisions"))
     judge.add_argument("--jobs", type=int, default=1)
     judge.add_argument("--only", default="", help="stems containing this")
     judge.add_argument("--set", dest="overrides", action="append", default=[])
     table = sub.add_parser("table")
-    table.add_argument("--work", default="bench_output/decisions")
+    table.add_argument("--work", default=str(OUTPUT / "decisions"))
     args = parser.parse_args()
     if args.command == "table":
         print_table(args.work)

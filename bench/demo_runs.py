@@ -1,7 +1,7 @@
 """``make demo`` run again and again (issue 46): does any frame of ``joining.gif`` (or of
 ``joining.png``) show a robot placed wrong?
 
-    .venv/bin/python bench/demo_runs.py [--runs 20] [--out bench_output/demo_runs]
+    .venv/bin/python -m bench.demo_runs [--runs 20] [--out bench_output/demo_runs]
 
 Each run is the demo itself (``cli.demo.run_demo``: three simulated robots mapped and merged
 live by the real nodes, over DDS), in its own folder. Every global map the demo drew --
@@ -17,25 +17,22 @@ frames with a robot placed wrong, the worst share) and the totals.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from multi_robot_mapper.cli.demo import (  # noqa: E402
+from bench.harness import OUTPUT
+from multi_robot_mapper.cli.demo import (
     DemoScenario,
     every_second,
     joining_views,
     run_demo,
     simulate_scenario,
 )
-from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.geometry import sample_segments  # noqa: E402
-from multi_robot_mapper.core.worlds import WORLDS  # noqa: E402
+from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.geometry import sample_segments
+from multi_robot_mapper.core.worlds import WORLDS
 
 ON_A_WALL = 0.30  # m
 RIGHT_SHARE = 0.5  # of a robot's wall points on a true wall: placed right
@@ -88,7 +85,7 @@ def judge_frame(
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=20)
-    parser.add_argument("--out", default="bench_output/demo_runs")
+    parser.add_argument("--out", default=str(OUTPUT / "demo_runs"))
     args = parser.parse_args()
     wall_points = sample_segments(WORLDS[DemoScenario().world](), 0.05)[0]
     walls = cKDTree(wall_points)

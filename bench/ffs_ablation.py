@@ -1,7 +1,7 @@
 """FFS variants on the merger's own problem (issue 14): how far each variant of the simulation
 moves the joint graph's placement, and where the field's own minimum lies.
 
-    .venv/bin/python bench/ffs_ablation.py [--cases freiburg-079_2 intel_2 ...]
+    .venv/bin/python -m bench.ffs_ablation [--cases freiburg-079_2 intel_2 ...]
         [--variant "chain_stiffness=0" --variant "chain_stiffness=0.3 sigma_start=0.1" ...]
         [--from-reference] [--work bench_output/ffs_ablation] [--fresh]
 
@@ -31,7 +31,6 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import pickle  # noqa: E402
-import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -39,6 +38,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from bench.harness import CARMEN, OUTPUT, carmen_log, imported_bag  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.ffs.merge import refine_with_ffs, with_keyframes_moved  # noqa: E402
@@ -46,8 +46,6 @@ from multi_robot_mapper.core.merging import MergeConfig, MergeResult  # noqa: E4
 from multi_robot_mapper.core.merging.joint import merge_joint, place_scans  # noqa: E402
 from multi_robot_mapper.core.pipeline import OfflineMap, TimedLaserScan, run_offline  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "carmen"
 CASES = ("freiburg-079_2", "freiburg-079_4", "intel_2", "intel_4", "csail_2", "csail_4")
 References = dict[str, tuple[np.ndarray, np.ndarray]]  # robot -> (stamps, (N, 3) poses)
 
@@ -62,17 +60,7 @@ def prepared(case: str, work: Path, fresh: bool) -> tuple[OfflineMap, MergeResul
     from multi_robot_mapper.io.bags import read_recordings, reference_poses
 
     log, robots = case.rsplit("_", 1)
-    bag = work / "bags" / case
-    if not bag.exists():
-        bag.parent.mkdir(parents=True, exist_ok=True)
-        source = DATA / f"{log}.log.gz"
-        command = ["import-carmen", str(source), "--robots", robots, "--out", str(bag)]
-        subprocess.run(
-            [sys.executable, "-m", "multi_robot_mapper.cli.main", *command],
-            check=True,
-            cwd=REPO,
-            stdout=subprocess.DEVNULL,
-        )
+    bag = imported_bag(log, int(robots), work / "bags" / case)
     inputs: dict[str, list[TimedLaserScan]] = {}
     references: References = {}
     for name, recording in read_recordings(bag).items():
@@ -154,7 +142,7 @@ def main() -> int:
     parser.add_argument("--cases", nargs="+", default=list(CASES))
     parser.add_argument("--variant", action="append", default=None)
     parser.add_argument("--from-reference", action="store_true")
-    parser.add_argument("--work", type=Path, default=REPO / "bench_output" / "ffs_ablation")
+    parser.add_argument("--work", type=Path, default=OUTPUT / "ffs_ablation")
     parser.add_argument("--fresh", action="store_true")
     args = parser.parse_args()
     variants = args.variant or [""]
@@ -163,8 +151,8 @@ def main() -> int:
     print(f"| case | FFS variant | ATE all at the {start} (m) | after FFS (m) | iterations | s |")
     print("| --- | --- | --- | --- | --- | --- |")
     for case in args.cases:
-        if not (DATA / f"{case.rsplit('_', 1)[0]}.log.gz").exists():
-            print(f"{case}: its log is not in {DATA}; skipped", file=sys.stderr)
+        if not carmen_log(case.rsplit("_", 1)[0]).exists():
+            print(f"{case}: its log is not in {CARMEN}; skipped", file=sys.stderr)
             continue
         local, joint, references = prepared(case, args.work, args.fresh)
         if args.from_reference:

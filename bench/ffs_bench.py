@@ -1,7 +1,7 @@
 """Force Field Simulation's figures (issue 14): re-convergence as in FFS Sec. 4.2, speed, and
 a picture of the potential and of the map before and after.
 
-    .venv/bin/python bench/ffs_bench.py [--log intel] [--bodies 60] [--seeds 10]
+    .venv/bin/python -m bench.ffs_bench [--log intel] [--bodies 60] [--seeds 10]
         [--figure docs/figures/ffs_reconvergence.png]
 
 The first ``--bodies`` keyframes of the log (a new one where the laser moved 0.5 m or turned
@@ -36,6 +36,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from bench.harness import CARMEN, FIGURES, carmen_log  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
@@ -47,15 +48,12 @@ from multi_robot_mapper.core.ffs.merge import (  # noqa: E402
 )
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "carmen"
-
 
 def keyframe_scans(log: str, count: int) -> tuple[list[np.ndarray], np.ndarray, int]:
     """The first ``count`` keyframes' segments (own frame), reference poses, raw returns."""
     sets, poses, raw = [], [], 0
     config = ExtractionConfig()
-    for scan in read_carmen(DATA / f"{log}.log.gz"):
+    for scan in read_carmen(carmen_log(log)):
         pose = np.asarray(scan.reference_pose, dtype=np.float64)
         if poses and not (
             np.hypot(*(pose[:2] - poses[-1][:2])) >= 0.5
@@ -85,12 +83,10 @@ def main() -> None:
     parser.add_argument("--bodies", type=int, default=60)
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--body-length", type=float, default=0.0, help="m of wall per body")
-    parser.add_argument(
-        "--figure", default=str(REPO / "docs" / "figures" / "ffs_reconvergence.png")
-    )
+    parser.add_argument("--figure", default=str(FIGURES / "ffs_reconvergence.png"))
     args = parser.parse_args()
-    if not (DATA / f"{args.log}.log.gz").is_file():
-        raise SystemExit(f"{args.log}: no log in {DATA}")
+    if not carmen_log(args.log).is_file():
+        raise SystemExit(f"{args.log}: no log in {CARMEN}")
     config = FfsConfig(time_budget=0.0, max_iterations=1000)
     sets, reference, raw = keyframe_scans(args.log, args.bodies)
     if args.body_length > 0.0:

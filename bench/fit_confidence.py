@@ -2,8 +2,8 @@
 
 Two steps, each its own command:
 
-    .venv/bin/python bench/fit_confidence.py collect [--logs intel aces ...] [--jobs 2]
-    .venv/bin/python bench/fit_confidence.py fit [--write] [--out bench_output/confidence]
+    .venv/bin/python -m bench.fit_confidence collect [--logs intel aces ...] [--jobs 2]
+    .venv/bin/python -m bench.fit_confidence fit [--write] [--out bench_output/confidence]
 
 ``collect`` matches pairs of every shared log with INTEGRATE (no guess, both sides' views)
 and stores each pair's raw evidence (:meth:`MatchEvidence.as_array`), its kind and whether the
@@ -38,7 +38,8 @@ pairs wrong only by the reference (``reference_check.ReferenceJudge``) counted r
 draws the reliability diagram (predicted against observed success, in bins, every log left
 out in turn) and the precision/recall curves to
 ``OUT/reliability.png`` and ``OUT/precision_recall.png``. ``--write`` writes the model fitted
-on every log into ``multi_robot_mapper/core/matching/confidence_model.py``.
+on every log into ``multi_robot_mapper/core/matching/confidence_model.json`` (data the
+package loads, with how and on what it was fitted).
 """
 
 from __future__ import annotations
@@ -52,15 +53,15 @@ import argparse  # noqa: E402
 import datetime  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
-import textwrap  # noqa: E402
 import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
-from reference_check import ReferenceJudge, judge_of_log  # noqa: E402
 from scipy.optimize import minimize  # noqa: E402
 
+from bench.harness import FIT_LOGS, OUTPUT, REPO, carmen_log  # noqa: E402
+from bench.reference_check import ReferenceJudge, judge_of_log  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
@@ -69,19 +70,20 @@ from multi_robot_mapper.core.local_mapping import LocalMapperConfig  # noqa: E40
 from multi_robot_mapper.core.matching import IntegrateConfig, integrate  # noqa: E402
 from multi_robot_mapper.core.matching.beams import Viewpoint, Views  # noqa: E402
 from multi_robot_mapper.core.matching.confidence import (  # noqa: E402
-    FEATURES,
+    MODEL_FILE as CONFIDENCE_MODEL_FILE,
+)
+from multi_robot_mapper.core.matching.confidence import (  # noqa: E402
     LogisticModel,
     MatchEvidence,
     is_right,
+    scan_model_json,
 )
 from multi_robot_mapper.core.matching.integrate import match_evidence  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "carmen"
-LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079", "edmonton")
 DENSE = ("freiburg-079",)
-MODEL_FILE = REPO / "multi_robot_mapper" / "core" / "matching" / "confidence_model.py"
+# The fitted model, data the package loads (core/matching/confidence.installed_scan_model).
+MODEL_FILE = REPO / "multi_robot_mapper" / "core" / "matching" / CONFIDENCE_MODEL_FILE
 KINDS = (
     "consecutive",
     "gap2",
@@ -157,7 +159,7 @@ def pairs_of(name: str, poses: np.ndarray) -> list[Pair]:
 
 
 def collect_log(name: str, out_dir: Path) -> str:
-    path = DATA / f"{name}.log.gz"
+    path = carmen_log(name)
     if not path.is_file():
         return f"{name}: skipped, {path} not found"
     started = time.perf_counter()
@@ -331,7 +333,7 @@ def judged_precision(
     if len(suspects):
         judge = _judges.get(name)
         if judge is None:
-            scans = list(read_carmen(DATA / f"{name}.log.gz"))
+            scans = list(read_carmen(carmen_log(name)))
             judge = _judges[name] = judge_of_log(
                 name, [carmen_scan_data(s) for s in scans], [s.reference_pose for s in scans]
             )
@@ -350,8 +352,8 @@ _judges: dict[str, ReferenceJudge] = {}  # per log, its searches remembered
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("step", choices=("collect", "fit"))
-    parser.add_argument("--logs", nargs="+", default=list(LOGS))
-    parser.add_argument("--out", type=Path, default=REPO / "bench_output" / "confidence")
+    parser.add_argument("--logs", nargs="+", default=list(FIT_LOGS))
+    parser.add_argument("--out", type=Path, default=OUTPUT / "confidence")
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--write", action="store_true", help="write the model fitted on all logs")
     parser.add_argument(
@@ -470,33 +472,20 @@ def draw(
 
 
 def write_model(model: LogisticModel, logs: list[str], pairs: int, l2: float) -> None:
-    weights = "".join(f"    {w:.6g},\n" for w in model.weights)
-    names = "".join(f'    "{n}",\n' for n in FEATURES)
-    day = datetime.date.today().isoformat()
-    provenance = textwrap.fill(
-        f"Fitted on {day} on {pairs} scan pairs of {', '.join(logs)} (kinds: "
-        f"{', '.join(KINDS)}), L2 penalty {l2:g}: "
-        f"``.venv/bin/python bench/fit_confidence.py collect && "
-        f".venv/bin/python bench/fit_confidence.py fit --write``. Calibration checked leaving "
-        f"each log out in turn (README, 'Match confidence').",
-        width=95,
+    """``MODEL_FILE``: the model, its numbers to 6 significant digits, with its provenance."""
+    rounded = LogisticModel(
+        float(f"{model.intercept:.6g}"), np.array([float(f"{w:.6g}") for w in model.weights])
     )
-    MODEL_FILE.write_text(
-        '''"""The fitted match-confidence model. Generated by ``bench/fit_confidence.py``: do not
-edit.
-
-'''
-        + provenance
-        + f'''
-"""
-
-SCAN_FEATURES = (
-{names})
-SCAN_INTERCEPT = {model.intercept:.6g}
-SCAN_WEIGHTS = (
-{weights})
-'''
+    fitted = (
+        f"bench/fit_confidence.py on {datetime.date.today().isoformat()}: {pairs} scan pairs "
+        f"of {', '.join(logs)} (kinds: {', '.join(KINDS)}), L2 penalty {l2:g}; calibration "
+        "checked leaving each log out in turn (README, 'Match confidence')"
     )
+    command = (
+        ".venv/bin/python -m bench.fit_confidence collect && "
+        ".venv/bin/python -m bench.fit_confidence fit --write"
+    )
+    MODEL_FILE.write_text(scan_model_json(rounded, fitted, command))
 
 
 if __name__ == "__main__":

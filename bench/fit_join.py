@@ -1,7 +1,7 @@
 """Fit and check the join model (issue 46): the probability that a placement of one map on
 another is right, from its evidence (``core/evidence/model.py``).
 
-    .venv/bin/python bench/fit_join.py [--work bench_output/decisions ...] [--write]
+    .venv/bin/python -m bench.fit_join [--work bench_output/decisions ...] [--write]
         [--figure docs/figures/join_reliability.png]
 
 Reads every pair of maps' consistent set that ``bench/decisions.py collect`` (or ``judge``)
@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import sys
 from datetime import date
 from pathlib import Path
 from typing import Any
@@ -34,16 +33,14 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from multi_robot_mapper.core.evidence.model import (  # noqa: E402
+from bench.harness import OUTPUT, REPO
+from multi_robot_mapper.core.evidence.model import (
     FEATURES,
     MODEL_FILE,
     JoinModel,
     join_features,
 )
-from multi_robot_mapper.core.evidence.placement import (  # noqa: E402
+from multi_robot_mapper.core.evidence.placement import (
     EVIDENCE_CORRELATION,
     PlacementEvidence,
 )
@@ -208,7 +205,7 @@ def reliability(p: np.ndarray, y: np.ndarray) -> list[tuple[float, float, float,
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--work", nargs="*", default=["bench_output/decisions"])
+    parser.add_argument("--work", nargs="*", default=[str(OUTPUT / "decisions")])
     parser.add_argument("--write", action="store_true")
     parser.add_argument("--figure", default="")
     parser.add_argument(

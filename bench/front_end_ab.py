@@ -9,7 +9,7 @@ and mean time per scan of extraction plus ``LocalMapper.add_scan`` with the back
 a node's scan thread does), and a digest of every scan's placement (accepted, pose), equal
 across checkouts when a change leaves every decision as it was.
 
-    .venv/bin/python bench/front_end_ab.py [CHECKOUT ...] [--log freiburg-079] [--robots 4]
+    .venv/bin/python -m bench.front_end_ab [CHECKOUT ...] [--log freiburg-079] [--robots 4]
         [--robot 1] [--scans N] [--rounds 3]
 
 With no checkout, this one alone. The live figure (DDS, the node, the back end beside it) is
@@ -32,13 +32,10 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "carmen"
 
-
-def measure(log: str, robots: int, robot: int, scans: int | None) -> dict[str, Any]:
-    """In the child: the checkout on ``PYTHONPATH`` maps the robot's run (imports are here so
-    that they come from that checkout, not from this file's)."""
+def measure(log: str, path: Path, robots: int, robot: int, scans: int | None) -> dict[str, Any]:
+    """In the child: the checkout on ``PYTHONPATH`` maps the robot's run of log ``log`` (at
+    ``path``); imports are here so that they come from that checkout, not from this file's."""
     import numpy as np
 
     import multi_robot_mapper
@@ -48,7 +45,7 @@ def measure(log: str, robots: int, robot: int, scans: int | None) -> dict[str, A
     from multi_robot_mapper.core.mapper_config import RobotMapperConfig
     from multi_robot_mapper.io.carmen import carmen_scan_data, monotonic_stamps, read_carmen
 
-    records = list(read_carmen(DATA / f"{log}.log.gz"))
+    records = list(read_carmen(path))
     start, stop = split_runs(len(records), robots, 0)[robot - 1]
     run = records[start:stop][:scans]
     stamps, _ = monotonic_stamps(np.array([r.timestamp for r in run]), log)
@@ -75,7 +72,9 @@ def measure(log: str, robots: int, robot: int, scans: int | None) -> dict[str, A
 
 
 def run_child(checkout: Path, args: argparse.Namespace) -> dict[str, Any]:
+    # This file run as a script: the child imports nothing of this checkout (not bench/).
     command = [sys.executable, str(Path(__file__).resolve()), "--child", "--log", args.log]
+    command += ["--log-path", str(args.log_path)]
     command += ["--robots", str(args.robots), "--robot", str(args.robot)]
     if args.scans:
         command += ["--scans", str(args.scans)]
@@ -98,12 +97,15 @@ def main() -> None:
     parser.add_argument("--scans", type=int, default=None, help="the first N of the run")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--log-path", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
-    if not (DATA / f"{args.log}.log.gz").is_file():
-        raise SystemExit(f"front_end_ab: {DATA / (args.log + '.log.gz')} not found")
     if args.child:
-        print(json.dumps(measure(args.log, args.robots, args.robot, args.scans)))
+        print(json.dumps(measure(args.log, args.log_path, args.robots, args.robot, args.scans)))
         return
+    # The harness in the parent only: it imports this checkout's package, the child another's.
+    from bench.harness import REPO, require_log
+
+    args.log_path = require_log(args.log, "front_end_ab")
     checkouts = [c.resolve() for c in args.checkouts] or [REPO]
     for checkout in checkouts:
         if not (checkout / "multi_robot_mapper").is_dir():

@@ -4,7 +4,7 @@ Targets (issue 2): >= 2000 scans/s at 180 beams, >= 500 scans/s at 1081 beams.
 180-beam scans are the real intel log when ../shared/data is present (else simulated SICK
 scans); 1081-beam scans are simulated Hokuyo UTM-30LX scans of the built-in office world.
 
-    .venv/bin/python bench/frontend_throughput.py [--repeat 5]
+    .venv/bin/python -m bench.frontend_throughput [--repeat 5]
 """
 
 from __future__ import annotations
@@ -17,27 +17,17 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import statistics  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from bench.harness import carmen_log, simulated_scans  # noqa: E402
 from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.scan import LaserScanData  # noqa: E402
-from multi_robot_mapper.core.simulation import LaserModel, _arc_length, drive_path, simulate_scan  # noqa: E402
-from multi_robot_mapper.core.worlds import ROUTES, office_world  # noqa: E402
+from multi_robot_mapper.core.simulation import LaserModel  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
-INTEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen" / "intel.log.gz"
-
-
-def simulated(laser: LaserModel, count: int, seed: int = 0) -> list[LaserScanData]:
-    walls = office_world()
-    route = np.asarray(ROUTES["office"], dtype=np.float64)
-    poses = drive_path(route, 1.0, laser.rate, float(_arc_length(route)[-1]))  # once at 1 m/s
-    poses = poses[np.linspace(0, len(poses) - 1, count).astype(int)]
-    rng = np.random.default_rng(seed)
-    return [simulate_scan(walls, tuple(p), laser, rng) for p in poses]
+INTEL = carmen_log("intel")
 
 
 def throughput(scans: list[LaserScanData], repeat: int) -> tuple[float, float]:
@@ -63,9 +53,9 @@ def main() -> None:
         source180 = f"real: intel.log.gz, {len(scans180)} scans"
     else:
         sick = LaserModel(beams=180, field_of_view=np.radians(179.0), range_max=80.0, rate=5.0)
-        scans180 = simulated(sick, 900)
+        scans180 = simulated_scans(sick, 900)
         source180 = "simulated SICK (../shared/data absent)"
-    scans1081 = simulated(LaserModel(), 500)
+    scans1081 = simulated_scans(LaserModel(), 500)
     print("front-end throughput, one core (scans/s; best / median of passes)")
     for beams, scans, source, target in (
         (180, scans180, source180, 2000),

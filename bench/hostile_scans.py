@@ -13,7 +13,7 @@ per reason (refused by the stream guard or the front end, set aside or held by t
 mapper), the hostile scans placed in the map and the good scans in it. Every hostile scan is
 counted when the counts add up to the hostile scans, none is in the map and every good one is.
 
-    .venv/bin/python bench/hostile_scans.py [--seeds 0 1 2 3 4] [--scans 300] [--hostile 200]
+    .venv/bin/python -m bench.hostile_scans [--seeds 0 1 2 3 4] [--scans 300] [--hostile 200]
 """
 
 from __future__ import annotations
@@ -25,21 +25,19 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import math  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 import traceback  # noqa: E402
 from collections import Counter  # noqa: E402
-from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
-
-from hostile_streams import HostileStream, hostile_stream, office_drive  # noqa: E402
-
+from bench.harness import test_helper  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.pipeline import OfflineMap, TimedLaserScan, run_offline  # noqa: E402
+
+# The drive and its hostile scans, shared with test_hostile_scans.py (a helper of test/).
+hostile_streams = test_helper("hostile_streams")
 
 
 def counted(stats: dict[str, Any]) -> Counter[str]:
@@ -68,8 +66,8 @@ def final_pose(offline: OfflineMap, stamp: float) -> np.ndarray | None:
 
 
 def run_seed(scans: int, hostile: int, seed: int) -> dict[str, Any]:
-    run = office_drive(scans, seed)
-    stream: HostileStream = hostile_stream(run, hostile, seed)
+    run = hostile_streams.office_drive(scans, seed)
+    stream = hostile_streams.hostile_stream(run, hostile, seed)
     last = float(run.stamps[-1])
     started = time.perf_counter()
     clean = replay(stream.good())

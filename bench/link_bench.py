@@ -8,14 +8,14 @@ reference; this bench does: every keyframe's stamp has a reference pose, so ever
 candidate ``T_keyframe_centre`` can be compared with the reference relative pose of its two
 keyframes. A link is *right* within 0.30 m / 5 deg (the confidence's own tolerance).
 
-    .venv/bin/python bench/link_bench.py prepare [--logs ...] [--robots 2 4 8]
+    .venv/bin/python -m bench.link_bench prepare [--logs ...] [--robots 2 4 8]
         [--work bench_output/link_bench]     # local mapping, cached (slow: minutes per case)
-    .venv/bin/python bench/link_bench.py links [--logs ...] [--robots 2 4 8] [--set N=V ...]
+    .venv/bin/python -m bench.link_bench links [--logs ...] [--robots 2 4 8] [--set N=V ...]
         [--json PATH] [--curve PATH.png]
-    .venv/bin/python bench/link_bench.py updates [--logs ...] [--robots 2 4 8] [--every 30]
+    .venv/bin/python -m bench.link_bench updates [--logs ...] [--robots 2 4 8] [--every 30]
         # the node's regime: growing maps, one update per --every s of log, within the
         # update_budget; prints | case | keyframes | updates | median | p90 | max (s) | placed |
-    .venv/bin/python bench/link_bench.py sources [--logs ...] [--robots 2 4 8] [--set N=V ...]
+    .venv/bin/python -m bench.link_bench sources [--logs ...] [--robots 2 4 8] [--set N=V ...]
         # issue 14 item 3: for every place that could be found on another map, is a right
         # placement among the correlation's and among Wolter's shape matching's hypotheses
         # (shape_hypotheses, 4 unless --set), before verification
@@ -37,7 +37,6 @@ import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import json  # noqa: E402
 import pickle  # noqa: E402
-import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -45,6 +44,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from bench.harness import CARMEN, OUTPUT, carmen_log, imported_bag  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
@@ -53,32 +53,12 @@ from multi_robot_mapper.core.merging import MergeConfig  # noqa: E402
 from multi_robot_mapper.core.pipeline import OfflineMap, TimedLaserScan, run_offline  # noqa: E402
 from multi_robot_mapper.io.bags import read_recordings, reference_poses  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "carmen"
 LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079")
 
 
 def bag_of(name: str, robots: int, work: Path) -> Path:
     """The log cut into ``robots`` runs (imported once with ``mrm import-carmen``)."""
-    bag = work / "bags" / f"{name}_{robots}"
-    if not bag.exists():
-        bag.parent.mkdir(parents=True, exist_ok=True)
-        subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "multi_robot_mapper.cli.main",
-                "import-carmen",
-                str(DATA / f"{name}.log.gz"),
-                "--robots",
-                str(robots),
-                "--out",
-                str(bag),
-            ],
-            check=True,
-            stdout=subprocess.DEVNULL,
-        )
-    return bag
+    return imported_bag(name, robots, work / "bags" / f"{name}_{robots}")
 
 
 def prepare(name: str, robots: int, work: Path) -> Path:
@@ -153,15 +133,15 @@ def main() -> int:
     )
     parser.add_argument("--logs", nargs="+", default=list(LOGS))
     parser.add_argument("--robots", nargs="+", type=int, default=[2, 4, 8])
-    parser.add_argument("--work", type=Path, default=REPO / "bench_output" / "link_bench")
+    parser.add_argument("--work", type=Path, default=OUTPUT / "link_bench")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--curve", type=Path, default=None)
     args = parser.parse_args()
     cases = [(name, k) for name in args.logs for k in args.robots]
-    missing = [name for name in args.logs if not (DATA / f"{name}.log.gz").exists()]
+    missing = [name for name in args.logs if not carmen_log(name).exists()]
     if missing:
-        print(f"note: skipping {', '.join(missing)} (no log in {DATA})", file=sys.stderr)
+        print(f"note: skipping {', '.join(missing)} (no log in {CARMEN})", file=sys.stderr)
         cases = [(n, k) for n, k in cases if n not in missing]
     if args.step == "prepare":
         for name, k in cases:

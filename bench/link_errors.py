@@ -7,7 +7,7 @@ relative to keyframe a against the reference, and the length of the link. A look
 place is metres off; a link between two slightly bent partial maps is a near miss beyond the
 0.30 m / 5 deg tolerance.
 
-    .venv/bin/python bench/link_errors.py [--json bench_output/merge_table/merge_table.json]
+    .venv/bin/python -m bench.link_errors [--json bench_output/merge_table/merge_table.json]
         [--work bench_output/merge_table]
 """
 
@@ -18,17 +18,16 @@ import json
 from pathlib import Path
 
 import numpy as np
-from reference_check import ReferenceJudge  # bench/ is on a script's path
 
+from bench.harness import OUTPUT
+from bench.reference_check import ReferenceJudge
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.io.bags import read_recordings
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--work", type=Path, default=REPO / "bench_output" / "merge_table")
+    parser.add_argument("--work", type=Path, default=OUTPUT / "merge_table")
     parser.add_argument("--json", type=Path, help="default WORK/merge_table.json")
     args = parser.parse_args()
     table = json.loads((args.json or args.work / "merge_table.json").read_text())

@@ -23,7 +23,7 @@ Sampled every ``--sample`` seconds, per window and in total:
   memory      resident memory of each kind of process (mappers summed, merger + its worker)
   maps        keyframes and segments of each robot's partial map, global map segments
 
-    .venv/bin/python bench/live_load.py [--minutes 60] [--robots 8] [--layout processes]
+    .venv/bin/python -m bench.live_load [--minutes 60] [--robots 8] [--layout processes]
         [--sample 60] [--json FILE]
 
 The run is in real time (one simulated hour takes an hour): the nodes are not known to keep
@@ -55,6 +55,7 @@ from rclpy.node import Node  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 
+from bench.harness import OUTPUT  # noqa: E402
 from multi_robot_mapper.core.simulation import (  # noqa: E402
     SIM_START_S,
     LaserModel,
@@ -184,7 +185,7 @@ def main() -> int:
         help="robot_mapper's max_scan_rate (Hz; 0: map every scan)",
     )
     parser.add_argument("--json", type=Path, help="write every sample here")
-    parser.add_argument("--logs", type=Path, default=Path("bench_output/live_load_logs"))
+    parser.add_argument("--logs", type=Path, default=OUTPUT / "live_load_logs")
     args = parser.parse_args()
 
     laser = LaserModel()

@@ -21,9 +21,9 @@ Measured (and only this):
   mapper      scans accepted / set aside (with reasons), keyframes, and how far the keyframes
               lie from the simulator's truth (relative to the first scan, the map frame)
 
-    .venv/bin/python bench/live_rate.py [--seconds 30] [--world office] [--seed 0]
+    .venv/bin/python -m bench.live_rate [--seconds 30] [--world office] [--seed 0]
         [--set local_mapping.keyframe_distance=0.5 ...] [--cpu 0] [--json]
-    .venv/bin/python bench/live_rate.py --log freiburg-079 [--robots 4 --robot 1] [--speed 4]
+    .venv/bin/python -m bench.live_rate --log freiburg-079 [--robots 4 --robot 1] [--speed 4]
 
 ``--log NAME`` plays a real CARMEN log from ``../shared/data/carmen`` instead (the simulated
 bench hides the real cost: 360-beam SICK scans of a real building): robot ``--robot`` of the
@@ -54,7 +54,6 @@ import json  # noqa: E402
 import math  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -64,6 +63,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 
+from bench.harness import carmen_log  # noqa: E402
 from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import parse_override  # noqa: E402
@@ -75,7 +75,6 @@ from multi_robot_mapper.ros.robot_mapper import RobotMapper  # noqa: E402
 from multi_robot_mapper.ros.testing import isolated_context, spin_until  # noqa: E402
 
 Key = tuple[int, int]
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
 
 
 class TimedMapper(RobotMapper):
@@ -133,7 +132,7 @@ def percentiles_ms(values: list[float]) -> dict[str, float]:
 
 def log_robot(args: argparse.Namespace) -> SimulatedRobot:
     """Robot ``--robot`` of a CARMEN log cut into ``--robots`` runs, with its reference poses."""
-    path = DATA / f"{args.log}.log.gz"
+    path = carmen_log(args.log)
     if not path.is_file():
         raise SystemExit(f"live_rate: {path} not found")
     scans = list(read_carmen(path))

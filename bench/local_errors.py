@@ -11,7 +11,7 @@ another piece's keyframe; ``after gap``: right after scans set aside), its gap i
 confidence in context, the error and the turn the mapper took. New pieces (the robot was
 lost) are counted. ``bench/fit_placement.py`` judges every match tried, not only the chosen.
 
-    .venv/bin/python bench/local_errors.py [--logs intel aces fhw csail] [--robots 4]
+    .venv/bin/python -m bench.local_errors [--logs intel aces fhw csail] [--robots 4]
         [--set NAME=VALUE ...]
 """
 
@@ -24,10 +24,10 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 from collections import Counter  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from bench.harness import carmen_log  # noqa: E402
 from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
@@ -44,8 +44,6 @@ from multi_robot_mapper.io.carmen import (  # noqa: E402
     read_carmen,
 )
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
-
 
 def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The motion T_a_b of two (x, y, theta) poses."""
@@ -54,7 +52,7 @@ def relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def run_log(name: str, robots: int, config: LocalMapperConfig) -> None:
-    path = DATA / f"{name}.log.gz"
+    path = carmen_log(name)
     if not path.is_file():
         print(f"{name}: skipped, {path} not found")
         return

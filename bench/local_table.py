@@ -8,7 +8,7 @@ pose of the two keyframes); the mapper never sees the reference. A closure wrong
 reference is checked again where the reference itself is wrong at one of its scans (the scans
 either side agree on another pose: ``reference_check.py``); those are counted apart.
 
-    .venv/bin/python bench/local_table.py [--logs intel aces fhw csail freiburg-079 edmonton]
+    .venv/bin/python -m bench.local_table [--logs intel aces fhw csail freiburg-079 edmonton]
         [--robots 2 4] [--jobs 2] [--work bench_output/local_table] [--set NAME=VALUE ...]
 
 Prints one Markdown table (ready for the README) and writes every figure to
@@ -30,10 +30,8 @@ from typing import Any
 
 import numpy as np
 
-# The same child-process runner as the merge table (bench/ is on the path of a bench script).
-from merge_table import mrm
-from reference_check import ReferenceJudge
-
+from bench.harness import FIT_LOGS, OUTPUT, imported_bag, mrm, present_logs
+from bench.reference_check import ReferenceJudge
 from multi_robot_mapper.cli.evaluate import METRICS_FILE, build_inputs
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE
@@ -45,9 +43,6 @@ from multi_robot_mapper.evaluation.metrics import (
 from multi_robot_mapper.io.bags import read_recordings
 from multi_robot_mapper.io.results import read_results
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "carmen"
-LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079", "edmonton")
 COLUMNS = (
     "log | robots | scans | pair_success | judged (pairs wrong only by the reference) | "
     "strict | unposed | pieces left | own-frame ATE per robot (m) | closures accepted / wrong "
@@ -120,12 +115,7 @@ def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]
     log = out.parent / "mrm.log"
     log.write_text("")
     try:
-        if not bag.exists():
-            partial = bag.with_name(tag + ".partial")
-            shutil.rmtree(partial, ignore_errors=True)
-            source = str(DATA / f"{name}.log.gz")
-            mrm(["import-carmen", source, "--robots", str(robots), "--out", str(partial)], log)
-            partial.rename(bag)
+        imported_bag(name, robots, bag, log=log)
         overrides = [item for pair in args.set for item in ("--set", pair)]
         replay = ["replay", str(bag), "--out", str(out), "--method", "local", *overrides]
         row["replay_wall_s"] = mrm(replay, log)
@@ -175,19 +165,14 @@ def table_row(row: dict[str, Any]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
-    parser.add_argument("--logs", nargs="+", default=list(LOGS))
+    parser.add_argument("--logs", nargs="+", default=list(FIT_LOGS))
     parser.add_argument("--robots", type=int, nargs="+", default=[2, 4])
     parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("--work", type=Path, default=REPO / "bench_output" / "local_table")
+    parser.add_argument("--work", type=Path, default=OUTPUT / "local_table")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     args = parser.parse_args()
     args.work = args.work.resolve()
-    cases = []
-    for name in args.logs:
-        if (DATA / f"{name}.log.gz").is_file():
-            cases += [(name, k) for k in args.robots]
-        else:
-            print(f"{name}: skipped, {DATA / f'{name}.log.gz'} not found", file=sys.stderr)
+    cases = [(name, k) for name in present_logs(args.logs) for k in args.robots]
     started = time.perf_counter()
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:
         futures = [pool.submit(run_case, name, k, args) for name, k in cases]

@@ -16,7 +16,7 @@ from the joint graph at every update with ``--cold``. The last two columns: FFS 
 update (median; ffs only) and the keyframe error at the end (RMSE of every merged keyframe's
 position against the reference after one rigid fit of all).
 
-    .venv/bin/python bench/merge_growth.py [--logs intel aces fhw csail] [--robots 2 4 8]
+    .venv/bin/python -m bench.merge_growth [--logs intel aces fhw csail] [--robots 2 4 8]
         [--steps 10] [--overlap 40] [--budget 0] [--method pivot|ffs] [--cold]
         [--set NAME=VALUE ...]
 
@@ -37,30 +37,16 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import math  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from merge_speed import DATA, add_merge_overrides, joint_cut, merge_config_of  # noqa: E402
-
+from bench.harness import add_merge_overrides, apart, carmen_log, joint_cut, merge_config_of  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult  # noqa: E402
 from multi_robot_mapper.core.merging.methods import merge_method  # noqa: E402
 from multi_robot_mapper.io.carmen import read_carmen  # noqa: E402
-
-RIGHT_DISTANCE = 0.30
-RIGHT_ANGLE = math.radians(5.0)
-
-
-def _off(a: np.ndarray, b: np.ndarray) -> bool:
-    """Are two SE(2) matrices more than 0.30 m or 5 deg apart?"""
-    dx, dy, dt = se2.pose_from_matrix(se2.invert(a) @ b)
-    return bool(np.hypot(dx, dy) > RIGHT_DISTANCE or abs(dt) > RIGHT_ANGLE)
 
 
 def keyframe_error(
@@ -93,7 +79,7 @@ def grow(
     cold: bool = False,
 ) -> None:
     """One row of the table (module doc)."""
-    path = DATA / f"{name}.log.gz"
+    path = carmen_log(name)
     if not path.is_file():
         print(f"| {name} | {robots} | skipped: {path} not found |", flush=True)
         return
@@ -123,12 +109,12 @@ def grow(
             if pose is None:
                 continue
             placed_now[robot] = se2.matrix_from_pose(*pose)
-            wrong += _off(T_map_world @ frames[robot], placed_now[robot])
+            wrong += apart(T_map_world @ frames[robot], placed_now[robot])
         same_reference = result.reference == previous_reference
         for robot, T in placed_before.items():
             if robot not in placed_now:
                 flips += 1
-            elif same_reference and _off(T, placed_now[robot]):
+            elif same_reference and apart(T, placed_now[robot]):
                 moves += 1
         placed_before, previous_reference = placed_now, result.reference
     assert result is not None

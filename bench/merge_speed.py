@@ -6,14 +6,14 @@ poses and fused (Amigoni Alg. 5) into two overlapping halves (scans ``[0, n/2 + 
 own first scan's frame. ``merge`` recovers how the second robot's frame lies in the first's;
 the known answer is the reference poses' relative transform.
 
-    .venv/bin/python bench/merge_speed.py [--log intel] [--scans 160] [--overlap 40]
+    .venv/bin/python -m bench.merge_speed [--log intel] [--scans 160] [--overlap 40]
         [--segments 100] [--repeats 7]
 
 Prints the median time per merge over the repeats (every repeat recomputes: no reuse), the
 split of that time (pairs/INTEGRATE, tree, fusion) and the error against the reference.
 Target: under 100 ms (the paper: 12.8 s for 108 x 103 segments on a 1 GHz Pentium III).
 
-    .venv/bin/python bench/merge_speed.py --split 2 4 8 [--logs intel aces fhw csail] [--joint]
+    .venv/bin/python -m bench.merge_speed --split 2 4 8 [--logs intel aces fhw csail] [--joint]
 
 instead cuts each whole log into K contiguous runs (each starting ``--overlap`` scans before
 its predecessor ends; every second scan), builds each run's partial map from its
@@ -22,7 +22,7 @@ no particular order and prints robots merged, the worst placement error, the num
 links that are wrong (> 0.3 m from the reference) and the merge time. The maps are reference
 maps, not local-mapping output: this measures merging alone.
 
-    .venv/bin/python bench/merge_speed.py --split 8 --logs intel --joint --live 10
+    .venv/bin/python -m bench.merge_speed --split 8 --logs intel --joint --live 10
 
 runs the joint merger as the node does while the maps grow (``live_joint``).
 
@@ -40,22 +40,24 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from multi_robot_mapper.cli.common import add_set_option  # noqa: E402
+from bench.harness import (  # noqa: E402
+    add_merge_overrides,
+    apart,
+    carmen_log,
+    equal_runs,
+    joint_cut,
+    merge_config_of,
+)
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.fusion import fuse  # noqa: E402
-from multi_robot_mapper.core.local_mapping import Keyframe  # noqa: E402
 from multi_robot_mapper.core.matching import IntegrateConfig  # noqa: E402
 from multi_robot_mapper.core.merging import MergeConfig, longest, merge  # noqa: E402
 from multi_robot_mapper.io.carmen import CarmenScan, carmen_scan_data, read_carmen  # noqa: E402
-
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
 
 
 def partial_map(
@@ -85,15 +87,13 @@ def partial_map(
 
 def split_runs(name: str, robots: int, overlap: int, use_views: bool, config: MergeConfig) -> None:
     """Merge a whole log cut into ``robots`` reference-placed partial maps; print one line."""
-    path = DATA / f"{name}.log.gz"
+    path = carmen_log(name)
     if not path.is_file():
         print(f"{name}: skipped, {path} not found")
         return
-    scans = list(read_carmen(path))
-    size = len(scans) // robots
     frames, maps, views = {}, {}, {}
-    for k in range(robots):
-        run = scans[max(0, k * size - overlap) : (k + 1) * size : 2]
+    for k, whole_run in enumerate(equal_runs(list(read_carmen(path)), robots, overlap)):
+        run = whole_run[::2]
         frames[f"robot{k}"], maps[f"robot{k}"], views[f"robot{k}"] = partial_map(run, 10**9)
     started = time.perf_counter()
     result = merge(maps, config, viewpoints=views if use_views else None)
@@ -123,62 +123,6 @@ def split_runs(name: str, robots: int, overlap: int, use_views: bool, config: Me
     )
 
 
-def reference_keyframes(scans: list[CarmenScan], spacing: float, turn: float) -> list[Keyframe]:
-    """A run's keyframes as a robot's ``partial_map`` carries them, built at the reference
-    poses: a keyframe where the laser moved ``spacing`` or turned ``turn`` since the last (the
-    local mapper's keyframe rule), every scan fused, each fused segment owned by the keyframe
-    of its scan and stored in that keyframe's frame; poses in the run's first scan's frame."""
-    T_robot_world = se2.invert(se2.matrix_from_pose(*scans[0].reference_pose))
-    world = np.zeros((0, 4))
-    owner = np.zeros(0, dtype=np.int64)
-    poses: list[np.ndarray] = []
-    stamps: list[float] = []
-    config = IntegrateConfig()
-    for scan in scans:
-        pose = np.asarray(scan.reference_pose, dtype=np.float64)
-        if not poses or (
-            np.hypot(*(pose[:2] - poses[-1][:2])) >= spacing
-            or abs(float(se2.wrap_angle(pose[2] - poses[-1][2]))) >= turn
-        ):
-            poses.append(pose)
-            stamps.append(scan.timestamp)
-        found = extract_scan(carmen_scan_data(scan), ExtractionConfig())[0].segments
-        placed = se2.transform_segments(se2.matrix_from_pose(*pose), found)
-        own = np.full(len(placed), len(poses) - 1, dtype=np.int64)
-        world, owner = fuse(world, owner, placed, own, config, 0.02)
-    keyframes = []
-    for k, pose in enumerate(poses):
-        T_world_keyframe = se2.matrix_from_pose(*pose)
-        segments = se2.transform_segments(se2.invert(T_world_keyframe), world[owner == k])
-        T_robot_keyframe = np.array(se2.pose_from_matrix(T_robot_world @ T_world_keyframe))
-        keyframes.append(Keyframe(k, stamps[k], T_robot_keyframe, segments))
-    return keyframes
-
-
-def joint_cut(
-    scans: list[CarmenScan], robots: int, overlap: int
-) -> tuple[dict[str, np.ndarray], dict[str, list[Keyframe]]]:
-    """A log cut into ``robots`` contiguous runs (each starting ``overlap`` scans before its
-    predecessor ends): each run's T_world_robotmap (its first scan's reference pose) and its
-    keyframes built at the reference poses (:func:`reference_keyframes`)."""
-    size = len(scans) // robots
-    frames, keyframes = {}, {}
-    for k in range(robots):
-        run = scans[max(0, k * size - overlap) : (k + 1) * size]
-        frames[f"robot{k}"] = se2.matrix_from_pose(*run[0].reference_pose)
-        keyframes[f"robot{k}"] = reference_keyframes(run, 0.5, 0.35)
-    return frames, keyframes
-
-
-def add_merge_overrides(parser: argparse.ArgumentParser) -> None:
-    """``--set NAME=VALUE`` (repeatable): a MergeConfig field; read by :func:`merge_config_of`."""
-    add_set_option(parser, "override a MergeConfig field, e.g. --set link_set_uniqueness=3")
-
-
-def merge_config_of(args: argparse.Namespace) -> MergeConfig:
-    return config_from_flat(MergeConfig, dict(parse_override(o) for o in args.overrides))
-
-
 def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> None:
     """``split_runs`` for the joint merger: each run's keyframes built at the reference poses,
     merged with ``merge_joint`` (every place matched); one line: robots placed, worst
@@ -190,7 +134,7 @@ def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> No
     matching (consistency, graph, fusion: what the budget cannot bound), keyframes."""
     from multi_robot_mapper.core.merging.joint import merge_joint
 
-    path = DATA / f"{name}.log.gz"
+    path = carmen_log(name)
     if not path.is_file():
         print(f"{name}: skipped, {path} not found")
         return
@@ -249,10 +193,7 @@ def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> No
         truth = (
             se2.invert(world[link.target[0]][link.keyframe]) @ world[link.source[0]][link.centre]
         )
-        dx, dy, dt = se2.pose_from_matrix(
-            se2.invert(truth) @ se2.matrix_from_pose(*link.T_keyframe_centre)
-        )
-        wrong += bool(np.hypot(dx, dy) > 0.3 or abs(dt) > np.radians(5.0))
+        wrong += apart(truth, se2.matrix_from_pose(*link.T_keyframe_centre))
     placed = sum(pose is not None for pose in result.placements.values())
     count = sum(len(k) for k in keyframes.values())
     print(
@@ -273,7 +214,7 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
     (and stayed so), robots placed at the end, keyframes; then each stage's median time."""
     from multi_robot_mapper.core.merging.joint import merge_joint
 
-    path = DATA / f"{name}.log.gz"
+    path = carmen_log(name)
     if not path.is_file():
         print(f"{name}: skipped, {path} not found")
         return
@@ -390,7 +331,7 @@ def main() -> None:
                 else:
                     split_runs(name, robots, args.overlap, not args.no_views, base)
         return
-    path = DATA / f"{args.log}.log.gz"
+    path = carmen_log(args.log)
     if not path.is_file():
         print(f"skipped: {path} not found")
         return

@@ -5,7 +5,7 @@ process: ``mrm import-carmen LOG --robots K`` (the bag is cached under ``--work`
 ``mrm replay BAG --method pivot|ffs`` (``--method``; local mapping per robot, then merging)
 and ``mrm evaluate`` against the log's reference poses.
 
-    .venv/bin/python bench/merge_table.py [--logs intel aces fhw csail] [--robots 2 4 8]
+    .venv/bin/python -m bench.merge_table [--logs intel aces fhw csail] [--robots 2 4 8]
         [--jobs 1] [--work bench_output/merge_table] [--json PATH] [--overlap-scans 0]
         [--set NAME=VALUE ...] [--quick]
 
@@ -22,45 +22,21 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import shutil
-import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
+from bench.harness import OUTPUT, imported_bag, mrm, present_logs
 from multi_robot_mapper.cli.evaluate import METRICS_FILE
 from multi_robot_mapper.io.results import read_results
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "carmen"
-ONE_THREAD = {v: "1" for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 COLUMNS = (
     "log | robots | merged | placed | ATE merged (m) | ATE all (m) | map error (m) | coverage | "
     "precision | merge (s) | merge update (s) | replay (s) | pair_success | links | wrong links "
     "(wrong only by the reference)"
 )
-
-
-def mrm(args: list[str], log: Path) -> float:
-    """Run ``mrm ARGS`` in a child process (output appended to ``log``); its wall time in s."""
-    started = time.perf_counter()
-    with log.open("a") as out:
-        out.write(f"$ mrm {' '.join(args)}\n")
-        out.flush()
-        code = subprocess.run(
-            [sys.executable, "-m", "multi_robot_mapper.cli.main", *args],
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            env={**os.environ, **ONE_THREAD},
-            cwd=REPO,
-        ).returncode
-    if code:
-        tail = log.read_text().strip().splitlines()[-1:]
-        raise RuntimeError(f"mrm {args[0]} exited {code}: {' '.join(tail)} (see {log})")
-    return time.perf_counter() - started
 
 
 def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]:
@@ -75,13 +51,7 @@ def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]
     log = out.parent / f"{tag}.log"
     log.write_text("")
     try:
-        if not bag.exists():
-            partial = bag.with_name(tag + ".partial")
-            shutil.rmtree(partial, ignore_errors=True)  # left by an interrupted import
-            imported = [str(DATA / f"{name}.log.gz"), "--robots", str(robots)]
-            imported += ["--overlap-scans", str(args.overlap_scans), "--out", str(partial)]
-            mrm(["import-carmen", *imported], log)
-            partial.rename(bag)
+        imported_bag(name, robots, bag, args.overlap_scans, log)
         overrides = [item for pair in args.set for item in ("--set", pair)]
         replay = ["replay", str(bag), "--out", str(out), "--method", args.method]
         row["replay_wall_s"] = mrm([*replay, "--overwrite", *overrides], log)
@@ -100,8 +70,7 @@ def wrong_links(links: list[list[Any]], bag: Path) -> tuple[int, int] | None:
     poses (off by more than the confidence's own tolerance, 0.30 m / 5 deg), and how many more
     are wrong only by the reference's own error at one of their scans
     (``reference_check.ReferenceJudge``). None when a link's keyframe has no reference pose."""
-    from reference_check import ReferenceJudge
-
+    from bench.reference_check import ReferenceJudge
     from multi_robot_mapper.io.bags import read_recordings
 
     if not links:
@@ -152,7 +121,7 @@ def main() -> None:
     parser.add_argument("--logs", nargs="+", default=["intel", "aces", "fhw", "csail"])
     parser.add_argument("--robots", type=int, nargs="+", default=[2, 4, 8])
     parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("--work", type=Path, default=REPO / "bench_output" / "merge_table")
+    parser.add_argument("--work", type=Path, default=OUTPUT / "merge_table")
     parser.add_argument("--json", type=Path, help="default WORK/merge_table.json")
     parser.add_argument("--overlap-scans", type=int, default=0)
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
@@ -162,12 +131,7 @@ def main() -> None:
     if args.quick:
         args.logs, args.robots = ["intel"], [2]
     args.work = args.work.resolve()
-    cases = []
-    for name in args.logs:
-        if (DATA / f"{name}.log.gz").is_file():
-            cases += [(name, k) for k in args.robots]
-        else:
-            print(f"{name}: skipped, {DATA / f'{name}.log.gz'} not found", file=sys.stderr)
+    cases = [(name, k) for name in present_logs(args.logs) for k in args.robots]
     started = time.perf_counter()
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:  # the work is in the mrm children
         futures = [pool.submit(run_case, name, k, args) for name, k in cases]

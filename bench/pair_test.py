@@ -5,10 +5,10 @@ prediction, no extra hypotheses) estimates the relative pose; a pair succeeds wi
 and 5 deg of the reference (strict: 0.10 m and 2 deg). Prints the success rates, how far the
 validity flag can be trusted, and the median time per pair (INTEGRATE only, one core).
 
-    .venv/bin/python bench/pair_test.py [--logs intel aces] [--limit 200]
+    .venv/bin/python -m bench.pair_test [--logs intel aces] [--limit 200]
         [--heuristics consecutive random histogram all endpoints] [--no-views] [--no-refine]
         [--set NAME=VALUE ...]
-    .venv/bin/python bench/pair_test.py --table [--heuristic-limit 300] [--json out.json]
+    .venv/bin/python -m bench.pair_test --table [--heuristic-limit 300] [--json out.json]
 
 ``--table`` runs Amigoni's Table 2 layout: every heuristic alone and their combination, each
 without refinement (``refine_iterations=0``: no least squares at all; the candidates are still
@@ -35,33 +35,18 @@ from pathlib import Path  # noqa: E402
 from typing import TextIO  # noqa: E402
 
 import numpy as np  # noqa: E402
-from reference_check import judge_of_log  # noqa: E402
 
+from bench.harness import LOGS, ExtractedLog, extracted_log, pair_indices  # noqa: E402
+from bench.reference_check import judge_of_log  # noqa: E402
 from multi_robot_mapper.cli.common import add_set_option  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
-from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
-from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.local_mapping import LocalMapperConfig  # noqa: E402
 from multi_robot_mapper.core.matching import HEURISTICS, IntegrateConfig, integrate  # noqa: E402
-from multi_robot_mapper.core.scan import LaserScanData  # noqa: E402
-from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
 # The local mapper's threshold for integrating a scan (LocalMapperConfig.integrate_confidence).
 INTEGRATE_CONFIDENCE = LocalMapperConfig().integrate_confidence
-LOGS = ("intel", "aces", "fhw", "csail")
 COMBINATION = "combination"
-
-
-@dataclasses.dataclass(frozen=True)
-class Log:
-    """One CARMEN log, extracted once: views, segment sets and reference poses."""
-
-    name: str
-    views: list[LaserScanData]
-    segments: list[np.ndarray]
-    poses: list[tuple[float, float, float]]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,27 +77,8 @@ class Row:
     confident_precision_judged: float = float("nan")
 
 
-def load_log(name: str) -> Log | None:
-    path = DATA / f"{name}.log.gz"
-    if not path.is_file():
-        print(f"{name}: skipped, {path} not found", file=sys.stderr)
-        return None
-    scans = list(read_carmen(path))
-    views = [carmen_scan_data(s) for s in scans]
-    segments = [extract_scan(v, ExtractionConfig())[0].segments for v in views]
-    return Log(name, views, segments, [s.reference_pose for s in scans])
-
-
-def pair_indices(log: Log, limit: int) -> np.ndarray:
-    """Every consecutive pair, or ``limit`` of them spread evenly over the log."""
-    pairs = np.arange(len(log.segments) - 1)
-    if limit and limit < len(pairs):
-        pairs = pairs[np.linspace(0, len(pairs) - 1, limit).astype(int)]
-    return pairs
-
-
 def run_log(
-    log: Log,
+    log: ExtractedLog,
     pairs: np.ndarray,
     heuristics: tuple[str, ...],
     views: bool,
@@ -174,7 +140,9 @@ def run_log(
     )
 
 
-def wrong_by_reference(log: Log, suspects: list[tuple[int, tuple[float, float, float]]]) -> int:
+def wrong_by_reference(
+    log: ExtractedLog, suspects: list[tuple[int, tuple[float, float, float]]]
+) -> int:
     """How many of ``suspects`` (pair k, k+1 and its match) are wrong only by the reference:
     right once the reference of scan k or k+1 is replaced by the pose their neighbours agree
     on (``ReferenceJudge.verdict`` "reference", the judge of the local and merge tables)."""
@@ -271,7 +239,7 @@ def main() -> None:
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     out = sys.stderr if args.json == "-" else sys.stdout
-    logs = [log for log in (load_log(name) for name in args.logs) if log is not None]
+    logs = [log for log in (extracted_log(name) for name in args.logs) if log is not None]
     rows: list[Row] = []
     if args.table:
         refined = (

@@ -1,6 +1,6 @@
 """Where the front end spends its time, on one core: microseconds per scan for each stage.
 
-    .venv/bin/python bench/profile_frontend.py [--beams 180|1081] [--repeat 5] [--cprofile]
+    .venv/bin/python -m bench.profile_frontend [--beams 180|1081] [--repeat 5] [--cprofile]
 
 Each stage of ``extract_segments`` is timed on its own inputs, in the order the front end
 calls them (best of ``--repeat`` passes over all scans). Scans are those of
@@ -20,19 +20,14 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import cProfile  # noqa: E402
 import pstats  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 from collections import defaultdict  # noqa: E402
 from collections.abc import Callable  # noqa: E402
-from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from frontend_throughput import INTEL, simulated  # noqa: E402
-
+from bench.harness import carmen_log, simulated_scans  # noqa: E402
 from multi_robot_mapper.core import extraction as ex  # noqa: E402
 from multi_robot_mapper.core.scan import LaserScanData, scan_points  # noqa: E402
 from multi_robot_mapper.core.simulation import LaserModel  # noqa: E402
@@ -40,12 +35,12 @@ from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: 
 
 
 def load(beams: int) -> list[LaserScanData]:
-    if beams == 180 and INTEL.is_file():
-        return [carmen_scan_data(s) for s in read_carmen(INTEL)]
+    if beams == 180 and carmen_log("intel").is_file():
+        return [carmen_scan_data(s) for s in read_carmen(carmen_log("intel"))]
     if beams == 180:
         sick = LaserModel(beams=180, field_of_view=np.radians(179.0), range_max=80.0, rate=5.0)
-        return simulated(sick, 900)
-    return simulated(LaserModel(), 500)
+        return simulated_scans(sick, 900)
+    return simulated_scans(LaserModel(), 500)
 
 
 class StageTimer:

@@ -11,6 +11,7 @@ replaced, where the scans either side show it wrong, by the pose they agree on
 same way). It is called only for matches wrong by the reference, so a bench pays a few
 searches per such end, and never overrules the reference elsewhere.
 
+The plain judgement, within 0.30 m / 5 deg of the reference, is :func:`bench.harness.right`.
 Used by ``bench/local_table.py`` (closures and joins) and ``bench/merge_table.py`` (links
 between robots); both print the matches wrong by the reference and, of those, the ones
 right once the reference's own error at one scan is set aside.
@@ -22,12 +23,12 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
+from bench.harness import right
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.local_mapping import LocalMapperConfig
 from multi_robot_mapper.core.matching import HEURISTICS, integrate
-from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.io.bags import (
     RobotRecording,
@@ -41,12 +42,6 @@ Pose = tuple[float, float, float]
 # Each search between consecutive scans must be right with this probability (the loop-closure
 # threshold).
 CONFIDENT = 0.9
-
-
-def right(T_found: Pose, T_true: Pose) -> bool:
-    """Within the correctness tolerance (0.30 m / 5 deg) of the truth?"""
-    dx, dy, dtheta = se2.between(T_true, T_found)
-    return bool(np.hypot(dx, dy) < RIGHT_DISTANCE and abs(dtheta) < RIGHT_ANGLE)
 
 
 def _search(first: LaserScanData, second: LaserScanData) -> tuple[Pose, float]:

@@ -6,7 +6,7 @@ ground of a robot is the share of its route within 0.5 m of another robot's
 (:func:`shared_ground`, the largest over the others). Prints the mean and the 10th-90th
 percentiles over robots.
 
-    .venv/bin/python bench/route_overlap.py [--buildings 30] [--robots 3] [--length 80]
+    .venv/bin/python -m bench.route_overlap [--buildings 30] [--robots 3] [--length 80]
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Every consecutive scan pair of each log is matched by INTEGRATE with no guess (a
 mapper's search does); for each gate (net-value fraction, cross support) it prints the share
 of pairs accepted and how many accepted matches are wrong (beyond 0.30 m / 5 deg).
 
-    .venv/bin/python bench/scan_gate.py [--logs intel aces fhw csail] [--limit N]
+    .venv/bin/python -m bench.scan_gate [--logs intel aces fhw csail] [--limit N]
 """
 
 from __future__ import annotations
@@ -14,13 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.harness import carmen_log
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.matching import IntegrateConfig, cross_support, integrate
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
 FRACTIONS = (0.0, 0.1, 0.15, 0.25)
 SUPPORTS = (0.0, 0.1, 0.2)
 
@@ -52,7 +52,7 @@ def main() -> None:
     header = "| gate (fraction, cross support) | " + " | ".join(args.logs) + " |"
     outcomes = {}
     for name in args.logs:
-        path = DATA / f"{name}.log.gz"
+        path = carmen_log(name)
         if not path.is_file():
             raise SystemExit(f"{path} not found (the real logs live in ../shared/data/carmen)")
         outcomes[name] = pair_outcomes(path, args.limit)

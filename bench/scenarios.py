@@ -19,12 +19,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Iterator, Sequence
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from bench.harness import BAGS, carmen_log
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
@@ -36,7 +36,6 @@ from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
 
 FloatArray = NDArray[np.float64]
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 KEYFRAME_DISTANCE = 0.5  # m, the local mapper's keyframe rule
 KEYFRAME_TURN = 0.35  # rad
@@ -116,7 +115,7 @@ def carmen_scenario(log: str, robots: int, overlap: int = 0) -> Scenario | None:
     from multi_robot_mapper.cli.import_carmen import split_runs
     from multi_robot_mapper.io.carmen import carmen_scan_data, monotonic_stamps, read_carmen
 
-    path = DATA / "carmen" / f"{log}.log.gz"
+    path = carmen_log(log)
     if not path.is_file():
         return None
     scans = read_carmen(path)
@@ -164,8 +163,8 @@ def bag_scenario(bag: str, robots: int) -> Scenario | None:
         with_beam_geometry,
     )
 
-    path = DATA / "bags" / f"{bag}.bag"
-    truth_path = DATA / "bags" / f"{bag}.truth.csv"
+    path = BAGS / f"{bag}.bag"
+    truth_path = BAGS / f"{bag}.truth.csv"
     if not path.is_file() or not truth_path.is_file():
         return None
     recordings = with_beam_geometry(read_bags([path]), BeamGeometry.parse("carmen"))

@@ -16,7 +16,7 @@ For each pair it runs (one core, no guess, no prediction):
   scoring chooses), and the share of pairs right and at the local mapper's
   ``integrate_confidence``.
 
-    .venv/bin/python bench/shape_pair_test.py [--logs intel aces fhw csail] [--limit 200]
+    .venv/bin/python -m bench.shape_pair_test [--logs intel aces fhw csail] [--limit 200]
         [--gap 50] [--set NAME=VALUE ...] [--json out.json]
 
 ``--set`` overrides a ShapeConfig field. Prints one markdown table.
@@ -31,27 +31,27 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from pair_test import INTEGRATE_CONFIDENCE, Log, load_log, pair_indices  # noqa: E402
-
+from bench.harness import ExtractedLog, extracted_log, pair_indices  # noqa: E402
 from multi_robot_mapper.cli.common import add_set_option  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
+from multi_robot_mapper.core.local_mapping import LocalMapperConfig  # noqa: E402
 from multi_robot_mapper.core.matching import HEURISTICS, IntegrateConfig, integrate  # noqa: E402
 from multi_robot_mapper.core.matching.shape import match_shapes, shape_of_scan  # noqa: E402
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig  # noqa: E402
 
+# The local mapper's threshold for integrating a scan.
+INTEGRATE_CONFIDENCE = LocalMapperConfig().integrate_confidence
+
 LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079", "edmonton")
 
 
-def revisit_pairs(log: Log, gap: int, limit: int, seed: int = 0) -> np.ndarray:
+def revisit_pairs(log: ExtractedLog, gap: int, limit: int, seed: int = 0) -> np.ndarray:
     """(first, second) pairs of scans at least ``gap`` apart whose reference poses are within
     1.5 m and 30 deg: ``limit`` of them drawn at random (all when fewer)."""
     poses = np.asarray(log.poses, dtype=np.float64)
@@ -67,7 +67,7 @@ def revisit_pairs(log: Log, gap: int, limit: int, seed: int = 0) -> np.ndarray:
     return pairs
 
 
-def judge(log: Log, first: int, second: int, T_1_2: np.ndarray) -> tuple[bool, bool]:
+def judge(log: ExtractedLog, first: int, second: int, T_1_2: np.ndarray) -> tuple[bool, bool]:
     truth = se2.invert(se2.matrix_from_pose(*log.poses[first])) @ se2.matrix_from_pose(
         *log.poses[second]
     )
@@ -76,7 +76,7 @@ def judge(log: Log, first: int, second: int, T_1_2: np.ndarray) -> tuple[bool, b
     return error < 0.30 and turn < np.radians(5), error < 0.10 and turn < np.radians(2)
 
 
-def run(log: Log, pairs: np.ndarray, shape_config: ShapeConfig) -> dict[str, float]:
+def run(log: ExtractedLog, pairs: np.ndarray, shape_config: ShapeConfig) -> dict[str, float]:
     config = IntegrateConfig()
     shapes = {}
     counts = dict.fromkeys(
@@ -146,7 +146,7 @@ def main() -> None:
     )
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name in args.logs:
-        log = load_log(name)
+        log = extracted_log(name)
         if log is None:
             continue
         consecutive = pair_indices(log, args.limit)

@@ -9,7 +9,7 @@ pose; "all": the same poses cast against every wall, furniture leg, person and p
 (no culling). Also the time to generate each building and to plan 3 robots' routes, and
 the cost of a sparse drive (a scan kept every 0.5 m or 15 deg).
 
-    .venv/bin/python bench/sim_speed.py [--scans 400] [--repeat 3]
+    .venv/bin/python -m bench.sim_speed [--scans 400] [--repeat 3]
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ Before it, the confident predictions refined alone that landed beyond a third of
 tolerance but within it (where the rivals are tried), by their confidence in context (the
 bench also wraps ``attempts.integrate`` to read it): what the rivals can buy there.
 
-    .venv/bin/python bench/track_near.py [--logs intel aces fhw csail edmonton freiburg-079]
+    .venv/bin/python -m bench.track_near [--logs intel aces fhw csail edmonton freiburg-079]
         [--robots 4] [--jobs 2]
 """
 
@@ -46,9 +46,8 @@ from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
-from fit_confidence import DATA  # noqa: E402  (bench/ is on a script's path)
-from reference_check import right  # noqa: E402
 
+from bench.harness import carmen_log, present_logs, right  # noqa: E402
 from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
@@ -105,7 +104,7 @@ def observe(name: str, robots: int) -> dict[str, list[Any]]:
     mapper.match_scan, attempts.close_to = watched_match_scan, watched_close_to
     attempts.integrate = watched_integrate
     try:
-        scans = read_carmen(DATA / f"{name}.log.gz")
+        scans = read_carmen(carmen_log(name))
         stamps, _ = monotonic_stamps(np.array([s.timestamp for s in scans]), name)
         extraction = ExtractionConfig()
         found: dict[str, list[Any]] = {"alone": [], "rivals": [], "far": []}
@@ -196,9 +195,7 @@ def main() -> None:
     parser.add_argument("--robots", type=int, default=4)
     parser.add_argument("--jobs", type=int, default=1)
     args = parser.parse_args()
-    logs = [name for name in args.logs if (DATA / f"{name}.log.gz").is_file()]
-    for name in sorted(set(args.logs) - set(logs)):
-        print(f"{name}: skipped, {DATA / f'{name}.log.gz'} not found")
+    logs = present_logs(args.logs)
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         results = dict(zip(logs, pool.map(observe, logs, [args.robots] * len(logs)), strict=True))
     for kind, title in (("alone", "refined alone"), ("rivals", "refined with its rivals")):

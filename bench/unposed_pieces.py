@@ -14,7 +14,7 @@ outside the main piece is then judged with the reference (the mapper never sees 
 - **guess**: whether the front end's best match when the robot was lost (``LostFrom``, the
   guess the back end searches around) is right within 0.30 m / 5 deg of the reference.
 
-    .venv/bin/python bench/unposed_pieces.py [--logs intel aces fhw csail edmonton]
+    .venv/bin/python -m bench.unposed_pieces [--logs intel aces fhw csail edmonton]
         [--robots 4 2] [--jobs 2] [--set NAME=VALUE ...]
 
 Prints one Markdown table (unposed scans by overlap, and of those that do not overlap, by
@@ -28,23 +28,14 @@ import os
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
-import argparse  # noqa: E402
-import dataclasses  # noqa: E402
 from collections import Counter  # noqa: E402
-from collections.abc import Callable  # noqa: E402
-from concurrent.futures import ProcessPoolExecutor  # noqa: E402
-from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
-from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
+from bench.harness import judge_every_run, map_run  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
-from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
-from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
-from multi_robot_mapper.core.local_mapping import LocalMapper, LocalMapperConfig  # noqa: E402
 from multi_robot_mapper.evaluation.metrics import (  # noqa: E402
     PAIR_ROTATION_RAD,
     PAIR_TRANSLATION_M,
@@ -52,11 +43,8 @@ from multi_robot_mapper.evaluation.metrics import (  # noqa: E402
 from multi_robot_mapper.io.carmen import (  # noqa: E402
     CarmenScan,
     carmen_scan_data,
-    monotonic_stamps,
-    read_carmen,
 )
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "carmen"
 OVERLAP_DISTANCE = 0.30  # m: a return this close to one of the main piece's sees the same wall
 OVERLAPS = 0.30  # share of a piece's returns near the main piece's: the piece overlaps it
 
@@ -70,34 +58,6 @@ def returns_at_reference(scan: CarmenScan) -> np.ndarray:
     kept = np.isfinite(ranges) & (ranges > data.range_min) & (ranges < data.range_max)
     points = np.c_[ranges[kept] * np.cos(bearings[kept]), ranges[kept] * np.sin(bearings[kept])]
     return se2.transform_points(se2.matrix_from_pose(*scan.reference_pose), points)
-
-
-@dataclasses.dataclass
-class MappedRun:
-    """One robot's run of a CARMEN log, mapped by one LocalMapper (back end in line)."""
-
-    scans: list[CarmenScan]  # the whole log's scans (with their reference poses)
-    start: int  # the run's scans are scans[start:stop]
-    stop: int
-    mapper: LocalMapper
-    index_of: dict[float, int]  # a scan's stamp -> its index in ``scans``
-
-
-def map_run(name: str, robots: int, robot: int, overrides: dict[str, Any]) -> MappedRun:
-    """Map robot ``robot`` (0-based) of log ``name`` cut into ``robots`` consecutive runs
-    (as ``mrm import-carmen`` cuts it)."""
-    path = DATA / f"{name}.log.gz"
-    scans = read_carmen(path)
-    stamps, _ = monotonic_stamps(np.array([s.timestamp for s in scans]), path.name)
-    start, stop = split_runs(len(scans), robots, 0)[robot]
-    mapper = LocalMapper(config_from_flat(LocalMapperConfig, overrides))
-    extraction = ExtractionConfig()
-    for index in range(start, stop):
-        data = carmen_scan_data(scans[index])
-        segments, _ = extract_scan(data, extraction)
-        mapper.add_scan(float(stamps[index]), segments, data)
-    index_of = {float(stamps[i]): i for i in range(start, stop)}
-    return MappedRun(scans, start, stop, mapper, index_of)
 
 
 def judge_run(
@@ -163,32 +123,6 @@ def judge_run(
         )
     rows.append({"log": name, "robots": robots, "robot": robot + 1, "total": stop - start})
     return rows
-
-
-Rows = list[dict[str, Any]]
-
-
-def judge_every_run(judge: Callable[[str, int, int, dict[str, Any]], Rows], doc: str) -> list[Rows]:
-    """The command line these benches share (``--logs``, ``--robots``, ``--jobs``, ``--set``),
-    and ``judge(log, robots, robot, overrides)`` called for every robot's run of every log
-    cut into each robot count, in ``--jobs`` processes; the results in that order."""
-    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
-    parser.add_argument("--logs", nargs="+", default=["intel", "aces", "fhw", "csail", "edmonton"])
-    parser.add_argument("--robots", nargs="+", type=int, default=[4, 2])
-    parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--set", dest="overrides", action="append", default=[])
-    args = parser.parse_args()
-    overrides = dict(parse_override(o) for o in args.overrides)
-    cases = [
-        (name, robots, robot)
-        for name in args.logs
-        if (DATA / f"{name}.log.gz").is_file()
-        for robots in args.robots
-        for robot in range(robots)
-    ]
-    with ProcessPoolExecutor(args.jobs) as pool:
-        names, counts, robots_ = (list(column) for column in zip(*cases, strict=True))
-        return list(pool.map(judge, names, counts, robots_, [overrides] * len(cases)))
 
 
 def main() -> None:

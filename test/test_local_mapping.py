@@ -26,7 +26,6 @@ from multi_robot_mapper.core.local_mapping import (
     LocalMapperConfig,
     LocalUpdate,
     attempts,
-    context_model,
     keyframe_map,
 )
 from multi_robot_mapper.core.local_mapping.held import OUTLIER
@@ -45,7 +44,8 @@ from multi_robot_mapper.core.worlds import WORLDS, box
 def as_matched(monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """Every context keeps the match confidence as it is: a fake INTEGRATE's confidences are
     then the ones the front end decides on."""
-    monkeypatch.setattr(context_model, "CALIBRATION", {c: (1.0, 0.0) for c in attempts.CONTEXTS})
+    calibration = {c: attempts.ContextCalibration(1.0, 0.0) for c in attempts.CONTEXTS}
+    monkeypatch.setattr(attempts, "installed_context_model", lambda: calibration)
 
 
 def _only_the_last_scan(segments: np.ndarray, scan: LaserScanData) -> attempts.References:
@@ -515,15 +515,15 @@ def test_a_search_that_is_not_confident_is_searched_again_with_the_shapes(
 
 
 @pytest.mark.parametrize("context", attempts.CONTEXTS)
-def test_a_context_shifts_the_odds_by_its_prior(monkeypatch, context: str) -> None:  # type: ignore[no-untyped-def]
+def test_a_context_shifts_the_odds_by_its_prior(context: str) -> None:
     # Bayes' rule: a context whose matches are right four times as often at the same evidence
     # multiplies the odds by 4 (intercept log 4, slope 1); no shift keeps the confidence.
-    monkeypatch.setattr(context_model, "CALIBRATION", {context: (1.0, float(np.log(4.0)))})
-    assert attempts.in_context(0.5, context) == pytest.approx(0.8)
-    assert attempts.in_context(0.2, context) == pytest.approx(0.5)  # odds 1/4 -> 1
-    monkeypatch.setattr(context_model, "CALIBRATION", {context: (1.0, 0.0)})
+    prior = {context: attempts.ContextCalibration(1.0, float(np.log(4.0)))}
+    assert attempts.in_context(0.5, context, prior) == pytest.approx(0.8)
+    assert attempts.in_context(0.2, context, prior) == pytest.approx(0.5)  # odds 1/4 -> 1
+    unshifted = {context: attempts.ContextCalibration(1.0, 0.0)}
     for p in (0.01, 0.3, 0.77, 0.999):
-        assert attempts.in_context(p, context) == pytest.approx(p)
+        assert attempts.in_context(p, context, unshifted) == pytest.approx(p)
 
 
 @given(
@@ -537,7 +537,7 @@ def test_more_evidence_never_means_less_confidence_in_any_context(
     # The fitted calibration is monotone (a positive slope in every context), and a
     # probability stays one.
     low, high = sorted((p, q))
-    assert context_model.CALIBRATION[context][0] > 0.0
+    assert attempts.installed_context_model()[context].slope > 0.0
     assert 0.0 <= attempts.in_context(low, context) <= attempts.in_context(high, context) <= 1.0
 
 
@@ -551,8 +551,10 @@ def test_the_front_end_decides_on_the_confidence_in_context(
     # matches are right four times as often (odds x 4: 0.857 >= integrate_confidence 0.8) the
     # scan is integrated; with the confidence as matched it is not, and the robot is lost.
     shift = {"search": float(np.log(search_prior))}
-    calibration = {c: (1.0, shift.get(c, 0.0)) for c in attempts.CONTEXTS}
-    monkeypatch.setattr(context_model, "CALIBRATION", calibration)
+    calibration = {
+        c: attempts.ContextCalibration(1.0, shift.get(c, 0.0)) for c in attempts.CONTEXTS
+    }
+    monkeypatch.setattr(attempts, "installed_context_model", lambda: calibration)
     monkeypatch.setattr(attempts, "integrate", lambda *a, **k: fake_match((0.4, 0.0, 0.0), 0.6))
     scan = stranger_scan()
     segments, _ = extract_scan(scan, EXTRACTION)

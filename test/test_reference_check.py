@@ -5,12 +5,10 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
-import sys
 from types import ModuleType
 
 import numpy as np
 import pytest
-from conftest import REPO
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.simulation import LaserModel, simulate_robots
@@ -23,11 +21,7 @@ MIDDLE = 2  # the scan whose reference is made wrong, in units of STRIDE
 
 @pytest.fixture(scope="module")
 def reference_check() -> ModuleType:
-    sys.path.insert(0, str(REPO / "bench"))
-    try:
-        return importlib.import_module("reference_check")
-    finally:
-        sys.path.remove(str(REPO / "bench"))
+    return importlib.import_module("bench.reference_check")
 
 
 @pytest.fixture(scope="module")

@@ -6,14 +6,18 @@ scan is matched (:func:`match_scan`)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
+import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from importlib import resources
+from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.local_mapping import context_model
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeScan
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
@@ -23,6 +27,7 @@ from multi_robot_mapper.core.matching.confidence import (
     RIGHT_ANGLE,
     RIGHT_DISTANCE,
     TRACK_TURNS,
+    model_number,
 )
 from multi_robot_mapper.core.matching.shape import Shape, match_shapes, shape_of_scan
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
@@ -69,7 +74,67 @@ def close_to(a: Pose, b: Pose, distance: float, angle: float) -> bool:
 CONTEXTS = ("track", "search", "recent", "other")
 
 
-def in_context(confidence: float, context: str) -> float:
+CONTEXT_MODEL_FILE = "context_model.json"
+
+
+@dataclasses.dataclass(frozen=True)
+class ContextCalibration:
+    """Platt scaling of one context: log-odds in context = slope * log-odds of the match
+    confidence + intercept."""
+
+    slope: float
+    intercept: float
+
+
+def load_context_model(
+    text: str, source: str = CONTEXT_MODEL_FILE
+) -> Mapping[str, ContextCalibration]:
+    """The calibration of each of :data:`CONTEXTS` in a ``context_model.json`` text (``source``
+    names the file in errors), read-only. Every context needs a finite intercept and a
+    positive finite slope (more evidence never means less confidence); ValueError, naming
+    ``source`` and what is wrong, otherwise."""
+    try:
+        data: Any = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{source}: not JSON ({error})") from None
+    contexts = data.get("contexts") if isinstance(data, dict) else None
+    if not isinstance(contexts, dict):
+        raise ValueError(f"{source}: expected an object with 'contexts'")
+    if set(contexts) != set(CONTEXTS):
+        raise ValueError(
+            f"{source}: calibrates contexts {sorted(contexts)}, the front end asks {list(CONTEXTS)}"
+        )
+    model = {}
+    for context in CONTEXTS:
+        entry = contexts[context] if isinstance(contexts[context], dict) else {}
+        slope, intercept = (
+            model_number(entry.get(key), f"{source}: {context} {key}")
+            for key in ("slope", "intercept")
+        )
+        if slope <= 0.0:
+            raise ValueError(f"{source}: {context} slope {slope} must be positive")
+        model[context] = ContextCalibration(slope, intercept)
+    return MappingProxyType(model)
+
+
+def context_model_json(model: Mapping[str, ContextCalibration], fitted: str, command: str) -> str:
+    """``context_model.json``'s text for ``model`` (what :func:`load_context_model` reads),
+    with how and on what it was ``fitted`` and the ``command`` that fitted it."""
+    contexts = {c: dataclasses.asdict(model[c]) for c in CONTEXTS}
+    data = {"contexts": contexts, "fitted": fitted, "command": command}
+    return json.dumps(data, indent=2) + "\n"
+
+
+@functools.cache
+def installed_context_model() -> Mapping[str, ContextCalibration]:
+    """The calibration shipped with the package (``context_model.json``), read once."""
+    path = resources.files(__package__).joinpath(CONTEXT_MODEL_FILE)
+    return load_context_model(path.read_text(encoding="utf-8"), str(path))
+
+
+def in_context(
+    confidence: float, context: str, model: Mapping[str, ContextCalibration] | None = None
+) -> float:
     """P(right) of a front-end match with this :mod:`~core.matching.confidence`, given its
     context (:data:`CONTEXTS`).
 
@@ -80,10 +145,11 @@ def in_context(confidence: float, context: str) -> float:
     match against another piece's keyframe 23 % (``bench/fit_placement.py``, README
     "Confidence in context"). Bayes' rule moves the log-odds by each context's prior; a
     slope lets the evidence count more or less there too (Platt scaling, fitted per context
-    on the front end's own matches with the reference, written into :mod:`context_model`)."""
-    slope, intercept = context_model.CALIBRATION[context]
+    on the front end's own matches with the reference, written into ``context_model.json``:
+    :func:`installed_context_model`, unless ``model`` is given)."""
+    calibration = (installed_context_model() if model is None else model)[context]
     p = min(max(confidence, 1e-9), 1.0 - 1e-9)
-    z = slope * float(np.log(p / (1.0 - p))) + intercept
+    z = calibration.slope * float(np.log(p / (1.0 - p))) + calibration.intercept
     return float(1.0 / (1.0 + np.exp(-np.clip(z, -50.0, 50.0))))
 
 
