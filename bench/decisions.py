@@ -451,10 +451,18 @@ def _write_records(
     (Path(work) / "records" / f"{stem}.json").write_text(json.dumps(out))
 
 
+class _CaseUnpickler(pickle.Unpickler):
+    """Reads the cases kept before bench/ became a package, whose pickles name the module
+    ``scenarios`` (then imported from bench/ on sys.path), as ``bench.scenarios``."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        return super().find_class("bench.scenarios" if module == "scenarios" else module, name)
+
+
 def judge_one(stem: str, work: str, overrides: dict[str, Any]) -> str:
     """Re-run one kept scenario's decisions with today's code (module doc)."""
     with open(Path(work) / "cases" / f"{stem}.pkl", "rb") as handle:
-        kept = pickle.load(handle)
+        kept = _CaseUnpickler(handle).load()
     old = json.loads((Path(work) / "records" / f"{stem}.json").read_text())
     config = config_from_flat(MergeConfig, overrides)
     truth = dataclasses.replace(

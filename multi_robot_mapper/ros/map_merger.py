@@ -17,10 +17,11 @@ Topics (the merger's own are relative to its namespace):
                               in ``map_frame``, for merged robots only (an unmerged robot gets
                               nothing, and a throttled log line); reliable, transient local
   pub ``robot_frames/<ns>/probability``  std_msgs/Float64: the probability that the robot's
-                              placement is right (the product of its joins' probabilities, the
-                              join model's), with every placement; 0 once a robot placed before
-                              is placed no more (its last ``robot_frames`` pose is withdrawn);
-                              reliable, transient local
+                              placement is right (from its paths of joins to the reference,
+                              each the product of its joins' probabilities, the join model's:
+                              docs/evidence_model.md), with every placement; 0 once a robot
+                              placed before is placed no more (its last ``robot_frames`` pose
+                              is withdrawn); reliable, transient local
   pub ``robot_poses/<ns>``    geometry_msgs/PoseStamped: the robot's newest pose moved into
                               ``map_frame`` (T_map_laser), one per pose it sends while merged,
                               stamped with that pose's stamp

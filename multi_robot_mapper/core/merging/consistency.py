@@ -31,7 +31,7 @@ refused. Three robots that see each other check each other.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -385,6 +385,8 @@ class Accepted:
     refused: list[PairVerdict]  # consistent within the pair, refused over the groups
     groups: list[list[UnitKey]]  # connected maps, largest first
     tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]]  # spanning tree adjacency
+    # each group's maps placed rigidly in its root's frame along the tree, by root
+    placed: dict[UnitKey, dict[UnitKey, FloatArray]] = dataclasses.field(default_factory=dict)
 
 
 # Why a pair was refused over the groups (the start of PairVerdict.reason).
@@ -444,7 +446,7 @@ def accept_pairs(
         group_a, group_b = placed[root(a)], placed[root(b)]
         T_ra_rb = group_a[a] @ placement(verdict, a, units) @ se2.invert(group_b[b])
         joined = {**group_a, **{key: T_ra_rb @ T for key, T in group_b.items()}}
-        judged = _judge_join(
+        judged = judge_join(
             verdict,
             joined,
             (group_a, group_b, T_ra_rb),
@@ -463,17 +465,20 @@ def accept_pairs(
         tree[a].append((b, judged))
         tree[b].append((a, judged))
         taken.append(judged)
-    groups: dict[UnitKey, list[UnitKey]] = {}
-    for key in units:
-        groups.setdefault(root(key), []).append(key)
-    ordered = sorted(
-        (sorted(g) for g in groups.values()),
+    return Accepted(taken, refused, ordered_groups(placed.values(), units), tree, placed)
+
+
+def ordered_groups(
+    groups: Iterable[Iterable[UnitKey]], units: Mapping[UnitKey, MapUnit]
+) -> list[list[UnitKey]]:
+    """Groups of maps, most robots first, then the longest maps."""
+    return sorted(
+        (sorted(g) for g in groups),
         key=lambda g: (-len({robot for robot, _ in g}), -sum(units[k].length for k in g), g),
     )
-    return Accepted(taken, refused, ordered, tree)
 
 
-def _judge_join(
+def judge_join(
     verdict: PairVerdict,
     joined: Mapping[UnitKey, FloatArray],
     groups: tuple[Mapping[UnitKey, FloatArray], Mapping[UnitKey, FloatArray], FloatArray],

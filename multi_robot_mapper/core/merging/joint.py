@@ -37,7 +37,6 @@ segments in its own frame). Each piece of each robot is a map of its own (a
 from __future__ import annotations
 
 import dataclasses
-import heapq
 import time
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
@@ -59,6 +58,7 @@ from multi_robot_mapper.core.merging.consistency import (
     consistent_set,
     seen_through_near,
 )
+from multi_robot_mapper.core.merging.corroboration import chain_probabilities, corroborate
 from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.global_map import FusionCache, fuse_keyframes
 from multi_robot_mapper.core.merging.joint_graph import Solution, solved
@@ -149,25 +149,18 @@ def merge_joint(
         new_state.intra, new_state.seen = state.intra, state.seen
         new_state.fusion = state.fusion
     verdicts = _verdicts(units, matches, config, model, state, new_state)
-    accepted = accept_pairs(
-        list(verdicts.values()),
-        units,
-        config,
-        model,
-        robot_reaches(units, config.max_speed),
-        lambda group_a, group_b, T: group_conflict(
-            group_a,
-            group_b,
-            T,
-            units,
-            {key: target_of(units[key], config) for key in (*group_a, *group_b)},
-            config,
-        ),
-    )
+    reaches = robot_reaches(units, config.max_speed)
+
+    def conflict(group_a: Any, group_b: Any, T: FloatArray) -> float:
+        targets = {key: target_of(units[key], config) for key in (*group_a, *group_b)}
+        return group_conflict(group_a, group_b, T, units, targets, config)
+
+    accepted = accept_pairs(list(verdicts.values()), units, config, model, reaches, conflict)
+    accepted = corroborate(accepted, verdicts.values(), units, config, model, reaches, conflict)
     checked = time.perf_counter()
     previous_reference = None if previous is None else previous.reference
     group, ref_unit = _reference(accepted, units, chosen, previous_reference)
-    chains = _chain_probabilities(ref_unit, accepted)
+    chains = chain_probabilities(ref_unit, [(*v.pair, v.probability) for v in accepted.pairs])
     group = [key for key in group if chains.get(key, 0.0) >= config.join_probability]
     new_state.solution = solved(
         units,
@@ -317,33 +310,6 @@ def _reference(
     mains = [key for key in group if key[1] == 0]
     pool = mains or group
     return group, max(pool, key=lambda key: (units[key].length, [-ord(c) for c in key[0]]))
-
-
-def _chain_probabilities(ref_unit: UnitKey | None, accepted: Accepted) -> dict[UnitKey, float]:
-    """The probability that each map joined to the reference is placed right: the largest
-    product of join probabilities along a path of accepted joins from the reference (the
-    tree's, and those that close its cycles: each agrees with the tree, so every path puts
-    the map in the same place, and the map is right when every join of one path is; each
-    join's evidence is its own). A map below ``join_probability`` is not placed."""
-    if ref_unit is None:
-        return {}
-    neighbours: dict[UnitKey, list[tuple[UnitKey, float]]] = {}
-    for verdict in accepted.pairs:
-        a, b = verdict.pair
-        neighbours.setdefault(a, []).append((b, verdict.probability))
-        neighbours.setdefault(b, []).append((a, verdict.probability))
-    # Dijkstra on -log P: the most probable path first.
-    chains: dict[UnitKey, float] = {}
-    frontier: list[tuple[float, UnitKey]] = [(-1.0, ref_unit)]
-    while frontier:
-        negative, key = heapq.heappop(frontier)
-        if key in chains:
-            continue
-        chains[key] = -negative
-        for other, probability in neighbours.get(key, []):
-            if other not in chains:
-                heapq.heappush(frontier, (negative * probability, other))
-    return chains
 
 
 # --- the result ---------------------------------------------------------------------------

@@ -30,7 +30,7 @@ def unmerged_reason(
     if main in chains:
         return (
             f"placement probability {chains[main]:.3f} below join_probability "
-            f"{config.join_probability:g} (the product of its joins to {ref_unit[0]})"
+            f"{config.join_probability:g} (its paths of joins to {ref_unit[0]})"
         )
     group = next((g for g in accepted.groups if main in g), [main])
     others = sorted({key[0] for key in group} - {robot})
