@@ -367,8 +367,8 @@ class MergeConfig:
         0.99,
         unit="",
         doc="the probability that a placement is right (the join model's, fitted on generated "
-        "buildings and shared logs: docs/evidence_model.md) that joining two maps needs (one "
-        "set, or several agreeing sets together), and that a robot's placement (over its "
+        "buildings and shared logs: docs/evidence_model.md) that joining two maps needs, and "
+        "that a robot's placement (over its "
         "paths of joins to the reference) needs to be published; below it a robot is "
         "unmerged, with the reason. The one threshold of every merge decision: lower it to "
         "merge sooner at more risk of a wrong map",

@@ -58,7 +58,6 @@ from multi_robot_mapper.core.merging.consistency import (
     consistent_set,
     seen_through_near,
 )
-from multi_robot_mapper.core.merging.corroboration import chain_probabilities, corroborate
 from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.global_map import FusionCache, fuse_keyframes
 from multi_robot_mapper.core.merging.joint_graph import Solution, solved
@@ -79,6 +78,7 @@ from multi_robot_mapper.core.merging.place_matching import (
     match_places,
     target_of,
 )
+from multi_robot_mapper.core.merging.placement_paths import chain_probabilities
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey, units_of
 from multi_robot_mapper.core.merging.unmerged import unmerged_reason
 
@@ -156,7 +156,6 @@ def merge_joint(
         return group_conflict(group_a, group_b, T, units, targets, config)
 
     accepted = accept_pairs(list(verdicts.values()), units, config, model, reaches, conflict)
-    accepted = corroborate(accepted, verdicts.values(), units, config, model, reaches, conflict)
     checked = time.perf_counter()
     previous_reference = None if previous is None else previous.reference
     group, ref_unit = _reference(accepted, units, chosen, previous_reference)
