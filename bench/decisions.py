@@ -453,7 +453,7 @@ def _write_records(
 
 class _CaseUnpickler(pickle.Unpickler):
     """Reads the cases kept before bench/ became a package, whose pickles name the module
-    ``scenarios`` (then imported from bench/ on sys.path), as ``bench.scenarios``."""
+    ``scenarios`` (then a top-level module), as ``bench.scenarios``."""
 
     def find_class(self, module: str, name: str) -> Any:
         return super().find_class("bench.scenarios" if module == "scenarios" else module, name)
