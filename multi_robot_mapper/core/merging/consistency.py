@@ -385,8 +385,6 @@ class Accepted:
     refused: list[PairVerdict]  # consistent within the pair, refused over the groups
     groups: list[list[UnitKey]]  # connected maps, largest first
     tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]]  # spanning tree adjacency
-    # each group's maps placed rigidly in its root's frame along the tree, by root
-    placed: dict[UnitKey, dict[UnitKey, FloatArray]] = dataclasses.field(default_factory=dict)
 
 
 # Why a pair was refused over the groups (the start of PairVerdict.reason).
@@ -446,7 +444,7 @@ def accept_pairs(
         group_a, group_b = placed[root(a)], placed[root(b)]
         T_ra_rb = group_a[a] @ placement(verdict, a, units) @ se2.invert(group_b[b])
         joined = {**group_a, **{key: T_ra_rb @ T for key, T in group_b.items()}}
-        judged = judge_join(
+        judged = _judge_join(
             verdict,
             joined,
             (group_a, group_b, T_ra_rb),
@@ -465,10 +463,10 @@ def accept_pairs(
         tree[a].append((b, judged))
         tree[b].append((a, judged))
         taken.append(judged)
-    return Accepted(taken, refused, ordered_groups(placed.values(), units), tree, placed)
+    return Accepted(taken, refused, _ordered_groups(placed.values(), units), tree)
 
 
-def ordered_groups(
+def _ordered_groups(
     groups: Iterable[Iterable[UnitKey]], units: Mapping[UnitKey, MapUnit]
 ) -> list[list[UnitKey]]:
     """Groups of maps, most robots first, then the longest maps."""
@@ -478,7 +476,7 @@ def ordered_groups(
     )
 
 
-def judge_join(
+def _judge_join(
     verdict: PairVerdict,
     joined: Mapping[UnitKey, FloatArray],
     groups: tuple[Mapping[UnitKey, FloatArray], Mapping[UnitKey, FloatArray], FloatArray],
