@@ -2,7 +2,12 @@
 another is right, from its evidence (``core/evidence/model.py``).
 
     .venv/bin/python -m bench.fit_join [--work bench_output/decisions ...] [--write]
-        [--figure docs/figures/join_reliability.png]
+        [--figure docs/figures/join_reliability.png] [--decisions merger|backend]
+
+``--decisions backend`` fits the local back end's model instead (``decision_model.json``) on
+the loop closures and joins of pieces it weighed (``bench/backend_decisions.py``, or
+``bench/decisions.py collect --maps own``), each judged by the truth; held out by scenario
+as the merger's.
 
 Reads every pair of maps' consistent set that ``bench/decisions.py collect`` (or ``judge``)
 recorded, each with its evidence and whether its placement is right by the truth; a set seen
@@ -35,7 +40,9 @@ from scipy.optimize import minimize
 
 from bench.harness import OUTPUT, REPO
 from multi_robot_mapper.core.evidence.model import (
+    DECISION_MODEL_FILE,
     FEATURES,
+    MERGER_FEATURES,
     MODEL_FILE,
     JoinModel,
     join_features,
@@ -59,7 +66,9 @@ def features_of(record: dict[str, Any]) -> list[float] | None:
     return _features(ways, record["seen_through"][1])  # type: ignore[arg-type]
 
 
-def _features(ways: list[dict[str, float]], conflict: float) -> list[float]:
+def _features(
+    ways: list[dict[str, float]], conflict: float, piece_join: bool = False
+) -> list[float]:
     """The features of a decision measured one or two ways, as the merger computes them
     (evidence.model.join_features); a record's matched wall is its score plus the free-space
     weight times its conflict (the score's two parts)."""
@@ -76,28 +85,41 @@ def _features(ways: list[dict[str, float]], conflict: float) -> list[float]:
         )
         for w in ways
     ]
-    values = join_features(evidence, conflict)
+    values = join_features(evidence, conflict, piece_join)
     return [values[name] for name in FEATURES]
 
 
-def load(works: list[str]) -> tuple[np.ndarray, np.ndarray, list[str], list[str]]:
-    """(features, right, scenario of each set, source of each set), each set once."""
+def load(
+    works: list[str], decisions: str = "merger"
+) -> tuple[np.ndarray, np.ndarray, list[str], list[str]]:
+    """(features, right, scenario of each set, source of each set), each set once: the
+    merger's sets, or with ``decisions`` "backend" the back end's closures and joins."""
     rows, labels, groups, sources = [], [], [], []
     seen: set[tuple[Any, ...]] = set()
     for work in works:
         for path in sorted((Path(work) / "records").glob("*.json")):
             case = json.loads(path.read_text())
             source = f"{case['description'].get('source', '?')}/{case['maps']}"
-            for item in case.get("closures", []):
+            bent: set[str] = set()  # robots a wrong decision has already bent (below)
+            for item in case.get("closures", []) if decisions == "backend" else []:
                 if item["kind"] != "weighed":
                     continue  # accepted closures and joins, judged (the weighed ones are here)
-                way = {k: item[k] for k in ("score", "rival", "conflict", "wall") if k in item}
-                values = _features([way, way], 0.0)
+                if item["robot"] in bent:
+                    # After a wrong decision was weighed (and, with the gate open, made), the
+                    # robot's map is bent by it and every later decision is judged against a
+                    # truth its map no longer holds: the first wrong one counts, not its
+                    # consequences (generated building 1: 1 wrong join, then 100 "wrong").
+                    continue
+                if not item["right"]:
+                    bent.add(item["robot"])
+                keys = ("score", "rival", "conflict", "wall", "matched")
+                way = {k: item[k] for k in keys if k in item}
+                values = _features([way, way], 0.0, item["weighed_kind"] == "join")
                 rows.append(values)
                 labels.append(bool(item["right"]))
                 groups.append(case["scenario"])
                 sources.append(f"{source}/{item['weighed_kind']}")
-            for update in case["updates"]:
+            for update in case["updates"] if decisions == "merger" else []:
                 for record in update["verdicts"]:
                     values = features_of(record)
                     if values is None or not record.get("judged", True):
@@ -126,12 +148,22 @@ SIGNS = {
     "rival_ratio": -1,
     "conflict": -1,
     "conflict_share": -1,
+    "piece_join": -1,  # a join of pieces is never likelier right than a closure on such evidence
 }
+# The back end's decisions are mostly right whatever their evidence (most candidates the
+# graph's prediction and the match's confidence let through are): free to take any sign, the
+# score's weight went negative against the margin's, and a placement that explains no wall
+# (score 0, 12.8 m of it in free space) was given 0.99 (csail 2). More wall explained never
+# makes a decision less likely.
+BACKEND_SIGNS = {**SIGNS, "log_score": 1}
 
 
-def fit(x: np.ndarray, y: np.ndarray, l2: float) -> tuple[float, np.ndarray]:
+def fit(
+    x: np.ndarray, y: np.ndarray, l2: float, signs: dict[str, int] = SIGNS
+) -> tuple[float, np.ndarray]:
     """Maximum-likelihood logistic regression, L2 penalty on standardised features, each
-    weight of the sign :data:`SIGNS` allows: (intercept, weights) on the raw features."""
+    weight of the sign ``signs`` allows (the features of ``x`` are ``signs``' keys in order,
+    a prefix of FEATURES): (intercept, weights) on the raw features."""
     mean, scale = x.mean(axis=0), x.std(axis=0) + 1e-9
     design = np.column_stack((np.ones(len(x)), (x - mean) / scale))
     target = y.astype(float)
@@ -145,8 +177,8 @@ def fit(x: np.ndarray, y: np.ndarray, l2: float) -> tuple[float, np.ndarray]:
         return float(nll + penalty), grad
 
     bounds = [(None, None)] + [
-        (0.0, None) if SIGNS[n] > 0 else (None, 0.0) if SIGNS[n] < 0 else (None, None)
-        for n in FEATURES
+        (0.0, None) if signs[n] > 0 else (None, 0.0) if signs[n] < 0 else (None, None)
+        for n in list(signs)[: x.shape[1]]
     ]
     w = minimize(loss, np.zeros(design.shape[1]), jac=True, method="L-BFGS-B", bounds=bounds).x
     weights = w[1:] / scale
@@ -158,7 +190,9 @@ def predict(model: tuple[float, np.ndarray], x: np.ndarray) -> np.ndarray:
     return np.asarray(1.0 / (1.0 + np.exp(-np.clip(z, -50, 50))))
 
 
-def held_out(x: np.ndarray, y: np.ndarray, groups: list[str], l2: float) -> np.ndarray:
+def held_out(
+    x: np.ndarray, y: np.ndarray, groups: list[str], l2: float, signs: dict[str, int] = SIGNS
+) -> np.ndarray:
     """Each set's probability from the fit on the folds without its scenario."""
     names = sorted(set(groups))
     rng = np.random.default_rng(0)
@@ -175,7 +209,7 @@ def held_out(x: np.ndarray, y: np.ndarray, groups: list[str], l2: float) -> np.n
         if y[train].all() or not y[train].any():
             out[test] = float(y[train].mean())
             continue
-        out[test] = predict(fit(x[train], y[train], l2), x[test])
+        out[test] = predict(fit(x[train], y[train], l2, signs), x[test])
     return out
 
 
@@ -211,20 +245,24 @@ def main() -> None:
     parser.add_argument(
         "--show", type=float, default=0.99, help="list the wrong sets held out at least this sure"
     )
+    parser.add_argument("--decisions", choices=("merger", "backend"), default="merger")
     args = parser.parse_args()
-    x, y, groups, sources = load(args.work)
+    x, y, groups, sources = load(args.work, args.decisions)
+    names = FEATURES if args.decisions == "backend" else MERGER_FEATURES
+    x = x[:, : len(names)]
     if len(y) == 0:
         raise SystemExit("no recorded sets: run bench/decisions.py collect first")
     print(
         f"{len(y)} sets ({int(y.sum())} right, {int((~y).sum())} wrong) from "
         f"{len(set(groups))} scenarios"
     )
-    losses = {l2: log_loss(held_out(x, y, groups, l2), y) for l2 in L2_GRID}
+    signs = BACKEND_SIGNS if args.decisions == "backend" else SIGNS
+    losses = {l2: log_loss(held_out(x, y, groups, l2, signs), y) for l2 in L2_GRID}
     l2 = min(losses, key=losses.__getitem__)
     print(
         "held-out log loss by penalty: " + ", ".join(f"{k:g}: {v:.4f}" for k, v in losses.items())
     )
-    p = held_out(x, y, groups, l2)
+    p = held_out(x, y, groups, l2, signs)
     print("\n| predicted | mean predicted | observed right | sets |\n| --- | --- | --- | --- |")
     for lo, hi, mean, observed, count in reliability(p, y):
         print(f"| {lo:g}-{hi:g} | {mean:.4f} | {observed:.4f} | {count} |")
@@ -243,23 +281,24 @@ def main() -> None:
     for k in doubtful:
         print(
             f"held out, P {p[k]:.4f} but wrong: {groups[k]} ({sources[k]}), features "
-            + ", ".join(f"{n} {v:.2f}" for n, v in zip(FEATURES, x[k], strict=True))
+            + ", ".join(f"{n} {v:.2f}" for n, v in zip(names, x[k], strict=True))
         )
-    intercept, weights = fit(x, y, l2)
+    intercept, weights = fit(x, y, l2, signs)
     print(
         "\nfit on every set: intercept "
         + f"{intercept:.5g}, "
-        + ", ".join(f"{n} {w:.5g}" for n, w in zip(FEATURES, weights, strict=True))
+        + ", ".join(f"{n} {w:.5g}" for n, w in zip(names, weights, strict=True))
     )
     if args.write:
         model = JoinModel(
-            FEATURES,
+            names,
             round(intercept, 6),
             tuple(round(float(w), 6) for w in weights),
             f"bench/fit_join.py on {date.today().isoformat()}: {len(y)} sets of "
             f"{len(set(groups))} scenarios ({', '.join(sorted(set(sources)))}), L2 {l2:g}",
         )
-        path = REPO / "multi_robot_mapper" / "core" / "evidence" / MODEL_FILE
+        name = MODEL_FILE if args.decisions == "merger" else DECISION_MODEL_FILE
+        path = REPO / "multi_robot_mapper" / "core" / "evidence" / name
         path.write_text(model.dumps())
         print(f"wrote {path}")
     if args.figure:

@@ -365,10 +365,10 @@ def own_snapshots(
         while pending and stamp - start > pending[0]:
             snapshots.append(mapper.keyframes())
             pending.pop(0)
-        segments, _ = extract_scan(scan, extraction)
         try:
+            segments, _ = extract_scan(scan, extraction)
             mapper.add_scan(float(stamp), segments, scan)
-        except Exception:  # as the node does: the map built so far is kept
+        except Exception:  # as the node does (a bad scan is dropped): the map so far is kept
             continue
     snapshots += [mapper.keyframes() for _ in pending]
     stamps = np.array([kf.stamp for kf in sorted(mapper.keyframes(), key=lambda k: k.index)])

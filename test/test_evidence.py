@@ -21,12 +21,13 @@ from test_merging import random_frames
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig, Drawing
 from multi_robot_mapper.core.evidence.model import (
+    DECISION_MODEL_FILE,
     FEATURES,
     JoinModel,
     installed_model,
     join_features,
 )
-from multi_robot_mapper.core.evidence.placement import placement_evidence
+from multi_robot_mapper.core.evidence.placement import PlacementEvidence, placement_evidence
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult
 from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.simulation import drive_path
@@ -198,6 +199,24 @@ def test_the_join_model_is_data_the_package_ships() -> None:
     }
     strong = dict(weak, margin=40.0, log_margin=math.log1p(40.0), rival_ratio=0.3)
     assert model.probability(strong) > model.probability(weak)
+
+
+def test_the_back_end_decision_model_weighs_a_join_of_pieces_below_a_closure() -> None:
+    # The back end's model (decision_model.json, fitted on its own closures and joins judged by
+    # the truth): the same evidence makes a loop closure, found where the robot's own graph
+    # predicts it, likelier right than a join of two pieces after a loss, found only within
+    # the robot's reach; and a rival as good as the placement makes either less likely.
+    model = installed_model(DECISION_MODEL_FILE)
+    assert JoinModel.load(model.dumps()) == model
+    assert set(model.features) <= set(FEATURES) and "piece_join" in model.features
+    evidence = PlacementEvidence(20.0, 5.0, 20.0, np.zeros(3), None, 0.0, 20.0)
+    rivalled = PlacementEvidence(20.0, 20.0, 20.0, np.zeros(3), None, 0.0, 20.0)
+    loop = model.probability(join_features([evidence]))
+    join = model.probability(join_features([evidence], piece_join=True))
+    assert join < loop
+    assert model.probability(join_features([rivalled])) < loop
+    # The merger's model never sees the back end's feature.
+    assert "piece_join" not in installed_model().features
 
 
 def test_a_wrong_join_does_not_move_the_reference() -> None:

@@ -227,3 +227,21 @@ def test_non_finite_fields_are_refused(field: str) -> None:
     values[field] = float("nan")
     with pytest.raises(ScanError, match=field):
         scan_points(LaserScanData(**values))
+
+
+def test_a_scan_error_crosses_a_process_boundary_whole() -> None:
+    # Raised in a worker process (a bench's pool, the back end's process) it comes back
+    # pickled: kind, message and field intact, not a TypeError from __init__.
+    import pickle
+
+    from multi_robot_mapper.core.scan import ScanError
+
+    error = pickle.loads(
+        pickle.dumps(ScanError("angles", "angle_increment is 0", "angle_increment"))
+    )
+    assert (error.kind, error.message, error.field) == (
+        "angles",
+        "angle_increment is 0",
+        "angle_increment",
+    )
+    assert str(error) == "angle_increment is 0"

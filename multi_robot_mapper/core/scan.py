@@ -43,6 +43,11 @@ class ScanError(ValueError):
         self.message = message
         self.field = field
 
+    def __reduce__(self) -> tuple[type[ScanError], tuple[str, str, str]]:
+        # Raised in a worker process, it crosses back pickled (bench pools, the back end's
+        # process): the default reduction would call __init__ with the message alone.
+        return (ScanError, (self.kind, self.message, self.field))
+
 
 @dataclasses.dataclass(frozen=True)
 class LaserScanData:

@@ -3,8 +3,15 @@
 of generated buildings and shared logs, whose truth is known, and checked held out by
 building (``bench/fit_join.py``, docs/evidence_model.md).
 
-The coefficients are data (``join_model.json`` beside this module, written by the fit), not
-code: a refit changes no line of the merger.
+The coefficients are data, not code: a refit changes no line of the merger. Two models share
+the features and the form, fitted on different decisions:
+
+- ``join_model.json``: a link between two robots' maps (the merger), whose placement nothing
+  bounds;
+- ``decision_model.json``: a loop closure or a join of pieces within one robot's map (the local
+  back end, ``bench/fit_join.py --decisions backend``), found where the robot's own graph
+  predicts it, after the match's confidence and the graph's gate: most such candidates are
+  right (a prior the merger's candidates do not have), so the same evidence means more.
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ from importlib import resources
 from multi_robot_mapper.core.evidence.placement import PlacementEvidence
 
 MODEL_FILE = "join_model.json"
+DECISION_MODEL_FILE = "decision_model.json"
 
 # The features, in the model's order (each a number of the decision's evidence):
 FEATURES = (
@@ -30,7 +38,14 @@ FEATURES = (
     "rival_ratio",  # the larger share of the placement's score a rival reaches (0-1+)
     "conflict",  # m of wall the placement puts in free space the robots saw, either way
     "conflict_share",  # that, as a share of the wall it matches (the larger way)
+    # 1 for a join of two pieces of one robot's map after it was lost, 0 otherwise (a loop
+    # closure, a link between robots): a loop closure is found where the robot's own graph
+    # predicts it, a join only within the robot's reach (decision_model.json: 8 of 82 joins
+    # wrong, 7 of 4326 closures, bench/fit_join.py --decisions backend)
+    "piece_join",
 )
+# The merger's model leaves out what only the back end's decisions have.
+MERGER_FEATURES = FEATURES[:-1]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,17 +79,20 @@ class JoinModel:
         return json.dumps(dataclasses.asdict(self), indent=2) + "\n"
 
 
-def installed_model() -> JoinModel:
-    """The model shipped with the package."""
-    text = resources.files(__package__).joinpath(MODEL_FILE).read_text(encoding="utf-8")
+def installed_model(name: str = MODEL_FILE) -> JoinModel:
+    """A model shipped with the package: the join model (default) or ``DECISION_MODEL_FILE``."""
+    text = resources.files(__package__).joinpath(name).read_text(encoding="utf-8")
     return JoinModel.load(text)
 
 
-def join_features(ways: Sequence[PlacementEvidence], conflict: float = 0.0) -> dict[str, float]:
+def join_features(
+    ways: Sequence[PlacementEvidence], conflict: float = 0.0, piece_join: bool = False
+) -> dict[str, float]:
     """The model's features of a decision from its evidence (:mod:`.placement`), measured one
     way or both (the weaker way counts): margin and score (m), the rival's share, the walls
     in free space (m; the larger of the ways' and ``conflict``, measured over more of the
-    maps: of every map of the groups a join makes) and their share of the wall matched."""
+    maps: of every map of the groups a join makes) and their share of the wall matched; and
+    whether it joins two pieces of one robot's map."""
     score = min(w.score for w in ways)
     margin = min(w.margin for w in ways)
     return {
@@ -84,4 +102,5 @@ def join_features(ways: Sequence[PlacementEvidence], conflict: float = 0.0) -> d
         "rival_ratio": max(w.rival_ratio for w in ways),
         "conflict": max(conflict, *(w.conflict for w in ways)),
         "conflict_share": max(w.conflict_share for w in ways),
+        "piece_join": float(piece_join),
     }

@@ -61,8 +61,9 @@ class LocalMapperConfig:
         unit="",
         doc="a loop closure or a join of two pieces of map is made only when the evidence "
         "model's probability that it is right reaches this: the walls it moves, each counted "
-        "once, against their best rival placement on the whole map they are placed on "
-        "(core/evidence, the same model and threshold as the merger's join_probability)",
+        "once, against their best rival placement where the robot can have been "
+        "(core/evidence: the model fitted on the back end's own decisions, "
+        "decision_model.json; the same threshold as the merger's join_probability)",
         minimum=0.5,
         maximum=0.999999,
     )

@@ -132,9 +132,10 @@ def moved_to(
     )
 
 
-def probability_of(evidence: PlacementEvidence, model: JoinModel) -> float:
-    """P(right) of a decision with this evidence (the join model's)."""
-    return model.probability(join_features([evidence]))
+def probability_of(evidence: PlacementEvidence, model: JoinModel, kind: str = "loop") -> float:
+    """P(right) of a decision of ``kind`` ("loop" or "join") with this evidence (the back
+    end's decision model)."""
+    return model.probability(join_features([evidence], piece_join=kind == "join"))
 
 
 def _thinned(poses: FloatArray, spacing: float, most: int) -> IntArray:

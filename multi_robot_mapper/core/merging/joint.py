@@ -285,8 +285,8 @@ def _reference(
 ) -> tuple[list[UnitKey], UnitKey | None]:
     """The group of maps placed in ``map`` and its reference map: the chosen robot's (its
     group), else the previous reference's while its group is as large as any, else the
-    largest group (with no two robots linked, the first robot's main map by name); within it
-    a robot's main frame (piece 0), longest first."""
+    largest group (with no two robots linked, the first robot by name, its longest map);
+    within it a robot's main frame (piece 0), longest first."""
     if not accepted.groups:
         return [], None
 
@@ -302,9 +302,15 @@ def _reference(
         if holding and (must or robots_in(holding[0]) == size):
             return holding[0], (wanted, 0)
     if size == 1:
-        # No two robots linked: the first robot by name (its main map) is ``map``, whatever
-        # the lengths of the maps so far, so that ``map`` does not jump as they grow.
-        first = (sorted(key for key in units if key[1] == 0) or sorted(units))[0]
+        # No two robots linked: the first robot by name is ``map``, whatever the lengths of
+        # the other robots' maps, so that ``map`` does not jump between robots as they grow.
+        # Of its pieces, the longest: a robot lost early maps most of its run in a later piece
+        # (the dense intel bag alone: its main piece was not piece 0, and nothing was placed).
+        robot = min(key[0] for key in units)
+        first = max(
+            (key for key in units if key[0] == robot),
+            key=lambda key: (units[key].length, -key[1]),
+        )
         return next(g for g in accepted.groups if first in g), first
     mains = [key for key in group if key[1] == 0]
     pool = mains or group

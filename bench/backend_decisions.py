@@ -1,0 +1,121 @@
+"""The local back end's own decisions, judged by the truth: every loop closure and join of pieces
+the evidence model weighed (issue 46), for fitting and checking the back end's decision model
+(``core/local_mapping/decision_model.json``, ``bench/fit_join.py --decisions backend``).
+
+    .venv/bin/python -m bench.backend_decisions --scenarios carmen:intel:4 generated_own:0 ...
+        [--generated FIRST COUNT] [--gate model|all] [--jobs 2] [--work bench_output/backend]
+
+Each scenario's robots are mapped by their own :class:`LocalMapper` (back end in line, every
+scan, as ``bench/decisions.py collect --maps own`` maps them, without the merger). Every
+decision the evidence model weighed is judged against the truth (the two keyframes' true
+relative pose; wrong beyond 0.30 m / 5 deg) and written with its evidence, in the records'
+format ``bench/fit_join.py`` reads (``WORK/records/SCENARIO.json``, kind ``weighed``).
+
+``--gate all`` accepts every decision the model weighed (the back end as it was before the
+evidence gate: the closures and joins the other checks pass, right and wrong, and what a wrong
+one does to the rest of the run); ``--gate model`` (default) runs the back end as it ships.
+A scenario already recorded is skipped (the collection resumes).
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+from bench.decisions import scenario_of, snapshots_of  # noqa: E402
+from bench.harness import OUTPUT  # noqa: E402
+from multi_robot_mapper.core.local_mapping.windows import WindowMatcher  # noqa: E402
+
+
+@contextmanager
+def every_weighed_accepted() -> Iterator[None]:
+    """The back end with the evidence gate open: each decision is still weighed (and kept in
+    ``weighed``) but accepted whatever its probability."""
+    original = WindowMatcher._believed
+
+    def believed(self: WindowMatcher, *args: Any, **kwargs: Any) -> bool:
+        original(self, *args, **kwargs)
+        return True
+
+    WindowMatcher._believed = believed  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        WindowMatcher._believed = original  # type: ignore[method-assign]
+
+
+def collect_one(name: str, gate: str, work: str) -> str:
+    """Map and judge one scenario's robots; returns a line for the log."""
+    out = Path(work) / "records" / f"{name.replace(':', '_')}.json"
+    if out.is_file():
+        return f"{name}: recorded already"
+    started = time.perf_counter()
+    scenario = scenario_of(name)
+    if scenario is None:
+        return f"{name}: absent (its data is not here)"
+    try:
+        if gate == "all":
+            with every_weighed_accepted():
+                _, records = snapshots_of(scenario, "own", [])
+        else:
+            _, records = snapshots_of(scenario, "own", [])
+    except Exception as error:  # one scenario's failure does not end the collection
+        return f"{name}: failed: {type(error).__name__}: {error}"
+    weighed = [r for r in records if r["kind"] == "weighed"]
+    accepted = [r for r in records if r["kind"] != "weighed"]
+    case = {
+        "scenario": name,
+        "maps": "own",
+        "gate": gate,
+        "description": scenario.description,
+        "closures": records,
+        "updates": [],
+        "seconds": round(time.perf_counter() - started, 1),
+    }
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(case, default=str))
+    wrong = sum(not r["right"] for r in weighed)
+    return (
+        f"{name}: {len(weighed)} weighed ({wrong} wrong), {len(accepted)} accepted "
+        f"({sum(r['wrong'] for r in accepted)} wrong), {case['seconds']} s"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("--scenarios", nargs="*", default=[])
+    parser.add_argument(
+        "--generated",
+        nargs=2,
+        type=int,
+        metavar=("FIRST", "COUNT"),
+        help="also generated buildings FIRST .. FIRST+COUNT-1 (generated_own:SEED)",
+    )
+    parser.add_argument("--gate", choices=("model", "all"), default="model")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--work", default=str(OUTPUT / "backend"))
+    args = parser.parse_args()
+    names = list(args.scenarios)
+    if args.generated:
+        first, count = args.generated
+        names += [f"generated_own:{seed}" for seed in range(first, first + count)]
+    with ProcessPoolExecutor(args.jobs) as pool:
+        for line in pool.map(
+            collect_one, names, [args.gate] * len(names), [args.work] * len(names)
+        ):
+            print(line, flush=True)
+
+
+if __name__ == "__main__":
+    main()
