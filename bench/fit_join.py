@@ -302,10 +302,11 @@ def main() -> None:
         path.write_text(model.dumps())
         print(f"wrote {path}")
     if args.figure:
-        draw(p, y, args.figure)
+        title = "join model" if args.decisions == "merger" else "back end's decision model"
+        draw(p, y, args.figure, f"{title} reliability")
 
 
-def draw(p: np.ndarray, y: np.ndarray, path: str) -> None:
+def draw(p: np.ndarray, y: np.ndarray, path: str, title: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -321,7 +322,7 @@ def draw(p: np.ndarray, y: np.ndarray, path: str) -> None:
         )
     ax.set_xlabel("predicted P(right), held out by scenario")
     ax.set_ylabel("observed share right")
-    ax.set_title("join model reliability")
+    ax.set_title(title)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     print(f"wrote {path}")
