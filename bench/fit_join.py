@@ -237,6 +237,24 @@ def reliability(p: np.ndarray, y: np.ndarray) -> list[tuple[float, float, float,
     return out
 
 
+def print_held_out(p: np.ndarray, y: np.ndarray, sources: list[str]) -> None:
+    """The held-out reliability table, and per source what each threshold accepts."""
+    print("\n| predicted | mean predicted | observed right | sets |\n| --- | --- | --- | --- |")
+    for lo, hi, mean, observed, count in reliability(p, y):
+        print(f"| {lo:g}-{hi:g} | {mean:.4f} | {observed:.4f} | {count} |")
+    print(
+        "\n| source | threshold | accepted | wrong among accepted | right sets accepted (recall) |"
+    )
+    print("| --- | --- | --- | --- | --- |")
+    for source in [*sorted(set(sources)), "all"]:
+        mine = np.array([s == source or source == "all" for s in sources])
+        for threshold in THRESHOLDS:
+            accepted = mine & (p >= threshold)
+            wrong = int((accepted & ~y).sum())
+            recall = (accepted & y).sum() / max(1, (mine & y).sum())
+            print(f"| {source} | {threshold:g} | {int(accepted.sum())} | {wrong} | {recall:.3f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", nargs="*", default=[str(OUTPUT / "decisions")])
@@ -263,20 +281,7 @@ def main() -> None:
         "held-out log loss by penalty: " + ", ".join(f"{k:g}: {v:.4f}" for k, v in losses.items())
     )
     p = held_out(x, y, groups, l2, signs)
-    print("\n| predicted | mean predicted | observed right | sets |\n| --- | --- | --- | --- |")
-    for lo, hi, mean, observed, count in reliability(p, y):
-        print(f"| {lo:g}-{hi:g} | {mean:.4f} | {observed:.4f} | {count} |")
-    print(
-        "\n| source | threshold | accepted | wrong among accepted | right sets accepted (recall) |"
-    )
-    print("| --- | --- | --- | --- | --- |")
-    for source in [*sorted(set(sources)), "all"]:
-        mine = np.array([s == source or source == "all" for s in sources])
-        for threshold in THRESHOLDS:
-            accepted = mine & (p >= threshold)
-            wrong = int((accepted & ~y).sum())
-            recall = (accepted & y).sum() / max(1, (mine & y).sum())
-            print(f"| {source} | {threshold:g} | {int(accepted.sum())} | {wrong} | {recall:.3f} |")
+    print_held_out(p, y, sources)
     doubtful = np.flatnonzero((p >= args.show) & ~y)
     for k in doubtful:
         print(

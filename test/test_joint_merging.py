@@ -626,23 +626,3 @@ def test_a_piece_placed_where_its_robot_cannot_have_driven_is_refused() -> None:
     assert len(accept_pairs([right, look_alike], units, CONFIG, model).pairs) == 2
     both = accept_pairs([right, verdict(a10, (11, 14, 17), 0.0)], units, CONFIG, model, reaches)
     assert len(both.pairs) == 2 and both.refused == [] and both.groups == [[a0, a10, b]]
-
-
-def test_a_lone_robot_lost_early_has_its_longest_piece_as_map() -> None:
-    # One robot lost after three keyframes maps the rest of its run in a second piece that
-    # nothing joins to the first (another building here). ``map`` is that longest piece, as
-    # the robot's main piece is (the dense intel bag alone: piece 0 was ``map`` and the main
-    # piece, unjoined, was reported "not placed").
-    short = stranger_keyframes()[:3]
-    _, office = drives("office", 1)
-    start = len(short)
-    long = [
-        dataclasses.replace(kf, index=start + k, stamp=100.0 + k, piece=start)
-        for k, kf in enumerate(office[0])
-    ]
-    result = merge_joint({"r1": [*short, *long]}, MergeConfig(), budget=0.0)
-    assert result.reference == "r1"
-    pieces = result.frames["r1"]
-    assert pieces.get(start) is not None
-    assert np.allclose(pieces[start], (0.0, 0.0, 0.0), atol=1e-9)
-    assert pieces.get(0) is None
