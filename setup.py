@@ -10,7 +10,8 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "bench"]),
-    # Fitted models are data the code loads (core/evidence/join_model.json, decision_model.json,
+    # Fitted models are data the code loads (core/evidence/join_model.json, closure_model.json,
+    # piece_join_model.json,
     # core/matching/confidence_model.json, core/local_mapping/context_model.json).
     package_data={
         PACKAGE: ["core/evidence/*.json", "core/matching/*.json", "core/local_mapping/*.json"]

@@ -2,10 +2,11 @@
 another is right, from its evidence (``core/evidence/model.py``).
 
     .venv/bin/python -m bench.fit_join [--work bench_output/decisions ...] [--write]
-        [--figure docs/figures/join_reliability.png] [--decisions merger|backend]
+        [--figure docs/figures/join_reliability.png] [--decisions merger|closure|piece_join]
 
-``--decisions backend`` fits the local back end's model instead (``decision_model.json``) on
-the loop closures and joins of pieces it weighed (``bench/backend_decisions.py``, or
+``--decisions closure`` (``piece_join``) fits the local back end's model of loop closures
+(joins of pieces) instead, ``closure_model.json`` (``piece_join_model.json``), on the
+decisions of that kind it weighed (``bench/backend_decisions.py``, or
 ``bench/decisions.py collect --maps own``), each judged by the truth; held out by scenario
 as the merger's.
 
@@ -40,10 +41,10 @@ from scipy.optimize import minimize
 
 from bench.harness import OUTPUT, REPO
 from multi_robot_mapper.core.evidence.model import (
-    DECISION_MODEL_FILE,
+    CLOSURE_MODEL_FILE,
     FEATURES,
-    MERGER_FEATURES,
     MODEL_FILE,
+    PIECE_JOIN_MODEL_FILE,
     JoinModel,
     join_features,
 )
@@ -66,9 +67,7 @@ def features_of(record: dict[str, Any]) -> list[float] | None:
     return _features(ways, record["seen_through"][1])  # type: ignore[arg-type]
 
 
-def _features(
-    ways: list[dict[str, float]], conflict: float, piece_join: bool = False
-) -> list[float]:
+def _features(ways: list[dict[str, float]], conflict: float) -> list[float]:
     """The features of a decision measured one or two ways, as the merger computes them
     (evidence.model.join_features); a record's matched wall is its score plus the free-space
     weight times its conflict (the score's two parts)."""
@@ -85,7 +84,7 @@ def _features(
         )
         for w in ways
     ]
-    values = join_features(evidence, conflict, piece_join)
+    values = join_features(evidence, conflict)
     return [values[name] for name in FEATURES]
 
 
@@ -93,7 +92,8 @@ def load(
     works: list[str], decisions: str = "merger"
 ) -> tuple[np.ndarray, np.ndarray, list[str], list[str]]:
     """(features, right, scenario of each set, source of each set), each set once: the
-    merger's sets, or with ``decisions`` "backend" the back end's closures and joins."""
+    merger's sets, or with ``decisions`` "closure" or "piece_join" the back end's decisions of
+    that kind ("loop" or "join")."""
     rows, labels, groups, sources = [], [], [], []
     seen: set[tuple[Any, ...]] = set()
     for work in works:
@@ -101,7 +101,8 @@ def load(
             case = json.loads(path.read_text())
             source = f"{case['description'].get('source', '?')}/{case['maps']}"
             bent: set[str] = set()  # robots a wrong decision has already bent (below)
-            for item in case.get("closures", []) if decisions == "backend" else []:
+            kind = {"closure": "loop", "piece_join": "join"}.get(decisions)
+            for item in case.get("closures", []) if kind else []:
                 if item["kind"] != "weighed":
                     continue  # accepted closures and joins, judged (the weighed ones are here)
                 if item["robot"] in bent:
@@ -112,9 +113,11 @@ def load(
                     continue
                 if not item["right"]:
                     bent.add(item["robot"])
+                if item["weighed_kind"] != kind:
+                    continue
                 keys = ("score", "rival", "conflict", "wall", "matched")
                 way = {k: item[k] for k in keys if k in item}
-                values = _features([way, way], 0.0, item["weighed_kind"] == "join")
+                values = _features([way, way], 0.0)
                 rows.append(values)
                 labels.append(bool(item["right"]))
                 groups.append(case["scenario"])
@@ -148,7 +151,6 @@ SIGNS = {
     "rival_ratio": -1,
     "conflict": -1,
     "conflict_share": -1,
-    "piece_join": -1,  # a join of pieces is never likelier right than a closure on such evidence
 }
 # The back end's decisions are mostly right whatever their evidence (most candidates the
 # graph's prediction and the match's confidence let through are): free to take any sign, the
@@ -263,18 +265,19 @@ def main() -> None:
     parser.add_argument(
         "--show", type=float, default=0.99, help="list the wrong sets held out at least this sure"
     )
-    parser.add_argument("--decisions", choices=("merger", "backend"), default="merger")
+    parser.add_argument(
+        "--decisions", choices=("merger", "closure", "piece_join"), default="merger"
+    )
     args = parser.parse_args()
     x, y, groups, sources = load(args.work, args.decisions)
-    names = FEATURES if args.decisions == "backend" else MERGER_FEATURES
-    x = x[:, : len(names)]
+    names = FEATURES
     if len(y) == 0:
         raise SystemExit("no recorded sets: run bench/decisions.py collect first")
     print(
         f"{len(y)} sets ({int(y.sum())} right, {int((~y).sum())} wrong) from "
         f"{len(set(groups))} scenarios"
     )
-    signs = BACKEND_SIGNS if args.decisions == "backend" else SIGNS
+    signs = SIGNS if args.decisions == "merger" else BACKEND_SIGNS
     losses = {l2: log_loss(held_out(x, y, groups, l2, signs), y) for l2 in L2_GRID}
     l2 = min(losses, key=losses.__getitem__)
     print(
@@ -302,12 +305,18 @@ def main() -> None:
             f"bench/fit_join.py on {date.today().isoformat()}: {len(y)} sets of "
             f"{len(set(groups))} scenarios ({', '.join(sorted(set(sources)))}), L2 {l2:g}",
         )
-        name = MODEL_FILE if args.decisions == "merger" else DECISION_MODEL_FILE
+        name = {
+            "merger": MODEL_FILE,
+            "closure": CLOSURE_MODEL_FILE,
+            "piece_join": PIECE_JOIN_MODEL_FILE,
+        }[args.decisions]
         path = REPO / "multi_robot_mapper" / "core" / "evidence" / name
         path.write_text(model.dumps())
         print(f"wrote {path}")
     if args.figure:
-        title = "join model" if args.decisions == "merger" else "back end's decision model"
+        title = {"merger": "join model", "closure": "loop closure model"}.get(
+            args.decisions, "join-of-pieces model"
+        )
         draw(p, y, args.figure, f"{title} reliability")
 
 

@@ -21,8 +21,9 @@ from test_merging import random_frames
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig, Drawing
 from multi_robot_mapper.core.evidence.model import (
-    DECISION_MODEL_FILE,
+    CLOSURE_MODEL_FILE,
     FEATURES,
+    PIECE_JOIN_MODEL_FILE,
     JoinModel,
     installed_model,
     join_features,
@@ -201,22 +202,22 @@ def test_the_join_model_is_data_the_package_ships() -> None:
     assert model.probability(strong) > model.probability(weak)
 
 
-def test_the_back_end_decision_model_weighs_a_join_of_pieces_below_a_closure() -> None:
-    # The back end's model (decision_model.json, fitted on its own closures and joins judged by
-    # the truth): the same evidence makes a loop closure, found where the robot's own graph
-    # predicts it, likelier right than a join of two pieces after a loss, found only within
-    # the robot's reach; and a rival as good as the placement makes either less likely.
-    model = installed_model(DECISION_MODEL_FILE)
-    assert JoinModel.load(model.dumps()) == model
-    assert set(model.features) <= set(FEATURES) and "piece_join" in model.features
+def test_the_back_end_weighs_a_join_of_pieces_below_a_loop_closure() -> None:
+    # The back end's models (fitted on its own closures and joins, judged by the truth): the
+    # same evidence makes a loop closure, found where the robot's own graph predicts it,
+    # likelier right than a join of two pieces after a loss, found only within the robot's
+    # reach; and more wall no rival explains makes either likelier.
+    closure = installed_model(CLOSURE_MODEL_FILE)
+    join = installed_model(PIECE_JOIN_MODEL_FILE)
+    for model in (closure, join):
+        assert JoinModel.load(model.dumps()) == model
+        assert set(model.features) <= set(FEATURES)
     evidence = PlacementEvidence(20.0, 5.0, 20.0, np.zeros(3), None, 0.0, 20.0)
     rivalled = PlacementEvidence(20.0, 20.0, 20.0, np.zeros(3), None, 0.0, 20.0)
-    loop = model.probability(join_features([evidence]))
-    join = model.probability(join_features([evidence], piece_join=True))
-    assert join < loop
-    assert model.probability(join_features([rivalled])) < loop
-    # The merger's model never sees the back end's feature.
-    assert "piece_join" not in installed_model().features
+    features = join_features([evidence])
+    assert join.probability(features) < closure.probability(features)
+    for model in (closure, join):
+        assert model.probability(join_features([rivalled])) < model.probability(features)
 
 
 def test_a_wrong_join_does_not_move_the_reference() -> None:

@@ -62,8 +62,8 @@ class LocalMapperConfig:
         doc="a loop closure or a join of two pieces of map is made only when the evidence "
         "model's probability that it is right reaches this: the walls it moves, each counted "
         "once, against their best rival placement where the robot can have been "
-        "(core/evidence: the model fitted on the back end's own decisions, "
-        "decision_model.json; the same threshold as the merger's join_probability)",
+        "(core/evidence: models fitted on the back end's own decisions, closure_model.json "
+        "and piece_join_model.json; the same threshold as the merger's join_probability)",
         minimum=0.5,
         maximum=0.999999,
     )

@@ -132,10 +132,9 @@ def moved_to(
     )
 
 
-def probability_of(evidence: PlacementEvidence, model: JoinModel, kind: str = "loop") -> float:
-    """P(right) of a decision of ``kind`` ("loop" or "join") with this evidence (the back
-    end's decision model)."""
-    return model.probability(join_features([evidence], piece_join=kind == "join"))
+def probability_of(evidence: PlacementEvidence, model: JoinModel) -> float:
+    """P(right) of a decision with this evidence, by the model of its kind."""
+    return model.probability(join_features([evidence]))
 
 
 def _thinned(poses: FloatArray, spacing: float, most: int) -> IntArray:

@@ -15,7 +15,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.evidence.model import DECISION_MODEL_FILE, installed_model
+from multi_robot_mapper.core.evidence.model import (
+    CLOSURE_MODEL_FILE,
+    PIECE_JOIN_MODEL_FILE,
+    installed_model,
+)
 from multi_robot_mapper.core.evidence.placement import Reach
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.attempts import hypotheses_of, pose_of_match
@@ -69,8 +73,11 @@ class WindowMatcher:
         self.graph = PoseGraph()
         self.accepted: dict[int, Closure] = {}  # graph edge id -> closure in the graph
         self.refused: dict[str, int] = {}  # reason -> closures refused
-        # the evidence model of the back end's decisions (core/evidence)
-        self.model = installed_model(DECISION_MODEL_FILE)
+        # the evidence models of the back end's decisions, one per kind (core/evidence)
+        self.models = {
+            "loop": installed_model(CLOSURE_MODEL_FILE),
+            "join": installed_model(PIECE_JOIN_MODEL_FILE),
+        }
         # The latest decisions the evidence model weighed (for the benches' judges; bounded:
         # a robot maps for hours).
         self.weighed: deque[Weighed] = deque(maxlen=_WEIGHED_KEPT)
@@ -215,7 +222,7 @@ class WindowMatcher:
         moved = moved_to(keyframes, mine, here)
         near = patch_around(keyframes, patch, mine)
         evidence = decision_evidence(keyframes, near, target, moved, reach)
-        probability = probability_of(evidence, self.model, kind)
+        probability = probability_of(evidence, self.models[kind])
         self.weighed.append(Weighed(kind, first, mine, found, probability, evidence))
         return probability >= self.config.join_probability
 
