@@ -3,7 +3,7 @@
 of generated buildings and shared logs, whose truth is known, and checked held out by
 building (``bench/fit_join.py``, docs/evidence_model.md).
 
-The coefficients are data, not code: a refit changes no line of the merger. Two models share
+The coefficients are data, not code: a refit changes no line of the merger. Three models share
 the features and the form, fitted on different decisions:
 
 - ``join_model.json``: a link between two robots' maps (the merger), whose placement nothing
@@ -14,7 +14,7 @@ the features and the form, fitted on different decisions:
   the merger's candidates do not have), so the same evidence means more;
 - ``piece_join_model.json``: a join of two pieces of one robot's map after it was lost
   (``--decisions piece_join``), found only within the robot's reach: weaker than a closure
-  (9 % of the first joins weighed are wrong), and its rivals say more.
+  (9 % of the first joins weighed are wrong), so it needs more wall that no rival explains.
 """
 
 from __future__ import annotations
