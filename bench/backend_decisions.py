@@ -1,6 +1,7 @@
 """The local back end's own decisions, judged by the truth: every loop closure and join of pieces
-the evidence model weighed (issue 46), for fitting and checking the back end's decision model
-(``core/local_mapping/decision_model.json``, ``bench/fit_join.py --decisions backend``).
+the evidence model weighed (issue 46), for fitting and checking the back end's models
+(``core/evidence/closure_model.json`` and ``piece_join_model.json``: ``bench/fit_join.py
+--decisions closure`` and ``piece_join``).
 
     .venv/bin/python -m bench.backend_decisions --scenarios carmen:intel:4 generated_own:0 ...
         [--generated FIRST COUNT] [--gate model|all] [--jobs 2] [--work bench_output/backend]
@@ -29,7 +30,7 @@ import json  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Iterator  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
-from contextlib import contextmanager  # noqa: E402
+from contextlib import contextmanager, nullcontext  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -65,10 +66,7 @@ def collect_one(name: str, gate: str, work: str) -> str:
     if scenario is None:
         return f"{name}: absent (its data is not here)"
     try:
-        if gate == "all":
-            with every_weighed_accepted():
-                _, records = snapshots_of(scenario, "own", [])
-        else:
+        with every_weighed_accepted() if gate == "all" else nullcontext():
             _, records = snapshots_of(scenario, "own", [])
     except Exception as error:  # one scenario's failure does not end the collection
         return f"{name}: failed: {type(error).__name__}: {error}"

@@ -96,12 +96,12 @@ def load(
     that kind ("loop" or "join")."""
     rows, labels, groups, sources = [], [], [], []
     seen: set[tuple[Any, ...]] = set()
+    kind = {"closure": "loop", "piece_join": "join"}.get(decisions)  # a back-end kind, or None
     for work in works:
         for path in sorted((Path(work) / "records").glob("*.json")):
             case = json.loads(path.read_text())
             source = f"{case['description'].get('source', '?')}/{case['maps']}"
             bent: set[str] = set()  # robots a wrong decision has already bent (below)
-            kind = {"closure": "loop", "piece_join": "join"}.get(decisions)
             for item in case.get("closures", []) if kind else []:
                 if item["kind"] != "weighed":
                     continue  # accepted closures and joins, judged (the weighed ones are here)
