@@ -15,7 +15,9 @@ format ``bench/fit_join.py`` reads (``WORK/records/SCENARIO.json``, kind ``weigh
 ``--gate all`` accepts every decision the model weighed (the back end as it was before the
 evidence gate: the closures and joins the other checks pass, right and wrong, and what a wrong
 one does to the rest of the run); ``--gate model`` (default) runs the back end as it ships.
-A scenario already recorded is skipped (the collection resumes).
+A scenario already recorded is skipped (the collection resumes). ``--table`` prints what a
+work folder holds as a markdown table instead (by shared log and cut, generated buildings
+together), for docs/results.md (``bench/results.py``).
 """
 
 from __future__ import annotations
@@ -90,6 +92,41 @@ def collect_one(name: str, gate: str, work: str) -> str:
     )
 
 
+def table(work: str) -> str:
+    """The records of ``work`` as a markdown table: per shared-log cut or bag cut (generated
+    buildings in one row), loop closures and joins of pieces weighed and accepted, each with
+    how many were wrong by the truth, and the worst accepted one's error."""
+    rows: dict[str, dict[str, Any]] = {}
+    for path in sorted((Path(work) / "records").glob("*.json")):
+        case = json.loads(path.read_text())
+        source, *rest = case["scenario"].split(":")
+        key = "generated buildings" if source.startswith("generated") else " ".join(rest)
+        row = rows.setdefault(key, {"scenarios": 0, "worst": 0.0})
+        row["scenarios"] += 1
+        for record in case["closures"]:
+            weighed = record["kind"] == "weighed"
+            kind = record["weighed_kind"] if weighed else record["kind"]
+            wrong = not record["right"] if weighed else bool(record["wrong"])
+            column = f"{kind} {'weighed' if weighed else 'accepted'}"
+            done, bad = row.get(column, (0, 0))
+            row[column] = (done + 1, bad + int(wrong))
+            if not weighed and wrong:
+                row["worst"] = max(row["worst"], float(record["error_m"]))
+    columns = ("loop weighed", "loop accepted", "join weighed", "join accepted")
+    lines = [
+        "| scenario | runs | closures weighed (wrong) | closures accepted (wrong) "
+        "| joins weighed (wrong) | joins accepted (wrong) | worst accepted wrong (m) |",
+        "| --- |" + " --- |" * 6,
+    ]
+    order = sorted(rows, key=lambda key: (key == "generated buildings", key))
+    for key in order:
+        row = rows[key]
+        cells = [f"{row.get(c, (0, 0))[0]} ({row.get(c, (0, 0))[1]})" for c in columns]
+        worst = f"{row['worst']:.2f}" if row["worst"] else "—"
+        lines.append(f"| {key} | {row['scenarios']} | {' | '.join(cells)} | {worst} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--scenarios", nargs="*", default=[])
@@ -103,7 +140,11 @@ def main() -> None:
     parser.add_argument("--gate", choices=("model", "all"), default="model")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--work", default=str(OUTPUT / "backend"))
+    parser.add_argument("--table", action="store_true", help="print WORK's records as a table")
     args = parser.parse_args()
+    if args.table:
+        print(table(args.work))
+        return
     names = list(args.scenarios)
     if args.generated:
         first, count = args.generated

@@ -14,6 +14,8 @@ error as soon as its run is done, and writes every figure (stats.json and metric
 run, the wall time of each step) to ``--json`` (default WORK/merge_table.json). ``--jobs N``
 runs N (log, K) cases at once; every child is limited to one thread. ``--quick`` is intel,
 K = 2 only. A missing log is skipped with a note; a failing step is reported in its row.
+``--table`` prints the table of an earlier run's JSON without running anything; ``--summary``
+prints the README's summary of it (one row per log: bench/results.py renders both).
 
 Target (issue 5): every robot merged in every case, ATE <= 0.15 m.
 """
@@ -116,6 +118,71 @@ def table_row(row: dict[str, Any]) -> str:
     return head + " | ".join(cells) + " |"
 
 
+# What each shared log is, for the summary (its place and how far apart its scans are: the
+# median distance and turn between consecutive scans).
+LOG_PLACES = {
+    "freiburg-079": "university building, dense (0.09 m, 3.3°)",
+    "intel": "research lab (0.55 m, 18°)",
+    "csail": "university building (0.94 m, 22°)",
+    "fhw": "museum (0.83 m, 13°)",
+    "aces": "long corridors (0.74 m, 15°)",
+    "edmonton": "crowded convention hall (1.00 m, 8.8°)",
+}
+SUMMARY_COLUMNS = (
+    "log | place, spacing of the scans | pair_success 4 / 2 robots | unposed 4 / 2 | worst "
+    "own-frame ATE, 2 and 4 robots (m) | merged 2 / 4 / 8 | ATE of the merged robots 2 / 4 / 8 (m)"
+)
+
+
+def summary_rows(rows: list[dict[str, Any]]) -> list[str]:
+    """One row per log of the runs ``rows``: its 4- and 2-robot cuts' pair_success and
+    unposed share, the worst own-frame ATE of their robots, and what each cut merged."""
+    by_log: dict[str, dict[int, dict[str, Any]]] = {}
+    for row in rows:
+        if "metrics" in row:
+            by_log.setdefault(row["log"], {})[row["robots"]] = row["metrics"]
+    lines = []
+    for log, cuts in by_log.items():
+
+        def pick(k: int, figure: Any, cuts: dict[int, dict[str, Any]] = cuts) -> str:
+            return figure(cuts[k]) if k in cuts else "—"
+
+        def unposed(m: dict[str, Any]) -> str:
+            return f"{100.0 * m['scans_unposed'] / max(m['scans_total'], 1):.1f} %"
+
+        def merged_ate(m: dict[str, Any]) -> str:
+            return fmt(m["ate_rmse_m"]) if m["robots_merged"] > 1 else "—"
+
+        own = [
+            r["ate_own_frame_m"]
+            for k in (2, 4)
+            for r in cuts.get(k, {}).get("robots", {}).values()
+            if r.get("ate_own_frame_m") is not None
+        ]
+        cells = [
+            log,
+            LOG_PLACES.get(log, ""),
+            f"{pick(4, lambda m: fmt(m['pair_success']))} / "
+            f"{pick(2, lambda m: fmt(m['pair_success']))}",
+            f"{pick(4, unposed)} / {pick(2, unposed)}",
+            fmt(max(own), 2) if own else "—",
+            ", ".join(
+                pick(k, lambda m: f"{m['robots_merged']}/{m['robots_total']}") for k in (2, 4, 8)
+            ),
+            ", ".join(pick(k, merged_ate) for k in (2, 4, 8)),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def print_table(path: Path, summary: bool) -> None:
+    """The table (or with ``summary`` the README's summary) of the runs saved at ``path``."""
+    rows = json.loads(path.read_text())["rows"]
+    columns = SUMMARY_COLUMNS if summary else COLUMNS
+    print(f"| {columns} |\n|" + " --- |" * (columns.count("|") + 1))
+    print("\n".join(summary_rows(rows) if summary else (table_row(row) for row in rows)))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--logs", nargs="+", default=["intel", "aces", "fhw", "csail"])
@@ -127,7 +194,12 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     parser.add_argument("--quick", action="store_true", help="intel, 2 robots only")
     parser.add_argument("--method", choices=("pivot", "ffs"), default="pivot")
+    parser.add_argument("--table", action="store_true", help="print the saved run's table")
+    parser.add_argument("--summary", action="store_true", help="print the saved run's summary")
     args = parser.parse_args()
+    if args.table or args.summary:
+        print_table(args.json or args.work / "merge_table.json", args.summary)
+        return
     if args.quick:
         args.logs, args.robots = ["intel"], [2]
     args.work = args.work.resolve()
@@ -143,8 +215,7 @@ def main() -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     report = {"wall_s": wall, "jobs": args.jobs, "overrides": args.set, "rows": rows}
     path.write_text(json.dumps(report, indent=1) + "\n")
-    print(f"| {COLUMNS} |\n|" + " --- |" * (COLUMNS.count("|") + 1))
-    print("\n".join(table_row(row) for row in rows))
+    print_table(path, summary=False)
     print(
         f"{len(rows)} runs, wall {wall / 60:.1f} min, --jobs {args.jobs} -> {path}", file=sys.stderr
     )
