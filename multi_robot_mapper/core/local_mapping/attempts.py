@@ -32,9 +32,9 @@ from multi_robot_mapper.core.matching.confidence import (
 from multi_robot_mapper.core.matching.shape import Shape, match_shapes, shape_of_scan
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -29,10 +29,10 @@ from multi_robot_mapper.core.evidence.placement import (
 from multi_robot_mapper.core.evidence.seen import scan_free_points
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass(frozen=True)

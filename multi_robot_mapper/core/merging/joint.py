@@ -81,10 +81,10 @@ from multi_robot_mapper.core.merging.place_matching import (
 from multi_robot_mapper.core.merging.placement_paths import chain_probabilities
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey, units_of
 from multi_robot_mapper.core.merging.unmerged import unmerged_reason
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass
