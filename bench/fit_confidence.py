@@ -67,16 +67,17 @@ from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.fusion import fuse  # noqa: E402
 from multi_robot_mapper.core.local_mapping import LocalMapperConfig  # noqa: E402
+from multi_robot_mapper.core.logistic import LogisticModel  # noqa: E402
 from multi_robot_mapper.core.matching import IntegrateConfig, integrate  # noqa: E402
 from multi_robot_mapper.core.matching.beams import Viewpoint, Views  # noqa: E402
 from multi_robot_mapper.core.matching.confidence import (  # noqa: E402
-    MODEL_FILE as CONFIDENCE_MODEL_FILE,
-)
-from multi_robot_mapper.core.matching.confidence import (  # noqa: E402
-    LogisticModel,
+    FEATURES,
     MatchEvidence,
     is_right,
     scan_model_json,
+)
+from multi_robot_mapper.core.matching.confidence import (  # noqa: E402
+    MODEL_FILE as CONFIDENCE_MODEL_FILE,
 )
 from multi_robot_mapper.core.matching.integrate import match_evidence  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
@@ -283,7 +284,7 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, l2: float) -> LogisticModel:
 
     w = minimize(loss, np.zeros(design.shape[1]), jac=True, method="L-BFGS-B").x
     weights = w[1:] / scale
-    return LogisticModel(float(w[0] - np.dot(weights, mean)), weights)
+    return LogisticModel(FEATURES, float(w[0] - np.dot(weights, mean)), weights)
 
 
 def held_out_log_loss(data: dict[str, dict[str, np.ndarray]], l2: float) -> float:
@@ -295,7 +296,7 @@ def held_out_log_loss(data: dict[str, dict[str, np.ndarray]], l2: float) -> floa
         train = [d for n, d in data.items() if n != name]
         x = np.vstack([d["features"] for d in train])
         y = np.concatenate([d["right"] for d in train]).astype(float)
-        p = np.clip(fit_logistic(x, y, l2).probability(test["features"]), 1e-12, 1.0 - 1e-12)
+        p = np.clip(fit_logistic(x, y, l2).probabilities(test["features"]), 1e-12, 1.0 - 1e-12)
         yt = test["right"].astype(float)
         losses.append(float(np.mean(-(yt * np.log(p) + (1.0 - yt) * np.log(1.0 - p)))))
     return float(np.mean(losses))
@@ -386,7 +387,7 @@ def main() -> None:
         y = np.concatenate([d["right"] for d in others.values()]).astype(float)
         model = fit_logistic(x, y, l2)
         test = data[name]
-        p = model.probability(test["features"])
+        p = model.probabilities(test["features"])
         held_out_p[name] = p
         yt = test["right"].astype(bool)
         consecutive = test["kind"] == KINDS.index("consecutive")
@@ -474,7 +475,9 @@ def draw(
 def write_model(model: LogisticModel, logs: list[str], pairs: int, l2: float) -> None:
     """``MODEL_FILE``: the model, its numbers to 6 significant digits, with its provenance."""
     rounded = LogisticModel(
-        float(f"{model.intercept:.6g}"), np.array([float(f"{w:.6g}") for w in model.weights])
+        FEATURES,
+        float(f"{model.intercept:.6g}"),
+        np.array([float(f"{w:.6g}") for w in model.weights]),
     )
     fitted = (
         f"bench/fit_confidence.py on {datetime.date.today().isoformat()}: {pairs} scan pairs "

@@ -45,13 +45,13 @@ from multi_robot_mapper.core.evidence.model import (
     FEATURES,
     MODEL_FILE,
     PIECE_JOIN_MODEL_FILE,
-    JoinModel,
     join_features,
 )
 from multi_robot_mapper.core.evidence.placement import (
     EVIDENCE_CORRELATION,
     PlacementEvidence,
 )
+from multi_robot_mapper.core.logistic import LogisticModel
 
 L2_GRID = (1e-4, 1e-3, 1e-2)
 FOLDS = 10
@@ -160,12 +160,11 @@ SIGNS = {
 BACKEND_SIGNS = {**SIGNS, "log_score": 1}
 
 
-def fit(
-    x: np.ndarray, y: np.ndarray, l2: float, signs: dict[str, int] = SIGNS
-) -> tuple[float, np.ndarray]:
+def fit(x: np.ndarray, y: np.ndarray, l2: float, signs: dict[str, int] = SIGNS) -> LogisticModel:
     """Maximum-likelihood logistic regression, L2 penalty on standardised features, each
     weight of the sign ``signs`` allows (the features of ``x`` are ``signs``' keys in order,
-    a prefix of FEATURES): (intercept, weights) on the raw features."""
+    a prefix of FEATURES): the model on the raw features."""
+    names = tuple(signs)[: x.shape[1]]
     mean, scale = x.mean(axis=0), x.std(axis=0) + 1e-9
     design = np.column_stack((np.ones(len(x)), (x - mean) / scale))
     target = y.astype(float)
@@ -180,16 +179,11 @@ def fit(
 
     bounds = [(None, None)] + [
         (0.0, None) if signs[n] > 0 else (None, 0.0) if signs[n] < 0 else (None, None)
-        for n in list(signs)[: x.shape[1]]
+        for n in names
     ]
     w = minimize(loss, np.zeros(design.shape[1]), jac=True, method="L-BFGS-B", bounds=bounds).x
     weights = w[1:] / scale
-    return float(w[0] - weights @ mean), weights
-
-
-def predict(model: tuple[float, np.ndarray], x: np.ndarray) -> np.ndarray:
-    z = model[0] + x @ model[1]
-    return np.asarray(1.0 / (1.0 + np.exp(-np.clip(z, -50, 50))))
+    return LogisticModel(names, float(w[0] - weights @ mean), weights)
 
 
 def held_out(
@@ -211,7 +205,7 @@ def held_out(
         if y[train].all() or not y[train].any():
             out[test] = float(y[train].mean())
             continue
-        out[test] = predict(fit(x[train], y[train], l2, signs), x[test])
+        out[test] = fit(x[train], y[train], l2, signs).probabilities(x[test])
     return out
 
 
@@ -291,17 +285,17 @@ def main() -> None:
             f"held out, P {p[k]:.4f} but wrong: {groups[k]} ({sources[k]}), features "
             + ", ".join(f"{n} {v:.2f}" for n, v in zip(names, x[k], strict=True))
         )
-    intercept, weights = fit(x, y, l2, signs)
+    model = fit(x, y, l2, signs)
     print(
         "\nfit on every set: intercept "
-        + f"{intercept:.5g}, "
-        + ", ".join(f"{n} {w:.5g}" for n, w in zip(names, weights, strict=True))
+        + f"{model.intercept:.5g}, "
+        + ", ".join(f"{n} {w:.5g}" for n, w in zip(model.features, model.weights, strict=True))
     )
     if args.write:
-        model = JoinModel(
+        written = LogisticModel(
             names,
-            round(intercept, 6),
-            tuple(round(float(w), 6) for w in weights),
+            round(model.intercept, 6),
+            tuple(round(float(w), 6) for w in model.weights),
             f"bench/fit_join.py on {date.today().isoformat()}: {len(y)} sets of "
             f"{len(set(groups))} scenarios ({', '.join(sorted(set(sources)))}), L2 {l2:g}",
         )
@@ -311,7 +305,7 @@ def main() -> None:
             "piece_join": PIECE_JOIN_MODEL_FILE,
         }[args.decisions]
         path = REPO / "multi_robot_mapper" / "core" / "evidence" / name
-        path.write_text(model.dumps())
+        path.write_text(written.dumps())
         print(f"wrote {path}")
     if args.figure:
         title = {"merger": "join model", "closure": "loop closure model"}.get(

@@ -38,6 +38,7 @@ from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.merging import MergeConfig
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.core.simulation import LaserModel, _arc_length, drive_path, simulate_scan
 from multi_robot_mapper.core.worlds import ROUTES, office_world
 from multi_robot_mapper.io.carmen import (
@@ -49,7 +50,6 @@ from multi_robot_mapper.io.carmen import (
 from multi_robot_mapper.io.recordings import split_runs
 
 FloatArray = NDArray[np.float64]
-Pose = tuple[float, float, float]
 
 __all__ = ["RIGHT_ANGLE", "RIGHT_DISTANCE"]  # the tolerance is the confidence's own
 

@@ -30,6 +30,7 @@ from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.local_mapping import LocalMapperConfig
 from multi_robot_mapper.core.matching import HEURISTICS, integrate
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.io.bags import (
     RobotRecording,
     TimedPose,
@@ -38,7 +39,6 @@ from multi_robot_mapper.io.bags import (
     reference_poses,
 )
 
-Pose = tuple[float, float, float]
 # Each search between consecutive scans must be right with this probability (the loop-closure
 # threshold).
 CONFIDENT = 0.9

@@ -15,10 +15,10 @@ from multi_robot_mapper.core.merging import MergeConfig, MergeResult, merge
 from multi_robot_mapper.core.merging.joint import JointState, place_scans
 from multi_robot_mapper.core.merging.methods import merge_method
 from multi_robot_mapper.core.offline import OfflineMap
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 
 def merged(local: OfflineMap, config: MergeConfig, method: str = "pivot") -> OfflineMap:

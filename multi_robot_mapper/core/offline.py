@@ -11,11 +11,11 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.core.snapshots import NewestPose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass(frozen=True)

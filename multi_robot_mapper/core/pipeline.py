@@ -44,6 +44,7 @@ from multi_robot_mapper.core.merging.methods import MERGE_METHODS
 from multi_robot_mapper.core.offline import OfflineMap, TimedLaserScan
 from multi_robot_mapper.core.scan import ScanError
 from multi_robot_mapper.core.scan_stream import ScanStreamConfig, ScanStreamGuard
+from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.core.snapshots import (
     NewestPose,
     Snapshot,
@@ -55,7 +56,6 @@ from multi_robot_mapper.core.snapshots import (
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 METHODS = ("reference", "local", "pivot", "ffs")
 IMPLEMENTED_METHODS = ("reference", "local", "pivot", "ffs")

@@ -30,9 +30,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
-Pose = tuple[float, float, float]
 
 # The prior that holds each piece's first keyframe where it is: 1 mm, 0.006 degrees.
 _ANCHOR_SIGMAS = np.array([1e-3, 1e-3, 1e-4])

@@ -11,6 +11,12 @@ from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
+# The one pose type of the package: ``(x, y, theta)`` in metres, metres, radians. ``T_a_b``
+# written as a triple is frame b's origin and heading in frame a (the pose whose
+# :func:`matrix_from_pose` is the matrix ``T_a_b``). The matchers' hypothesis rows
+# ``(theta, tx, ty)`` are a different layout and stay arrays, never a ``Pose``.
+Pose = tuple[float, float, float]
+
 
 def wrap_angle(angle: ArrayLike) -> FloatArray:
     """Wrap angles to [-pi, pi)."""
@@ -35,7 +41,7 @@ def matrices_from_poses(poses: ArrayLike) -> FloatArray:
     return out
 
 
-def pose_from_matrix(T: FloatArray) -> tuple[float, float, float]:
+def pose_from_matrix(T: FloatArray) -> Pose:
     """Inverse of :func:`matrix_from_pose`."""
     return float(T[0, 2]), float(T[1, 2]), float(np.arctan2(T[1, 0], T[0, 0]))
 
@@ -83,13 +89,13 @@ def inverse_transform_segments_each(poses: FloatArray, segments: FloatArray) -> 
     return out
 
 
-def compose(T_a_b: ArrayLike, T_b_c: ArrayLike) -> tuple[float, float, float]:
+def compose(T_a_b: ArrayLike, T_b_c: ArrayLike) -> Pose:
     """``T_a_c`` of two ``(x, y, theta)`` poses."""
     ab, bc = np.asarray(T_a_b, dtype=np.float64), np.asarray(T_b_c, dtype=np.float64)
     return pose_from_matrix(matrix_from_pose(*ab) @ matrix_from_pose(*bc))
 
 
-def between(T_a_b: ArrayLike, T_a_c: ArrayLike) -> tuple[float, float, float]:
+def between(T_a_b: ArrayLike, T_a_c: ArrayLike) -> Pose:
     """``T_b_c`` of two ``(x, y, theta)`` poses in the same frame a."""
     ab, ac = np.asarray(T_a_b, dtype=np.float64), np.asarray(T_a_c, dtype=np.float64)
     return pose_from_matrix(invert(matrix_from_pose(*ab)) @ matrix_from_pose(*ac))

@@ -17,10 +17,10 @@ from multi_robot_mapper.core.local_mapping import LocalMapper
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult
 from multi_robot_mapper.core.merging.joint import place_scans
 from multi_robot_mapper.core.merging.methods import merge_method
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -40,10 +40,10 @@ from scipy.spatial import cKDTree
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.geometry import ranges_index
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 Robots = tuple[str, ...]
 
 PAIR_TRANSLATION_M = 0.30

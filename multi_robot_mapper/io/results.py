@@ -29,11 +29,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core.geometry import quaternion_from_yaw, yaw_from_quaternion
+from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.io.outputs import atomic_file, atomic_write_text
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 MAP_FILE = "map.json"
 ROBOTS_FILE = "robots.json"

@@ -33,9 +33,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from multi_robot_mapper.core.se2 import Pose
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 FORMAT = "multi_robot_mapper.saved_map"
 VERSION = 1

@@ -31,13 +31,12 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_msgs.msg import Header
 
 from multi_robot_mapper.core.merging import MergeResult
+from multi_robot_mapper.core.se2 import Pose
 
 OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN
 STALE = DiagnosticStatus.STALE
 TOPIC = "/diagnostics"
-
-Pose = tuple[float, float, float]
 
 
 class RateMeter:

@@ -3,8 +3,9 @@
 of generated buildings and shared logs, whose truth is known, and checked held out by
 building (``bench/fit_join.py``, docs/evidence_model.md).
 
-The coefficients are data, not code: a refit changes no line of the merger. Three models share
-the features and the form, fitted on different decisions:
+The coefficients are data, not code (:mod:`~multi_robot_mapper.core.logistic`): a refit changes
+no line of the merger. Three models share the features and the form, fitted on different
+decisions:
 
 - ``join_model.json``: a link between two robots' maps (the merger), whose placement nothing
   bounds;
@@ -19,13 +20,12 @@ the features and the form, fitted on different decisions:
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from importlib import resources
 
 from multi_robot_mapper.core.evidence.placement import PlacementEvidence
+from multi_robot_mapper.core.logistic import LogisticModel, load_model
 
 MODEL_FILE = "join_model.json"
 CLOSURE_MODEL_FILE = "closure_model.json"
@@ -45,42 +45,27 @@ FEATURES = (
 )
 
 
-@dataclasses.dataclass(frozen=True)
-class JoinModel:
-    """P(right) = 1 / (1 + exp(-(intercept + sum(weights * features))))."""
-
-    features: tuple[str, ...]
-    intercept: float
-    weights: tuple[float, ...]
-    fitted: str  # how and on what it was fitted (the fit's own words)
-
-    def probability(self, values: Mapping[str, float]) -> float:
-        z = self.intercept + sum(
-            w * float(values[name]) for name, w in zip(self.features, self.weights, strict=True)
-        )
-        return 1.0 / (1.0 + math.exp(-max(-50.0, min(50.0, z))))
-
-    @staticmethod
-    def load(text: str) -> JoinModel:
-        data = json.loads(text)
-        features = tuple(str(f) for f in data["features"])
-        unknown = set(features) - set(FEATURES)
-        if unknown:
-            raise ValueError(f"{MODEL_FILE}: unknown features {sorted(unknown)}")
-        weights = tuple(float(w) for w in data["weights"])
-        if len(weights) != len(features):
-            raise ValueError(f"{MODEL_FILE}: {len(features)} features, {len(weights)} weights")
-        return JoinModel(features, float(data["intercept"]), weights, str(data.get("fitted", "")))
-
-    def dumps(self) -> str:
-        return json.dumps(dataclasses.asdict(self), indent=2) + "\n"
+def load_join_model(text: str, source: str = MODEL_FILE) -> LogisticModel:
+    """A decision model of a model file's ``text`` (``source`` names the file in errors): any
+    of :data:`FEATURES`, in any order (its decisions are weighed by name,
+    :meth:`~multi_robot_mapper.core.logistic.LogisticModel.probability`). ValueError, naming
+    ``source`` and what is wrong, otherwise."""
+    return load_model(text, source, FEATURES, "bench/fit_join.py", in_order=False)
 
 
-def installed_model(name: str = MODEL_FILE) -> JoinModel:
+def installed_model(name: str = MODEL_FILE) -> LogisticModel:
     """A model shipped with the package: the join model (default), ``CLOSURE_MODEL_FILE`` or
     ``PIECE_JOIN_MODEL_FILE``."""
-    text = resources.files(__package__).joinpath(name).read_text(encoding="utf-8")
-    return JoinModel.load(text)
+    path = resources.files(__package__).joinpath(name)
+    return load_join_model(path.read_text(encoding="utf-8"), str(path))
+
+
+class JoinModel(LogisticModel):
+    """A decision model under the name the tests build and read one by (test_evidence.py,
+    test_joint_merging.py): a :class:`~multi_robot_mapper.core.logistic.LogisticModel`,
+    which is what the package passes around."""
+
+    load = staticmethod(load_join_model)
 
 
 def join_features(ways: Sequence[PlacementEvidence], conflict: float = 0.0) -> dict[str, float]:

@@ -12,7 +12,6 @@ import time
 from collections.abc import Callable, Mapping
 from importlib import resources
 from types import MappingProxyType
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,6 +19,7 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeScan
+from multi_robot_mapper.core.logistic import LogisticModel, model_number, read_object
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
 from multi_robot_mapper.core.matching.confidence import (
     LIKELY,
@@ -27,14 +27,13 @@ from multi_robot_mapper.core.matching.confidence import (
     RIGHT_ANGLE,
     RIGHT_DISTANCE,
     TRACK_TURNS,
-    model_number,
 )
 from multi_robot_mapper.core.matching.shape import Shape, match_shapes, shape_of_scan
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,13 +76,20 @@ CONTEXTS = ("track", "search", "recent", "other")
 CONTEXT_MODEL_FILE = "context_model.json"
 
 
-@dataclasses.dataclass(frozen=True)
-class ContextCalibration:
-    """Platt scaling of one context: log-odds in context = slope * log-odds of the match
-    confidence + intercept."""
+# What a context's calibration weighs: the match confidence's log-odds, its one feature.
+CONTEXT_FEATURES = ("confidence_log_odds",)
 
-    slope: float
-    intercept: float
+
+class ContextCalibration(LogisticModel):
+    """Platt scaling of one context, a logistic model of the match confidence's log-odds:
+    log-odds in context = slope * log-odds of the match confidence + intercept."""
+
+    def __init__(self, slope: float, intercept: float) -> None:
+        super().__init__(CONTEXT_FEATURES, intercept, np.array([slope]))
+
+    @property
+    def slope(self) -> float:
+        return float(self.weights[0])
 
 
 def load_context_model(
@@ -93,11 +99,7 @@ def load_context_model(
     names the file in errors), read-only. Every context needs a finite intercept and a
     positive finite slope (more evidence never means less confidence); ValueError, naming
     ``source`` and what is wrong, otherwise."""
-    try:
-        data: Any = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise ValueError(f"{source}: not JSON ({error})") from None
-    contexts = data.get("contexts") if isinstance(data, dict) else None
+    contexts = read_object(text, source, "'contexts'").get("contexts")
     if not isinstance(contexts, dict):
         raise ValueError(f"{source}: expected an object with 'contexts'")
     if set(contexts) != set(CONTEXTS):
@@ -120,7 +122,7 @@ def load_context_model(
 def context_model_json(model: Mapping[str, ContextCalibration], fitted: str, command: str) -> str:
     """``context_model.json``'s text for ``model`` (what :func:`load_context_model` reads),
     with how and on what it was ``fitted`` and the ``command`` that fitted it."""
-    contexts = {c: dataclasses.asdict(model[c]) for c in CONTEXTS}
+    contexts = {c: {"slope": model[c].slope, "intercept": model[c].intercept} for c in CONTEXTS}
     data = {"contexts": contexts, "fitted": fitted, "command": command}
     return json.dumps(data, indent=2) + "\n"
 
@@ -149,8 +151,7 @@ def in_context(
     :func:`installed_context_model`, unless ``model`` is given)."""
     calibration = (installed_context_model() if model is None else model)[context]
     p = min(max(confidence, 1e-9), 1.0 - 1e-9)
-    z = calibration.slope * float(np.log(p / (1.0 - p))) + calibration.intercept
-    return float(1.0 / (1.0 + np.exp(-np.clip(z, -50.0, 50.0))))
+    return float(calibration.probabilities([float(np.log(p / (1.0 - p)))]))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -29,8 +29,8 @@ from multi_robot_mapper.core.local_mapping.loop_closer import (
     LostFrom,
 )
 from multi_robot_mapper.core.pose_graph import Edge
+from multi_robot_mapper.core.se2 import Pose
 
-Pose = tuple[float, float, float]
 # What the front end gives the back end for one keyframe (LoopCloser.add_keyframe's arguments).
 KeyframeJob = tuple[KeyframeScan, Pose, int, Edge | None, LostFrom | None]
 # What one keyframe changed, and the keyframes it changed, rebuilt.

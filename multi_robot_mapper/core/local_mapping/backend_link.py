@@ -19,8 +19,7 @@ from multi_robot_mapper.core.local_mapping.joins import LostFrom
 from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeScan
 from multi_robot_mapper.core.local_mapping.loop_closer import BackendUpdate
 from multi_robot_mapper.core.pose_graph import Edge
-
-Pose = tuple[float, float, float]
+from multi_robot_mapper.core.se2 import Pose
 
 
 class BackendLink:

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import Drawing
-from multi_robot_mapper.core.evidence.model import JoinModel, join_features
+from multi_robot_mapper.core.evidence.model import join_features
 from multi_robot_mapper.core.evidence.placement import (
     EVIDENCE_CORRELATION,
     PlacementEvidence,
@@ -29,10 +29,11 @@ from multi_robot_mapper.core.evidence.placement import (
 from multi_robot_mapper.core.evidence.seen import scan_free_points
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
+from multi_robot_mapper.core.logistic import LogisticModel
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -132,7 +133,7 @@ def moved_to(
     )
 
 
-def probability_of(evidence: PlacementEvidence, model: JoinModel) -> float:
+def probability_of(evidence: PlacementEvidence, model: LogisticModel) -> float:
     """P(right) of a decision with this evidence, by the model of its kind."""
     return model.probability(join_features([evidence]))
 

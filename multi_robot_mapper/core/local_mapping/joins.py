@@ -24,11 +24,11 @@ from multi_robot_mapper.core.local_mapping.windows import (
     _WINDOW,
     Closure,
     FloatArray,
-    Pose,
     WindowMatcher,
 )
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.pose_graph import ReachBound
+from multi_robot_mapper.core.se2 import Pose
 
 
 class LastPlaced(NamedTuple):

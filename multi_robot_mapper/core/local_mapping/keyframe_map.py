@@ -26,11 +26,11 @@ from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -54,10 +54,10 @@ from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap, Keyf
 from multi_robot_mapper.core.local_mapping.windows import (
     Closure,
     FloatArray,
-    Pose,
 )
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.pose_graph import Edge
+from multi_robot_mapper.core.se2 import Pose
 
 T = TypeVar("T")
 

@@ -71,10 +71,10 @@ from multi_robot_mapper.core.matching import MatchResult
 from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 
 # Back-end times kept (per keyframe): enough for any replay, bounded for a node running for hours.

@@ -37,10 +37,10 @@ from multi_robot_mapper.core.matching.beams import Viewpoint
 from multi_robot_mapper.core.matching.confidence import TRACK_TURNS
 from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 # Keyframes per window matched for loop closures and joins: the keyframe and its nearest
 # neighbours in time (the confidence is calibrated on windows of three scans).

@@ -21,27 +21,26 @@ cases too, each a number with a meaning:
   smallest eigenvalue of the point-to-line information, :func:`scoring.information`): zero in
   a bare corridor, whose offset along the walls nothing fixes.
 
-A logistic model turns them into a probability. Its weights are fitted on the shared logs by
-``bench/fit_confidence.py`` (leave one log out to check calibration) and written, with the
-command and data they came from, into ``confidence_model.json`` beside this module (data the
-package ships, loaded once by :func:`installed_scan_model`); the
-thresholds that decide each use (integrate a scan, close a loop, link two robots) are in the
-configs of those stages, chosen from the precision/recall curve (README).
+A logistic model (:class:`~multi_robot_mapper.core.logistic.LogisticModel`) turns them into a
+probability. Its weights are fitted on the shared logs by ``bench/fit_confidence.py`` (leave
+one log out to check calibration) and written, with the command and data they came from, into
+``confidence_model.json`` beside this module (data the package ships, loaded once by
+:func:`installed_scan_model`); the thresholds that decide each use (integrate a scan, close a
+loop, link two robots) are in the configs of those stages, chosen from the precision/recall
+curve (README).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-import json
-import math
 from importlib import resources
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.logistic import LogisticModel, load_model
 from multi_robot_mapper.core.matching.beams import BeamAgreement
 
 FloatArray = NDArray[np.float64]
@@ -190,69 +189,21 @@ FEATURES = (
 )
 
 
-@dataclasses.dataclass(frozen=True)
-class LogisticModel:
-    """P(right) = 1 / (1 + exp(-(intercept + weights . features)))."""
-
-    intercept: float
-    weights: FloatArray
-
-    def probability(self, features: FloatArray) -> FloatArray:
-        """P(right) of each row of ``features`` (or of one feature vector)."""
-        z = self.intercept + np.asarray(features, dtype=np.float64) @ self.weights
-        return np.asarray(1.0 / (1.0 + np.exp(-np.clip(z, -50.0, 50.0))))
-
-
 MODEL_FILE = "confidence_model.json"
 
 
 def load_scan_model(text: str, source: str = MODEL_FILE) -> LogisticModel:
     """The match-confidence model of a ``confidence_model.json`` text (``source`` names the
-    file in errors): its features must be :data:`FEATURES` in that order, one finite weight
-    each. ValueError, naming ``source`` and what is wrong, otherwise."""
-    try:
-        data: Any = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise ValueError(f"{source}: not JSON ({error})") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"{source}: expected an object with features, intercept and weights")
-    missing = [key for key in ("features", "intercept", "weights") if key not in data]
-    if missing:
-        raise ValueError(f"{source}: missing {', '.join(missing)}")
-    features = data["features"]
-    if not isinstance(features, list) or tuple(features) != FEATURES:
-        raise ValueError(
-            f"{source}: fitted on features {features}, the code computes {list(FEATURES)}; "
-            "refit with bench/fit_confidence.py"
-        )
-    intercept = model_number(data["intercept"], f"{source}: intercept")
-    weights = data["weights"]
-    if not isinstance(weights, list) or len(weights) != len(FEATURES):
-        raise ValueError(f"{source}: expected {len(FEATURES)} weights, one per feature")
-    values = np.array([model_number(w, f"{source}: weight {i}") for i, w in enumerate(weights)])
-    values.flags.writeable = False  # the loaded model is shared: nothing may change it
-    return LogisticModel(intercept, values)
-
-
-def model_number(value: object, what: str) -> float:
-    """A fitted model file's number: ``value`` as a float, or ValueError saying ``what`` is
-    not a finite number."""
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ValueError(f"{what} must be a finite number, not {value!r}")
-    return float(value)
+    file in errors): its features must be :data:`FEATURES` in that order (the rows of
+    :meth:`MatchEvidence.features` are weighed as they come), one finite weight each.
+    ValueError, naming ``source`` and what is wrong, otherwise."""
+    return load_model(text, source, FEATURES, "bench/fit_confidence.py")
 
 
 def scan_model_json(model: LogisticModel, fitted: str, command: str) -> str:
     """``confidence_model.json``'s text for ``model`` (what :func:`load_scan_model` reads),
     with how and on what it was ``fitted`` and the ``command`` that fitted it."""
-    data = {
-        "features": list(FEATURES),
-        "intercept": float(model.intercept),
-        "weights": [float(w) for w in model.weights],
-        "fitted": fitted,
-        "command": command,
-    }
-    return json.dumps(data, indent=2) + "\n"
+    return dataclasses.replace(model, fitted=fitted, command=command).dumps()
 
 
 @functools.cache
@@ -265,7 +216,7 @@ def installed_scan_model() -> LogisticModel:
 def confidence(features: FloatArray, model: LogisticModel | None = None) -> float:
     """P(right) of a match with these :meth:`MatchEvidence.features` (the fitted model unless
     ``model`` is given)."""
-    return float((installed_scan_model() if model is None else model).probability(features))
+    return float((installed_scan_model() if model is None else model).probabilities(features))
 
 
 def is_right(T_estimate: FloatArray, T_truth: FloatArray) -> bool:

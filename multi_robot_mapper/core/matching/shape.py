@@ -52,11 +52,11 @@ from multi_robot_mapper.core.extraction import cluster_bounds
 from multi_robot_mapper.core.geometry import ranges_index
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.scan import LaserScanData, scan_points
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
-Pose = tuple[float, float, float]
 
 _SKIP_PERCEIVED = 1_000  # a choice of the dynamic programme: leave a perceived polyline out
 

@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.evidence.model import JoinModel
+from multi_robot_mapper.core.logistic import LogisticModel
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import (
@@ -183,7 +183,7 @@ def consistent_set(
     config: MergeConfig,
     seen_through: SeenThrough,
     evidence_of: EvidenceOf,
-    model: JoinModel,
+    model: LogisticModel,
 ) -> PairVerdict:
     """The pair's heaviest consistent set of links, its evidence and the probability that its
     placement is right (module doc): a candidate join when that reaches ``join_probability``.
@@ -403,7 +403,7 @@ def accept_pairs(
     verdicts: Sequence[PairVerdict],
     units: Mapping[UnitKey, MapUnit],
     config: MergeConfig,
-    model: JoinModel,
+    model: LogisticModel,
     reaches: Mapping[str, RobotReach] | None = None,
     group_conflict: GroupConflict | None = None,
 ) -> Accepted:
@@ -482,7 +482,7 @@ def _judge_join(
     groups: tuple[Mapping[UnitKey, FloatArray], Mapping[UnitKey, FloatArray], FloatArray],
     units: Mapping[UnitKey, MapUnit],
     config: MergeConfig,
-    model: JoinModel,
+    model: LogisticModel,
     reaches: Mapping[str, RobotReach] | None,
     group_conflict: GroupConflict | None,
 ) -> PairVerdict:

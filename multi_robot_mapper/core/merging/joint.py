@@ -46,8 +46,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.evidence.model import JoinModel, installed_model
+from multi_robot_mapper.core.evidence.model import installed_model
 from multi_robot_mapper.core.local_mapping import Keyframe
+from multi_robot_mapper.core.logistic import LogisticModel
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.consistency import (
     GROUP_DOUBT,
@@ -81,10 +82,10 @@ from multi_robot_mapper.core.merging.place_matching import (
 from multi_robot_mapper.core.merging.placement_paths import chain_probabilities
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey, units_of
 from multi_robot_mapper.core.merging.unmerged import unmerged_reason
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass
@@ -118,7 +119,7 @@ def merge_joint(
     previous: MergeResult | None = None,
     reference: str | None = None,
     budget: float | None = None,
-    model: JoinModel | None = None,
+    model: LogisticModel | None = None,
 ) -> MergeResult:
     """Merge the robots' keyframe maps (module doc). ``budget``: seconds the update may take
     (default ``config.update_budget``; 0 or None with a config of 0: every place is matched);
@@ -211,7 +212,7 @@ def _verdicts(
     units: Mapping[UnitKey, MapUnit],
     records: Mapping[MatchKey, MatchRecord],
     config: MergeConfig,
-    model: JoinModel,
+    model: LogisticModel,
     state: JointState | None,
     new_state: JointState,
 ) -> dict[tuple[UnitKey, UnitKey], PairVerdict]:

@@ -29,10 +29,10 @@ from multi_robot_mapper.core.merging.pairwise import (
     match_maps,
     no_match,
 )
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass

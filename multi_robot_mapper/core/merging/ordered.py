@@ -14,10 +14,10 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.merging.compose import as_map, fuse_maps
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.pairwise import Link, link_of, match_maps
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass

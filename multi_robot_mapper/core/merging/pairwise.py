@@ -29,9 +29,9 @@ from multi_robot_mapper.core.merging.free_space import (
     free_space_conflict,
     seen_through_allowance,
 )
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
-Pose = tuple[float, float, float]
 
 
 @dataclasses.dataclass(frozen=True)

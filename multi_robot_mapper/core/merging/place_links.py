@@ -53,9 +53,9 @@ from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.pairwise import MapSignature, draw_map, longest
 from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, thin, viewpoints
 from multi_robot_mapper.core.merging.shape_placements import shape_placements, view_shapes
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
-Pose = tuple[float, float, float]
 
 # Placements farther apart than this (or turned more) are different answers (rivals).
 _DISTINCT_SHIFT = 1.0  # m
