@@ -330,12 +330,7 @@ class _ScanMatching:
         of the first prediction."""
         started = time.perf_counter()
         anchor = reference.anchor
-        poses = self.references.poses
-        # The predictions, from the reference's frame.
-        T_ref_last = se2.between(
-            se2.compose(poses[anchor.keyframe], anchor.T_keyframe_scan), self.references.here
-        )
-        guesses = [se2.compose(T_ref_last, m) for m in guesses_from_last]
+        guesses = self._predictions(anchor, guesses_from_last)
         result = integrate(
             reference.segments,
             self.new,
@@ -364,7 +359,7 @@ class _ScanMatching:
             result,
             anchor,
             reference.segments,
-            se2.compose(poses[anchor.keyframe], T_keyframe_new),
+            se2.compose(self.references.poses[anchor.keyframe], T_keyframe_new),
             piece,
             stage,
             context,
@@ -377,6 +372,16 @@ class _ScanMatching:
         if shaping:
             self.count("shape", shaping)
         return done
+
+    def _predictions(self, anchor: Anchor, motions: list[Pose]) -> list[Pose]:
+        """The new scan's predicted placements in the frame of the reference scan at
+        ``anchor``: ``motions`` from the last placed scan."""
+        poses = self.references.poses
+        # The predictions, from the reference's frame.
+        T_ref_last = se2.between(
+            se2.compose(poses[anchor.keyframe], anchor.T_keyframe_scan), self.references.here
+        )
+        return [se2.compose(T_ref_last, m) for m in motions]
 
     def _shaped(
         self, shapes: Shapes, reference: Reference, guesses: list[Pose], result: MatchResult
