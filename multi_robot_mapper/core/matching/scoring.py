@@ -169,12 +169,12 @@ def geometry_scores(
     cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
     c, s = cos_h[h], sin_h[h]
     tx, ty = np.ascontiguousarray(transforms[:, 1])[h], np.ascontiguousarray(transforms[:, 2])[h]
-    close = _within_reach(geometry, a, b, c, s, tx, ty, config)
-    h, a, b, c, s, tx, ty = h[close], a[close], b[close], c[close], s[close], tx[close], ty[close]
-    placed, d = _placed_pairs(geometry, a, b, c, s, tx, ty)
+    triples = _Triples(h, a, b, c, s, tx, ty)
+    triples = triples.take(_within_reach(geometry, triples, config))
+    placed, d = _placed_pairs(geometry, triples)
     # Most candidate triples are far apart: drop them before the overlap arithmetic.
     near = np.flatnonzero(d <= config.match_distance)
-    h, a, b, d = h[near], a[near], b[near], d[near]
+    h, a, b, d = triples.h[near], triples.a[near], triples.b[near], d[near]
     placed = placed.take(near)
     l1, l2 = _overlaps(placed, geometry.lines1.length[a], geometry.lines2.length[b])
     crossing = _segments_cross(
@@ -193,19 +193,28 @@ def geometry_scores(
     return PairScores(h[keep], a[keep], b[keep], value[keep], crossing[keep])
 
 
-def _within_reach(
-    geometry: PairGeometry,
-    a: IntArray,
-    b: IntArray,
-    c: FloatArray,
-    s: FloatArray,
-    tx: FloatArray,
-    ty: FloatArray,
-    config: IntegrateConfig,
-) -> IntArray:
-    """The candidate triples (S1 segment ``a``, S2 segment ``b`` under the hypothesis's
-    cosine ``c``, sine ``s`` and translation ``tx``, ``ty``) whose midpoints are close enough
-    for the pair to score."""
+class _Triples(NamedTuple):
+    """Candidate (hypothesis, s1, s2) triples: the hypothesis ``h``, the S1 segment ``a`` and
+    the S2 segment ``b``, with the hypothesis's cosine ``c``, sine ``s`` and translation
+    ``tx``, ``ty``."""
+
+    h: IntArray
+    a: IntArray
+    b: IntArray
+    c: FloatArray
+    s: FloatArray
+    tx: FloatArray
+    ty: FloatArray
+
+    def take(self, index: IntArray) -> _Triples:
+        """The triples at ``index``."""
+        h, a, b, c, s, tx, ty = self
+        return _Triples(h[index], a[index], b[index], c[index], s[index], tx[index], ty[index])
+
+
+def _within_reach(geometry: PairGeometry, triples: _Triples, config: IntegrateConfig) -> IntArray:
+    """The candidate triples whose midpoints are close enough for the pair to score."""
+    _, a, b, c, s, tx, ty = triples
     lines1, lines2 = geometry.lines1, geometry.lines2
     # A pair scores only if it overlaps along one of its lines (l1 or l2 > 0 below) while one
     # segment's end points lie within match_distance of the other's line (d below). Then its
@@ -246,18 +255,11 @@ class _PlacedPairs(NamedTuple):
         return _PlacedPairs(*(column[index] for column in self))
 
 
-def _placed_pairs(
-    geometry: PairGeometry,
-    a: IntArray,
-    b: IntArray,
-    c: FloatArray,
-    s: FloatArray,
-    tx: FloatArray,
-    ty: FloatArray,
-) -> tuple[_PlacedPairs, FloatArray]:
-    """The candidate pairs placed (:class:`_PlacedPairs`) and their distance d (Alg. 4 l. 9:
-    the min over the two segments of the max distance of the other's end points to its
-    line)."""
+def _placed_pairs(geometry: PairGeometry, triples: _Triples) -> tuple[_PlacedPairs, FloatArray]:
+    """The candidate triples' pairs placed by their hypotheses (:class:`_PlacedPairs`) and
+    their distance d (Alg. 4 l. 9: the min over the two segments of the max distance of the
+    other's end points to its line)."""
+    _, a, b, c, s, tx, ty = triples
     # S2 end points under the hypothesis, and their distances to s1's line (Alg. 4 l. 9).
     p1x, p1y, p2x, p2y = (column[b] for column in geometry.second_columns)
     q1x = c * p1x - s * p1y + tx
