@@ -448,6 +448,36 @@ def refit_segments(
     (possibly refined) point spans, in the (centred) frame of ``x``, ``y``.
     """
     tol = np.array(tolerance)
+    fit, worst, seg_first, seg_last = _fit_within_tolerance(
+        x, y, moments, seg_first, seg_last, tol, enforce_tolerance
+    )
+    # Consecutive pieces of one polyline share a corner point, or (after a corner sliver was
+    # dropped) hold adjacent points of one cluster. Below, index 0 of every "pair" array is
+    # the pair of segments 0 and 1, and so on.
+    pair = (seg_first[1:] - seg_last[:-1] <= _INT_ONE) & (
+        cluster_first.searchsorted(seg_first[1:], side="right")
+        == cluster_first.searchsorted(seg_last[:-1], side="right")
+    )
+    joined = np.zeros(len(seg_first), dtype=bool)
+    joined[:-1] = pair
+    if not np.count_nonzero(pair):
+        return fit.segments, joined, seg_first, seg_last
+    segments = _shared_corners(x, y, fit, worst, pair, seg_first, seg_last, tol)
+    return segments, joined, seg_first, seg_last
+
+
+def _fit_within_tolerance(
+    x: FloatArray,
+    y: FloatArray,
+    moments: FloatArray,
+    seg_first: IntArray,
+    seg_last: IntArray,
+    tol: FloatArray,
+    enforce_tolerance: bool,
+) -> tuple[_LineFit, FloatArray, IntArray, IntArray]:
+    """The TLS fit of each segment (:func:`refit_segments`), each segment's farthest covered
+    point from its line, and the point spans; with ``enforce_tolerance`` a segment is split
+    again at its farthest point until none leaves one beyond ``tol + REFIT_SLACK``."""
     while True:
         fit = _fit_lines(x, y, moments, seg_first, seg_last)
         worst = np.maximum.reduceat(fit.across, fit.start)
@@ -471,19 +501,24 @@ def refit_segments(
         at = np.searchsorted(seg_first, new_vertex, side="right")
         seg_first = np.insert(seg_first, at, new_vertex)
         seg_last = np.insert(seg_last, at - 1, new_vertex)
-    mx, my, ux, uy, segments = fit.mx, fit.my, fit.ux, fit.uy, fit.segments
+    return fit, worst, seg_first, seg_last
 
-    # Consecutive pieces of one polyline share a corner point, or (after a corner sliver was
-    # dropped) hold adjacent points of one cluster. Below, index 0 of every "pair" array is
-    # the pair of segments 0 and 1, and so on.
-    pair = (seg_first[1:] - seg_last[:-1] <= _INT_ONE) & (
-        cluster_first.searchsorted(seg_first[1:], side="right")
-        == cluster_first.searchsorted(seg_last[:-1], side="right")
-    )
-    joined = np.zeros(len(seg_first), dtype=bool)
-    joined[:-1] = pair
-    if not np.count_nonzero(pair):
-        return segments, joined, seg_first, seg_last
+
+def _shared_corners(
+    x: FloatArray,
+    y: FloatArray,
+    fit: _LineFit,
+    worst: FloatArray,
+    pair: BoolArray,
+    seg_first: IntArray,
+    seg_last: IntArray,
+    tol: FloatArray,
+) -> FloatArray:
+    """The fitted segments with the ends of each joined ``pair`` of consecutive segments on
+    their shared corner: the crossing of their lines near the shared point, else the midpoint
+    of the two projected ends; where that drags a covered point farther from its segment than
+    the plain fit did (and beyond ``tol``), both keep their projected ends."""
+    mx, my, ux, uy = fit.mx, fit.my, fit.ux, fit.uy
     # Computed for every consecutive pair (slices, no gathers) and applied to joined ones.
     ux0, uy0, ux1, uy1 = ux[:-1], uy[:-1], ux[1:], uy[1:]
     sine = ux0 * uy1 - uy0 * ux1
@@ -498,7 +533,7 @@ def refit_segments(
     near = np.hypot(cross_x - _HALF * (ax + bx), cross_y - _HALF * (ay + by)) <= reach
     use_crossing = steep & near
     # Otherwise the midpoint of the two projected ends.
-    plain = segments
+    plain = fit.segments
     corner = _HALF * (plain[:-1, 2:] + plain[1:, :2])
     np.copyto(corner[:, 0], cross_x, where=use_crossing)
     np.copyto(corner[:, 1], cross_y, where=use_crossing)
@@ -514,7 +549,7 @@ def refit_segments(
     undo = (pair & (worse[:-1] | worse[1:]))[:, None]
     np.copyto(segments[:-1, 2:], plain[:-1, 2:], where=undo)
     np.copyto(segments[1:, :2], plain[1:, :2], where=undo)
-    return segments, joined, seg_first, seg_last
+    return segments
 
 
 def extract_scan(scan: LaserScanData, config: ExtractionConfig) -> tuple[SegmentScan, ScanPoints]:

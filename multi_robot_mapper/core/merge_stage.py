@@ -74,39 +74,9 @@ def _merged_joint(local: OfflineMap, config: MergeConfig, method: str = "pivot")
     again = time.perf_counter()
     merge_keyframes(local.keyframes, config, previous=result, budget=0.0)
     update_s = time.perf_counter() - again
-    # A robot's frame is its main piece's (local mapping's trajectory and map are in it).
-    frames: dict[str, Pose | None] = {}
-    trajectories = {}
-    for robot, own in local.trajectories.items():
-        frames[robot] = result.frames.get(robot, {}).get(_main_piece(local, robot))
-        placed = None
-        if frames[robot] is not None and robot in local.anchors:
-            placed = place_scans(result, robot, local.anchors[robot])
-        trajectories[robot] = own if placed is None else placed
+    frames, trajectories = _placed_trajectories(local, result)
     assert result.robots == local.robots
-    stamp = {(r, kf.index): kf.stamp for r, frames in local.keyframes.items() for kf in frames}
-    graph_links = result.state.links if isinstance(result.state, JointState) else []
-    stats = _merge_stats(local, result, first_s, result.stats["links_accepted"])
-    stats.update(
-        {
-            "robots_unmerged": [robot for robot in local.robots if frames.get(robot) is None],
-            # Every link in the joint graph: keyframe (robot, stamp) a, keyframe b and T_a_b,
-            # so that a bench holding the reference can judge each one.
-            "merge_graph_links": [
-                [
-                    link.target[0],
-                    stamp[(link.target[0], link.keyframe)],
-                    link.source[0],
-                    stamp[(link.source[0], link.centre)],
-                    *(round(float(v), 5) for v in link.T_keyframe_centre),
-                ]
-                for link in graph_links
-            ],
-            "merge_update_s": round(update_s, 4),
-            "merge_timings": {k: round(v, 4) for k, v in result.timings.items()},
-            "merge_stats": dict(result.stats),
-        }
-    )
+    stats = _joint_merge_stats(local, result, frames, first_s, update_s)
     believed = {
         robot: result.frame_probabilities[robot][_main_piece(local, robot)]
         for robot in local.robots
@@ -133,6 +103,60 @@ def _merged_joint(local: OfflineMap, config: MergeConfig, method: str = "pivot")
         newest_poses=local.newest_poses,
         merge_result=result,
     )
+
+
+def _placed_trajectories(
+    local: OfflineMap, result: MergeResult
+) -> tuple[dict[str, Pose | None], dict[str, tuple[FloatArray, FloatArray]]]:
+    """Each robot's frame in ``map`` (None: unmerged) and its trajectory: every scan whose
+    keyframe was merged, placed through its keyframe's optimised pose; an unmerged robot's
+    in its own frame."""
+    # A robot's frame is its main piece's (local mapping's trajectory and map are in it).
+    frames: dict[str, Pose | None] = {}
+    trajectories = {}
+    for robot, own in local.trajectories.items():
+        frames[robot] = result.frames.get(robot, {}).get(_main_piece(local, robot))
+        placed = None
+        if frames[robot] is not None and robot in local.anchors:
+            placed = place_scans(result, robot, local.anchors[robot])
+        trajectories[robot] = own if placed is None else placed
+    return frames, trajectories
+
+
+def _joint_merge_stats(
+    local: OfflineMap,
+    result: MergeResult,
+    frames: dict[str, Pose | None],
+    first_s: float,
+    update_s: float,
+) -> dict[str, object]:
+    """The ``local`` run's stats with the joint merge's (``first_s`` it took, ``update_s``
+    an update with nothing changed took): the robots unmerged, every link in the graph, the
+    merge's timings and counts."""
+    stamp = {(r, kf.index): kf.stamp for r, frames in local.keyframes.items() for kf in frames}
+    graph_links = result.state.links if isinstance(result.state, JointState) else []
+    stats = _merge_stats(local, result, first_s, result.stats["links_accepted"])
+    stats.update(
+        {
+            "robots_unmerged": [robot for robot in local.robots if frames.get(robot) is None],
+            # Every link in the joint graph: keyframe (robot, stamp) a, keyframe b and T_a_b,
+            # so that a bench holding the reference can judge each one.
+            "merge_graph_links": [
+                [
+                    link.target[0],
+                    stamp[(link.target[0], link.keyframe)],
+                    link.source[0],
+                    stamp[(link.source[0], link.centre)],
+                    *(round(float(v), 5) for v in link.T_keyframe_centre),
+                ]
+                for link in graph_links
+            ],
+            "merge_update_s": round(update_s, 4),
+            "merge_timings": {k: round(v, 4) for k, v in result.timings.items()},
+            "merge_stats": dict(result.stats),
+        }
+    )
+    return stats
 
 
 def own_frame_map(offline: OfflineMap, robot: str) -> FloatArray:

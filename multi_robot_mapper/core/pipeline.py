@@ -186,14 +186,34 @@ def run_offline(
         local = _run_local(recordings, front_end, local_mapping or LocalMapperConfig(), timeline)
         if method == "local":
             return local
-        if progress is not None:
-            progress("merging", 0, 1)
-        merged = merged_map(local, config, method)
-        if progress is not None:
-            progress("merging", 1, 1)
-        if snapshots is not None and merged.merge_result is not None:
-            snapshots(final_snapshot(merged))
-        return merged
+        return _merged_run(local, config, method, progress, snapshots)
+    return _run_reference(recordings, front_end, method)
+
+
+def _merged_run(
+    local: OfflineMap,
+    config: MergeConfig,
+    method: str,
+    progress: Progress | None,
+    snapshots: SnapshotSink | None,
+) -> OfflineMap:
+    """The merging stage of ``run_offline`` on its ``local`` run, with its progress; the
+    merged result handed to ``snapshots`` as the last snapshot."""
+    if progress is not None:
+        progress("merging", 0, 1)
+    merged = merged_map(local, config, method)
+    if progress is not None:
+        progress("merging", 1, 1)
+    if snapshots is not None and merged.merge_result is not None:
+        snapshots(final_snapshot(merged))
+    return merged
+
+
+def _run_reference(
+    recordings: Mapping[str, Sequence[TimedLaserScan]], front_end: _FrontEnd, method: str
+) -> OfflineMap:
+    """The ``reference`` method of ``run_offline``: every scan with a reference pose placed
+    at it."""
     robots = sorted(recordings)
     segment_sets: list[FloatArray] = []
     owners: list[IntArray] = []
@@ -315,97 +335,135 @@ def _run_local(
     robots = sorted(recordings)
     started = time.perf_counter()
     mappers, times = _map_in_time_order(recordings, front_end, config, timeline)
-    segment_sets: list[FloatArray] = []
-    owners: list[IntArray] = []
-    trajectories: dict[str, tuple[FloatArray, FloatArray]] = {}
-    keyframe_poses: dict[str, FloatArray] = {}
-    all_keyframes: dict[str, list[Keyframe]] = {}
-    anchors: dict[str, tuple[FloatArray, IntArray, FloatArray]] = {}
-    newest_poses: dict[str, NewestPose] = {}
-    per_robot: dict[str, dict[str, object]] = {}
-    backend_times: list[float] = []
-    optimise_times: list[float] = []
+    maps = _LocalMaps()
     for index, robot in enumerate(robots):
-        mapper = mappers[robot]
-        backend_times += mapper.backend_seconds
-        optimise_times += mapper.optimise_seconds
+        maps.add(index, robot, mappers[robot])
+    stats = _local_stats(maps, front_end, times, started, timeline)
+    frames: dict[str, Pose | None] = {r: None for r in robots}  # never claimed: "unmerged"
+    return OfflineMap(
+        robots,
+        np.vstack(maps.segment_sets) if maps.segment_sets else np.zeros((0, 4)),
+        np.concatenate(maps.owners) if maps.owners else np.zeros(0, dtype=np.int64),
+        maps.trajectories,
+        frames,
+        stats,
+        maps.keyframe_poses,
+        maps.all_keyframes,
+        maps.anchors,
+        newest_poses=maps.newest_poses,
+    )
+
+
+@dataclasses.dataclass
+class _LocalMaps:
+    """What a ``local`` run reports of each robot's :class:`LocalMapper`, robot after robot:
+    its main piece's map, trajectory and keyframes, every keyframe and anchor, its newest
+    pose, its counts and its back end's times."""
+
+    segment_sets: list[FloatArray] = dataclasses.field(default_factory=list)
+    owners: list[IntArray] = dataclasses.field(default_factory=list)
+    trajectories: dict[str, tuple[FloatArray, FloatArray]] = dataclasses.field(default_factory=dict)
+    keyframe_poses: dict[str, FloatArray] = dataclasses.field(default_factory=dict)
+    all_keyframes: dict[str, list[Keyframe]] = dataclasses.field(default_factory=dict)
+    anchors: dict[str, tuple[FloatArray, IntArray, FloatArray]] = dataclasses.field(
+        default_factory=dict
+    )
+    newest_poses: dict[str, NewestPose] = dataclasses.field(default_factory=dict)
+    per_robot: dict[str, dict[str, object]] = dataclasses.field(default_factory=dict)
+    backend_times: list[float] = dataclasses.field(default_factory=list)
+    optimise_times: list[float] = dataclasses.field(default_factory=list)
+
+    def add(self, index: int, robot: str, mapper: LocalMapper) -> None:
+        """Robot ``robot`` (the ``index``-th) mapped by ``mapper``."""
+        self.backend_times += mapper.backend_seconds
+        self.optimise_times += mapper.optimise_seconds
         main = mapper.main_piece()
         backend = mapper.backend  # in line: this process's
         assert isinstance(backend, Backend)
         map_segments = backend.map.map_segments(piece=main)
         keyframes = [kf for kf in mapper.keyframes() if kf.piece == main]
-        keyframe_poses[robot] = np.array(
+        self.keyframe_poses[robot] = np.array(
             [kf.T_robotmap_keyframe for kf in keyframes], dtype=np.float64
         ).reshape(-1, 3)
-        segment_sets.append(map_segments)
-        owners.append(np.full(len(map_segments), index, dtype=np.int64))
-        trajectories[robot] = mapper.trajectory(main)
-        all_keyframes[robot] = mapper.keyframes()
-        anchors[robot] = all_anchors(mapper)
+        self.segment_sets.append(map_segments)
+        self.owners.append(np.full(len(map_segments), index, dtype=np.int64))
+        self.trajectories[robot] = mapper.trajectory(main)
+        self.all_keyframes[robot] = mapper.keyframes()
+        self.anchors[robot] = all_anchors(mapper)
         newest = newest_pose(mapper)
         if newest is not None:
-            newest_poses[robot] = newest
-        scans = backend.map.scans
-        per_robot[robot] = {
-            "scans_accepted": mapper.scans_accepted,
-            "scans_set_aside": mapper.scans_set_aside,
-            "scans_tracked": mapper.scans_tracked,
-            "scans_placed_by": dict(mapper.scans_placed_by),
-            "scans_in_main_piece": len(trajectories[robot][0]),
-            "scans_held": mapper.scans_held,  # not placed yet when the scans ended (nor set aside)
-            "set_aside_reasons": dict(mapper.set_aside_reasons),
-            "pieces_started": mapper.pieces_started,
-            "pieces_left": len(set(backend.map.pieces.tolist())),
-            "keyframes": len(keyframes),
-            "keyframes_all_pieces": len(scans),
-            "map_segments": len(map_segments),
-            "local_edges": backend.closer.local_edges,
-            "motion_bounds": backend.closer.motion_bounds,
-            "closures_accepted": len(mapper.closures),
-            "closures_refused": dict(backend.closer.refused),
-            "closures": [{"kind": c.kind, **_closure_record(c, scans)} for c in mapper.closures],
-            # headings across losses (the front end's guess's heading; its position unused)
-            "headings": [_closure_record(c, scans) for c in backend.closer.headings],
-            "front_end_stage_s": {k: round(v, 4) for k, v in mapper.stage_seconds.items()},
-        }
+            self.newest_poses[robot] = newest
+        self.per_robot[robot] = _robot_stats(
+            mapper, backend, len(self.trajectories[robot][0]), len(keyframes), len(map_segments)
+        )
 
-    def summary(values: list[float]) -> dict[str, float]:
-        array = np.asarray(values) if values else np.zeros(1)
-        return {
-            "median_ms": round(float(np.median(array)) * 1e3, 3),
-            "p95_ms": round(float(np.percentile(array, 95)) * 1e3, 3),
-            "max_ms": round(float(array.max()) * 1e3, 3),
-        }
 
-    scan_times = summary(times.per_scan)
+def _robot_stats(
+    mapper: LocalMapper, backend: Backend, in_main: int, keyframes: int, map_segments: int
+) -> dict[str, object]:
+    """One robot's part of a ``local`` run's ``stats.json``: its scans (``in_main`` in its
+    main piece), pieces, keyframes (``keyframes`` in its main piece, whose map has
+    ``map_segments`` segments), closures and the front end's time per stage."""
+    scans = backend.map.scans
+    return {
+        "scans_accepted": mapper.scans_accepted,
+        "scans_set_aside": mapper.scans_set_aside,
+        "scans_tracked": mapper.scans_tracked,
+        "scans_placed_by": dict(mapper.scans_placed_by),
+        "scans_in_main_piece": in_main,
+        "scans_held": mapper.scans_held,  # not placed yet when the scans ended (nor set aside)
+        "set_aside_reasons": dict(mapper.set_aside_reasons),
+        "pieces_started": mapper.pieces_started,
+        "pieces_left": len(set(backend.map.pieces.tolist())),
+        "keyframes": keyframes,
+        "keyframes_all_pieces": len(scans),
+        "map_segments": map_segments,
+        "local_edges": backend.closer.local_edges,
+        "motion_bounds": backend.closer.motion_bounds,
+        "closures_accepted": len(mapper.closures),
+        "closures_refused": dict(backend.closer.refused),
+        "closures": [{"kind": c.kind, **_closure_record(c, scans)} for c in mapper.closures],
+        # headings across losses (the front end's guess's heading; its position unused)
+        "headings": [_closure_record(c, scans) for c in backend.closer.headings],
+        "front_end_stage_s": {k: round(v, 4) for k, v in mapper.stage_seconds.items()},
+    }
+
+
+def _time_summary(values: list[float]) -> dict[str, float]:
+    """Median, 95th percentile and maximum of ``values`` (s) in ms."""
+    array = np.asarray(values) if values else np.zeros(1)
+    return {
+        "median_ms": round(float(np.median(array)) * 1e3, 3),
+        "p95_ms": round(float(np.percentile(array, 95)) * 1e3, 3),
+        "max_ms": round(float(array.max()) * 1e3, 3),
+    }
+
+
+def _local_stats(
+    maps: _LocalMaps,
+    front_end: _FrontEnd,
+    times: _MappingTimes,
+    started: float,
+    timeline: Timeline | None,
+) -> dict[str, object]:
+    """A ``local`` run's ``stats.json`` (its mapping ``started`` then)."""
+    scan_times = _time_summary(times.per_scan)
     stats: dict[str, object] = {
         "method": "local",
-        "scans_posed": sum(len(t[0]) for t in trajectories.values()),
-        "segments": int(sum(len(s) for s in segment_sets)),
+        "scans_posed": sum(len(t[0]) for t in maps.trajectories.values()),
+        "segments": int(sum(len(s) for s in maps.segment_sets)),
         **front_end.counts(),
         "local_mapping_s": round(times.mapping_s, 4),
         "mapping_errors": times.errors,
         "local_mapping_median_ms": scan_times["median_ms"],
         "local_mapping_p95_ms": scan_times["p95_ms"],
-        "backend_per_keyframe": summary(backend_times),
-        "optimisation_per_keyframe": summary(optimise_times),
-        "closures_accepted": sum(int(str(r["closures_accepted"])) for r in per_robot.values()),
-        "robots": per_robot,
+        "backend_per_keyframe": _time_summary(maps.backend_times),
+        "optimisation_per_keyframe": _time_summary(maps.optimise_times),
+        "closures_accepted": sum(int(str(r["closures_accepted"])) for r in maps.per_robot.values()),
+        "robots": maps.per_robot,
         "total_s": round(time.perf_counter() - started, 4),
     }
     if timeline is not None:  # merges while mapping: part of total_s, counted apart
         stats["snapshots"] = timeline.taken
         stats["snapshot_merges_s"] = round(timeline.merge_s, 4)
-    frames: dict[str, Pose | None] = {r: None for r in robots}  # never claimed: "unmerged"
-    return OfflineMap(
-        robots,
-        np.vstack(segment_sets) if segment_sets else np.zeros((0, 4)),
-        np.concatenate(owners) if owners else np.zeros(0, dtype=np.int64),
-        trajectories,
-        frames,
-        stats,
-        keyframe_poses,
-        all_keyframes,
-        anchors,
-        newest_poses=newest_poses,
-    )
+    return stats

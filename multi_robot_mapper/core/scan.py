@@ -82,11 +82,59 @@ class ScanPoints:
 
 def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
     """Convert LaserScan fields to valid points, checking every field a driver can get wrong."""
-    angle_min, angle_max, angle_increment = scan.angle_min, scan.angle_max, scan.angle_increment
-    range_min, range_max, intensities = scan.range_min, scan.range_max, scan.intensities
+    angle_min, angle_increment = scan.angle_min, scan.angle_increment
+    range_min, range_max = scan.range_min, scan.range_max
     r = np.asarray(scan.ranges, dtype=np.float64).ravel()
     n = r.size
-    notices: list[ScanNotice] = []
+    _check_beam_count(n, max_beams)
+    _check_scalar_fields(scan)
+    _check_beam_angles(scan, n)
+    notices = _intensities_notices(scan.intensities, n)
+
+    # The range limits are finite (checked above), so NaN and +-inf fail one of the two
+    # comparisons: no separate finiteness test is needed.
+    with np.errstate(invalid="ignore"):
+        valid = (r >= range_min) & (r < range_max)
+    index = valid.nonzero()[0]
+    dropped: tuple[tuple[str, int], ...] = ()
+    if index.size < n:
+        dropped = _dropped_by_kind(r, range_min, range_max)
+        notices += _non_finite_notices(dropped, n)
+    if angle_increment < 0.0:
+        index = index[::-1]
+        notices.append(
+            ScanNotice(
+                "negative_increment",
+                "angle_increment is negative (clockwise scan); points re-ordered counter-clockwise",
+            )
+        )
+    if index.size == 0:
+        notices.append(
+            ScanNotice(
+                "no_valid_ranges",
+                f"none of the {n} ranges is a finite reading in "
+                f"[range_min={range_min:g}, range_max={range_max:g}) m",
+            )
+        )
+    cos, sin = _beam_directions(angle_min, angle_increment, n)
+    if index.size == n and angle_increment > 0.0:
+        rv = r  # every beam valid, already counter-clockwise: no gathers
+    else:
+        rv, cos, sin = r[index], cos[index], sin[index]
+    points = np.empty((index.size, 2))
+    np.multiply(rv, cos, out=points[:, 0])
+    np.multiply(rv, sin, out=points[:, 1])
+    return ScanPoints(
+        points=points,
+        beam_index=index.astype(np.int64, copy=False),
+        beam_count=n,
+        notices=tuple(notices),
+        dropped=dropped,
+    )
+
+
+def _check_beam_count(n: int, max_beams: int) -> None:
+    """ScanError unless the scan has between one and ``max_beams`` beams."""
     if n == 0:
         raise ScanError("no_beams", "scan has no beams (ranges is empty)", "ranges")
     if n > max_beams:
@@ -95,11 +143,17 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
             f"scan has {n} beams, more than max_beams={max_beams}; refusing it as corrupt",
             "ranges",
         )
+
+
+def _check_scalar_fields(scan: LaserScanData) -> None:
+    """ScanError unless every angle and range field is finite and the range limits leave room
+    for a valid reading."""
+    range_min, range_max = scan.range_min, scan.range_max
     # The scalar checks use math, not numpy: numpy costs about a microsecond per scalar call.
     for name, value in (
-        ("angle_min", angle_min),
-        ("angle_max", angle_max),
-        ("angle_increment", angle_increment),
+        ("angle_min", scan.angle_min),
+        ("angle_max", scan.angle_max),
+        ("angle_increment", scan.angle_increment),
         ("range_min", range_min),
         ("range_max", range_max),
     ):
@@ -119,6 +173,13 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
             f"range_max ({range_max:g} m) <= range_min ({range_min:g} m): no reading can be valid",
             "range_max",
         )
+
+
+def _check_beam_angles(scan: LaserScanData, n: int) -> None:
+    """ScanError unless the angle fields describe the ``n`` beams of ``ranges``: a nonzero
+    increment of the sign of angle_max - angle_min, no more than a full turn, and as many
+    beams as ranges (within a beam either way)."""
+    angle_min, angle_max, angle_increment = scan.angle_min, scan.angle_max, scan.angle_increment
     if n > 1 and angle_increment == 0.0:
         raise ScanError(
             "zero_increment", f"angle_increment is 0 for a scan of {n} beams", "angle_increment"
@@ -151,64 +212,34 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
                 f"{expected:.0f}: the fields contradict each other",
                 "ranges",
             )
+
+
+def _intensities_notices(intensities: FloatArray | None, n: int) -> list[ScanNotice]:
+    """A notice when the intensities are given but not one per beam (they are ignored)."""
     if intensities is not None:
         n_int = np.asarray(intensities).size
         if n_int not in (0, n):
-            notices.append(
+            return [
                 ScanNotice(
                     "intensities_length",
                     f"intensities has {n_int} entries but ranges has {n}; intensities ignored",
                 )
-            )
+            ]
+    return []
 
-    # The range limits are finite (checked above), so NaN and +-inf fail one of the two
-    # comparisons: no separate finiteness test is needed.
-    with np.errstate(invalid="ignore"):
-        valid = (r >= range_min) & (r < range_max)
-    index = valid.nonzero()[0]
-    dropped: tuple[tuple[str, int], ...] = ()
-    if index.size < n:
-        dropped = _dropped_by_kind(r, range_min, range_max)
-        counts = dict(dropped)
-        n_nan, n_inf = counts.get("nan", 0), counts.get("+inf", 0) + counts.get("-inf", 0)
-        if n_nan or n_inf:
-            notices.append(
-                ScanNotice(
-                    "non_finite_ranges",
-                    f"{n_nan} NaN and {n_inf} inf of {n} ranges: treated as no return",
-                )
-            )
-    if angle_increment < 0.0:
-        index = index[::-1]
-        notices.append(
+
+def _non_finite_notices(dropped: tuple[tuple[str, int], ...], n: int) -> list[ScanNotice]:
+    """A notice when some of the ``n`` ranges are NaN or infinite (``dropped``, by kind)."""
+    counts = dict(dropped)
+    n_nan, n_inf = counts.get("nan", 0), counts.get("+inf", 0) + counts.get("-inf", 0)
+    if n_nan or n_inf:
+        return [
             ScanNotice(
-                "negative_increment",
-                "angle_increment is negative (clockwise scan); points re-ordered counter-clockwise",
+                "non_finite_ranges",
+                f"{n_nan} NaN and {n_inf} inf of {n} ranges: treated as no return",
             )
-        )
-    if index.size == 0:
-        notices.append(
-            ScanNotice(
-                "no_valid_ranges",
-                f"none of the {n} ranges is a finite reading in "
-                f"[range_min={range_min:g}, range_max={range_max:g}) m",
-            )
-        )
-    cos, sin = _beam_directions(angle_min, angle_increment, n)
-    if index.size == n and angle_increment > 0.0:
-        rv = r  # every beam valid, already counter-clockwise: no gathers
-    else:
-        rv, cos, sin = r[index], cos[index], sin[index]
-    points = np.empty((index.size, 2))
-    np.multiply(rv, cos, out=points[:, 0])
-    np.multiply(rv, sin, out=points[:, 1])
-    return ScanPoints(
-        points=points,
-        beam_index=index.astype(np.int64, copy=False),
-        beam_count=n,
-        notices=tuple(notices),
-        dropped=dropped,
-    )
+        ]
+    return []
 
 
 def _dropped_by_kind(

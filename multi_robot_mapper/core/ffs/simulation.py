@@ -129,17 +129,7 @@ def run_ffs(
     count = len(poses)
     free = np.ones(count, dtype=bool) if fixed is None else ~np.asarray(fixed, dtype=bool)
     springs = springs or ChainSprings(poses, None, 0.0)
-    # Centre of mass of each body in its own frame; the sensor origin is (0, 0) there.
-    mass = np.maximum(np.bincount(bodies.body, bodies.masses, count), 1e-12)
-    com_local = np.column_stack(
-        [
-            np.bincount(bodies.body, bodies.masses * bodies.points[:, c], count) / mass
-            for c in (0, 1)
-        ]
-    )
-    radius = np.sqrt(
-        np.bincount(bodies.body, bodies.masses * np.sum(bodies.points**2, axis=1), count) / mass
-    )
+    moments = _BodyMoments.of(bodies, count)
     sigma, dt = resume or (config.sigma_start, config.dt_start)
     potentials: list[float] = []
     relocations: list[float] = []
@@ -153,43 +143,11 @@ def run_ffs(
         points, directions = placed(bodies, poses)
         # Rotation centre: centre of mass -> sensor origin as sigma cools (FFS 3.5).
         cooled = (config.sigma_start - sigma) / span
-        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        local = (1.0 - cooled) * com_local
-        centres = poses[:, :2] + np.column_stack(
-            [c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]]
-        )
+        centres = _rotation_centres(poses, moments.com_local, cooled)
         field = force_field(points, directions, bodies, centres, sigma, config.cutoff)
         spring = springs.acceleration(poses)
         potentials.append(field.potential)
-        # Accelerations (Eq. 6-7): force over mass, torque over moment of inertia, both in
-        # units of a body lying fully on another's walls (a point there has the kernel's sum
-        # sqrt(2 pi) sigma / spacing of neighbours on a line): then 1/2 a dt^2 with dt = 1 is
-        # the whole step such a body needs, and a body touching others at a few points only
-        # moves that much less (the paper's F / m).
-        contact = np.sqrt(2.0 * np.pi) * sigma / config.spacing / sigma**2
-        # Moment of inertia about the centre a * com (a = 1 - cooled), from the body's second
-        # moment: sum m |p - a com|^2 = M (r^2 - (2a - a^2) |com|^2), no pass over the points.
-        a = 1.0 - cooled
-        inertia = mass * (radius**2 - (2.0 * a - a * a) * np.sum(com_local**2, axis=1))
-        translation = field.force / (mass[:, None] * contact)
-        rotation = np.where(
-            inertia > 1e-12, field.torque / (np.maximum(inertia, 1e-12) * contact), 0.0
-        )
-        step = 0.5 * dt**2
-        shift = step * translation * free[:, None]
-        turn = step * rotation * free
-        # Turning about the centre moves the body's origin too.
-        arm = poses[:, :2] - centres
-        ct, st = np.cos(turn), np.sin(turn)
-        poses[:, 0] = centres[:, 0] + ct * arm[:, 0] - st * arm[:, 1] + shift[:, 0]
-        poses[:, 1] = centres[:, 1] + st * arm[:, 0] + ct * arm[:, 1] + shift[:, 1]
-        # The springs pull on the bodies' origins (their prediction is of the whole pose).
-        pulled = step * spring * free[:, None]
-        poses[:, :2] += pulled[:, :2]
-        poses[:, 2] = se2.wrap_angle(poses[:, 2] + turn + pulled[:, 2])
-        # Net motion: where field and springs balance, the body stands still.
-        moved = np.hypot(*(shift + pulled[:, :2]).T) + np.abs(turn + pulled[:, 2]) * radius
-        relocation = float(moved[free].mean()) if free.any() else 0.0
+        relocation = _step(poses, field, spring, centres, moments, free, cooled, sigma, dt, config)
         relocations.append(relocation)
         # Cooling (FFS 3.6): sigma linearly, dt exponentially.
         sigma = max(config.sigma_end, sigma - config.sigma_step)
@@ -199,6 +157,87 @@ def run_ffs(
             break
     seconds = time.perf_counter() - started
     return FfsResult(poses, potentials, relocations, iteration, converged, seconds, sigma, dt)
+
+
+@dataclasses.dataclass(frozen=True)
+class _BodyMoments:
+    """Each body's mass, centre of mass in its own frame (where the sensor origin is (0, 0))
+    and radius of gyration about its origin."""
+
+    mass: FloatArray  # (K,)
+    com_local: FloatArray  # (K, 2)
+    radius: FloatArray  # (K,)
+
+    @staticmethod
+    def of(bodies: Bodies, count: int) -> _BodyMoments:
+        """The moments of the ``count`` bodies' points."""
+        # Centre of mass of each body in its own frame; the sensor origin is (0, 0) there.
+        mass = np.maximum(np.bincount(bodies.body, bodies.masses, count), 1e-12)
+        com_local = np.column_stack(
+            [
+                np.bincount(bodies.body, bodies.masses * bodies.points[:, c], count) / mass
+                for c in (0, 1)
+            ]
+        )
+        radius = np.sqrt(
+            np.bincount(bodies.body, bodies.masses * np.sum(bodies.points**2, axis=1), count) / mass
+        )
+        return _BodyMoments(mass, com_local, radius)
+
+
+def _rotation_centres(poses: FloatArray, com_local: FloatArray, cooled: float) -> FloatArray:
+    """(K, 2) each body's rotation centre in ``map``: its centre of mass (``com_local`` in its
+    own frame) drawn towards its sensor origin by the share ``cooled`` of the cooling."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    local = (1.0 - cooled) * com_local
+    return poses[:, :2] + np.column_stack(
+        [c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]]
+    )
+
+
+def _step(
+    poses: FloatArray,
+    field: FieldStep,
+    spring: FloatArray,
+    centres: FloatArray,
+    moments: _BodyMoments,
+    free: BoolArray,
+    cooled: float,
+    sigma: float,
+    dt: float,
+    config: FfsConfig,
+) -> float:
+    """One step of the free bodies (``poses`` moved in place) by the field and the springs'
+    accelerations: ½·a·Δt², turning about the rotation centres; the mean relocation of the
+    free bodies (m)."""
+    mass, com_local, radius = moments.mass, moments.com_local, moments.radius
+    # Accelerations (Eq. 6-7): force over mass, torque over moment of inertia, both in
+    # units of a body lying fully on another's walls (a point there has the kernel's sum
+    # sqrt(2 pi) sigma / spacing of neighbours on a line): then 1/2 a dt^2 with dt = 1 is
+    # the whole step such a body needs, and a body touching others at a few points only
+    # moves that much less (the paper's F / m).
+    contact = np.sqrt(2.0 * np.pi) * sigma / config.spacing / sigma**2
+    # Moment of inertia about the centre a * com (a = 1 - cooled), from the body's second
+    # moment: sum m |p - a com|^2 = M (r^2 - (2a - a^2) |com|^2), no pass over the points.
+    a = 1.0 - cooled
+    inertia = mass * (radius**2 - (2.0 * a - a * a) * np.sum(com_local**2, axis=1))
+    translation = field.force / (mass[:, None] * contact)
+    rotation = np.where(inertia > 1e-12, field.torque / (np.maximum(inertia, 1e-12) * contact), 0.0)
+    step = 0.5 * dt**2
+    shift = step * translation * free[:, None]
+    turn = step * rotation * free
+    # Turning about the centre moves the body's origin too.
+    arm = poses[:, :2] - centres
+    ct, st = np.cos(turn), np.sin(turn)
+    poses[:, 0] = centres[:, 0] + ct * arm[:, 0] - st * arm[:, 1] + shift[:, 0]
+    poses[:, 1] = centres[:, 1] + st * arm[:, 0] + ct * arm[:, 1] + shift[:, 1]
+    # The springs pull on the bodies' origins (their prediction is of the whole pose).
+    pulled = step * spring * free[:, None]
+    poses[:, :2] += pulled[:, :2]
+    poses[:, 2] = se2.wrap_angle(poses[:, 2] + turn + pulled[:, 2])
+    # Net motion: where field and springs balance, the body stands still.
+    moved = np.hypot(*(shift + pulled[:, :2]).T) + np.abs(turn + pulled[:, 2]) * radius
+    return float(moved[free].mean()) if free.any() else 0.0
 
 
 class ChainSprings:

@@ -278,30 +278,67 @@ def match_scan(
     decision reads an attempt's confidence in its context (:func:`in_context`).
     ``count(stage, seconds)`` is told where the time went; ``record`` (a list) receives every
     attempt kept."""
-    threshold = config.integrate_confidence
-    here, poses, pieces = references.here, references.poses, references.pieces
     attempts: list[Attempt] = record if record is not None else []
-    current = pieces[references.keyframe]
+    matching = _ScanMatching(config, references, new, view, count, shapes, attempts)
+    if tracking:
+        # Tracking needs a prediction: after a new piece starts nothing is known of the
+        # motion, and "did not move" refined in a corridor stays where it started.
+        tracked = matching.track(motions)
+        if tracked is not None:
+            return tracked
+    return matching.search(motions)
+
+
+class _ScanMatching:
+    """The match attempts of one new scan (:func:`match_scan`): what it is matched against,
+    every attempt kept so far, and whether two likely ones disagree."""
+
+    def __init__(
+        self,
+        config: LocalMapperConfig,
+        references: References,
+        new: FloatArray,
+        view: LaserScanData,
+        count: Callable[[str, float], None],
+        shapes: Shapes | None,
+        attempts: list[Attempt],
+    ) -> None:
+        self.config = config
+        self.references = references
+        self.new = new
+        self.view = view
+        self.count = count
+        self.shapes = shapes
+        self.attempts = attempts
+        self.threshold = config.integrate_confidence
+        self.current = references.pieces[references.keyframe]
+        self.rivals_disagree = False
+        self.searched: Attempt | None = None  # the search against the last scan, once made
 
     def attempt(
+        self,
         stage: str,
         reference: Reference,
         search: bool,
         guesses_from_last: list[Pose],
         judge_near_prediction: bool = False,
     ) -> Attempt:
+        """The new scan matched against ``reference`` from the predictions
+        ``guesses_from_last`` (motions from the last placed scan; with ``search``,
+        INTEGRATE's own hypotheses too, and the shapes' where that is not confident), kept
+        with its confidence in context; the time it took counted. With
+        ``judge_near_prediction`` its confidence is read only within the correctness tolerance
+        of the first prediction."""
         started = time.perf_counter()
         anchor = reference.anchor
-        # The predictions, from the reference's frame.
-        T_ref_last = se2.between(se2.compose(poses[anchor.keyframe], anchor.T_keyframe_scan), here)
-        guesses = [se2.compose(T_ref_last, m) for m in guesses_from_last]
+        guesses = self._predictions(anchor, guesses_from_last)
         result = integrate(
             reference.segments,
-            new,
-            config.integrate,
+            self.new,
+            self.config.integrate,
             heuristics=HEURISTICS if search else (),
             extra_hypotheses=hypotheses_of(guesses),
-            views=(reference.view, view),
+            views=(reference.view, self.view),
             judged=(
                 (lambda T: close_to(pose_of_match(T), guesses[0], RIGHT_DISTANCE, RIGHT_ANGLE))
                 if judge_near_prediction
@@ -310,46 +347,69 @@ def match_scan(
         )
         checked = result.seconds.get("confidence", 0.0)
         shaping = 0.0
-        piece = pieces[anchor.keyframe]
-        context = "other" if piece != current else stage
-        if search and shapes is not None and in_context(result.confidence, context) < threshold:
-            # A search that is not confident is searched again with Wolter's shape matching
-            # as a second source of hypotheses: its polylines keep clusters too small for
-            # segments. Only then: a confident search keeps the hypotheses its confidence
-            # was calibrated on.
-            shaped = time.perf_counter()
-            found = match_shapes(shapes(reference.view), shapes(view), shapes.config)
-            shaped_result = integrate(
-                reference.segments,
-                new,
-                config.integrate,
-                heuristics=HEURISTICS,
-                extra_hypotheses=hypotheses_of(guesses + list(found.alternatives)),
-                views=(reference.view, view),
-            )
-            if shaped_result.confidence > result.confidence:
-                result = shaped_result
-            shaping = time.perf_counter() - shaped
+        piece = self.references.pieces[anchor.keyframe]
+        context = "other" if piece != self.current else stage
+        if (
+            search
+            and self.shapes is not None
+            and in_context(result.confidence, context) < self.threshold
+        ):
+            result, shaping = self._shaped(self.shapes, reference, guesses, result)
         T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
         done = Attempt(
             result,
             anchor,
             reference.segments,
-            se2.compose(poses[anchor.keyframe], T_keyframe_new),
+            se2.compose(self.references.poses[anchor.keyframe], T_keyframe_new),
             piece,
             stage,
             context,
             in_context(result.confidence, context),
             reference.stamp,
         )
-        attempts.append(done)
-        count(stage, time.perf_counter() - started - checked - shaping)
-        count("confidence", checked)
+        self.attempts.append(done)
+        self.count(stage, time.perf_counter() - started - checked - shaping)
+        self.count("confidence", checked)
         if shaping:
-            count("shape", shaping)
+            self.count("shape", shaping)
         return done
 
-    def reachable(a: Attempt) -> bool:
+    def _predictions(self, anchor: Anchor, motions: list[Pose]) -> list[Pose]:
+        """The new scan's predicted placements in the frame of the reference scan at
+        ``anchor``: ``motions`` from the last placed scan."""
+        poses = self.references.poses
+        # The predictions, from the reference's frame.
+        T_ref_last = se2.between(
+            se2.compose(poses[anchor.keyframe], anchor.T_keyframe_scan), self.references.here
+        )
+        return [se2.compose(T_ref_last, m) for m in motions]
+
+    def _shaped(
+        self, shapes: Shapes, reference: Reference, guesses: list[Pose], result: MatchResult
+    ) -> tuple[MatchResult, float]:
+        """The search ``result`` searched again with the shape matching's placements as more
+        hypotheses: the more confident of the two, and the seconds it took."""
+        # A search that is not confident is searched again with Wolter's shape matching
+        # as a second source of hypotheses: its polylines keep clusters too small for
+        # segments. Only then: a confident search keeps the hypotheses its confidence
+        # was calibrated on.
+        shaped = time.perf_counter()
+        found = match_shapes(shapes(reference.view), shapes(self.view), shapes.config)
+        shaped_result = integrate(
+            reference.segments,
+            self.new,
+            self.config.integrate,
+            heuristics=HEURISTICS,
+            extra_hypotheses=hypotheses_of(guesses + list(found.alternatives)),
+            views=(reference.view, self.view),
+        )
+        if shaped_result.confidence > result.confidence:
+            result = shaped_result
+        return result, time.perf_counter() - shaped
+
+    def reachable(self, a: Attempt) -> bool:
+        """Can the robot have driven to the placement of ``a`` since it was last placed (in
+        its own piece, or in another where it was last placed there)?"""
         # In its own piece, the robot is no farther from its last placed scan than it drives
         # at ``plausible_speed`` (or its own top speed, when faster) in the time since, plus
         # the correctness tolerance: a scan of another place or of another building can match
@@ -360,41 +420,43 @@ def match_scan(
         # takes it: two attempts against neighbouring keyframes of one look-alike place agree
         # as well as two right ones (intel: 7.2 m off at 0.64 and 0.76; intel 4 robot1, after
         # a held scan: 7.2 m off at 0.92).
+        references = self.references
         top_speed = references.top_speed
-        if a.piece == current and references.elapsed is not None:
-            pose, elapsed = here, references.elapsed
+        if a.piece == self.current and references.elapsed is not None:
+            pose, elapsed = references.here, references.elapsed
             if not (references.own_speed_only and top_speed is not None):
-                top_speed = max(top_speed or 0.0, config.plausible_speed)
-        elif a.piece != current and top_speed is not None and a.piece in references.left:
+                top_speed = max(top_speed or 0.0, self.config.plausible_speed)
+        elif a.piece != self.current and top_speed is not None and a.piece in references.left:
             pose, elapsed = references.left[a.piece]
         else:
             return True
         reach = reach_in(top_speed, elapsed)
         return bool(np.hypot(a.pose[0] - pose[0], a.pose[1] - pose[1]) <= reach)
 
-    rivals_disagree = False
-    search: Attempt | None = None  # the search against the last scan, once made
-
-    def settled() -> Attempt | None:
+    def settled(self) -> Attempt | None:
+        """The attempt that settles the placement, if one does yet."""
         # A match against the last keyframe or the last scan settles it alone; one against an
         # older keyframe (tried because those failed: the best of several tries), or any
         # match once two likely ones disagree, only with another match that corroborates it.
-        if rivals_disagree:
-            return corroborated(attempts, reachable)
-        recent = [a for a in attempts if a.stage != "recent" and reachable(a)]
+        if self.rivals_disagree:
+            return corroborated(self.attempts, self.reachable)
+        recent = [a for a in self.attempts if a.stage != "recent" and self.reachable(a)]
         best = max(recent, key=lambda a: a.confidence, default=None)
-        if best is not None and best.confidence >= threshold:
+        if best is not None and best.confidence >= self.threshold:
             return best
-        return corroborated(attempts, reachable)
+        return corroborated(self.attempts, self.reachable)
 
-    def keyframe_reference(keyframe: int) -> Reference:
-        scan = references.scans[keyframe]
+    def keyframe_reference(self, keyframe: int) -> Reference:
+        """A keyframe's scan as a reference."""
+        scan = self.references.scans[keyframe]
         return Reference(scan.segments, scan.view, Anchor(keyframe, (0.0, 0.0, 0.0)), scan.stamp)
 
-    if tracking:
-        # Tracking needs a prediction: after a new piece starts nothing is known of the
-        # motion, and "did not move" refined in a corridor stays where it started.
-        start = keyframe_reference(references.keyframe)
+    def track(self, motions: list[Pose]) -> tuple[Attempt, bool, bool] | None:
+        """The placement tracked against the last keyframe from the predictions, when the
+        motion model and the match agree (or a likely search does not disagree); None when
+        tracking settles nothing (the search goes on, :meth:`search`)."""
+        here = self.references.here
+        start = self.keyframe_reference(self.references.keyframe)
         # A fast laser's prediction is good: refined alone, it lands next to it. When it lands
         # farther, or is not confident, it is refined again with rivals a wrong minimum cannot
         # hide from: turned either way (a turn that starts between two scans is the usual
@@ -402,22 +464,22 @@ def match_scan(
         # the look-alike's rival, or the right answer when the prediction found the look-alike).
         # Its confidence is read only within the tolerance of the prediction: beyond it the
         # placement is discarded whatever its confidence (most scans that need the rivals).
-        quick = attempt("track", start, False, motions[:1], judge_near_prediction=True)
+        quick = self.attempt("track", start, False, motions[:1], judge_near_prediction=True)
         # A sure one settles anywhere within the tolerance: on every shared log cut into 4
         # robots (bench/track_near.py, its fourth table) the 1 599 sure ones there were all
         # right; the 0.81 that stayed 17 deg off on aces (below) is far from sure.
         near = (NEAR, NEAR_ANGLE) if quick.confidence < SURE else (RIGHT_DISTANCE, RIGHT_ANGLE)
         if (
-            quick.confidence >= threshold
+            quick.confidence >= self.threshold
             and close_to(se2.between(here, quick.pose), motions[0], *near)
-            and reachable(quick)
+            and self.reachable(quick)
         ):
             return quick, True, True
-        attempts.remove(quick)
+        self.attempts.remove(quick)
         x, y, theta = motions[0]
         rivals = [(x, y, theta + d) for d in (*TRACK_TURNS, *LOOK_ALIKE_TURNS) if d]
-        track = attempt("track", start, False, motions + rivals)
-        if track.confidence >= threshold and reachable(track):
+        track = self.attempt("track", start, False, motions + rivals)
+        if track.confidence >= self.threshold and self.reachable(track):
             if track.confidence >= SURE or close_to(
                 se2.between(here, track.pose), motions[0], RIGHT_DISTANCE, RIGHT_ANGLE
             ):
@@ -431,25 +493,32 @@ def match_scan(
             # Far from the prediction, the placement may be a look-alike the prediction led
             # to: the search with no guess confirms it, or finds a likely rival, and then
             # neither settles alone.
-            search = attempt("search", references.last, True, motions)
-            rivals_disagree = (
+            search = self.attempt("search", self.references.last, True, motions)
+            self.searched = search
+            self.rivals_disagree = (
                 search.confidence >= LIKELY
-                and reachable(search)
+                and self.reachable(search)
                 and not close_to(search.pose, track.pose, RIGHT_DISTANCE, RIGHT_ANGLE)
             )
-            if not rivals_disagree:
+            if not self.rivals_disagree:
                 return track, True, True
-        elif (done := settled()) is not None:
+        elif (done := self.settled()) is not None:
             return done, True, True
-    if search is None:
-        attempt("search", references.last, True, motions)
-    if (done := settled()) is not None:
-        return done, True, False
-    for k in references.older:
-        attempt("recent", keyframe_reference(k), True, motions)
-        if (done := settled()) is not None:
+        return None
+
+    def search(self, motions: list[Pose]) -> tuple[Attempt, bool, bool]:
+        """The placement searched against the last scan (unless tracking searched already),
+        then against the older keyframes, until one settles it; else the guess a new piece
+        starts from, not to be integrated."""
+        if self.searched is None:
+            self.attempt("search", self.references.last, True, motions)
+        if (done := self.settled()) is not None:
             return done, True, False
-    # The guess a new piece starts from: the most confident placement the robot can have
-    # driven to (a look-alike far off misleads the join's search).
-    guesses = [a for a in attempts if reachable(a)] or attempts
-    return max(guesses, key=lambda a: a.confidence), False, False
+        for k in self.references.older:
+            self.attempt("recent", self.keyframe_reference(k), True, motions)
+            if (done := self.settled()) is not None:
+                return done, True, False
+        # The guess a new piece starts from: the most confident placement the robot can have
+        # driven to (a look-alike far off misleads the join's search).
+        guesses = [a for a in self.attempts if self.reachable(a)] or self.attempts
+        return max(guesses, key=lambda a: a.confidence), False, False

@@ -218,20 +218,7 @@ class PieceJoins(WindowMatcher):
         config = self.config
         other_piece = self.keyframes.piece(keyframe)
         radius = self._join_radius(piece)
-        pairs: list[tuple[int, int]] = []  # (keyframe of this piece, of the other)
-        young = len(self.keyframes.members(piece))
-        if 1 < young <= _WINDOW and depth == 0:
-            # Where the robot was lost: near the keyframe it was last placed by, whatever the
-            # guess's heading (a guess that is not confident may be turned round).
-            lost_at = self.keyframes.pose(keyframe)
-            around = self.keyframes.near(lost_at, other_piece, config.loop_radius)
-            pairs += [(piece, int(k)) for k in around[: config.loop_candidates]]
-        guess = se2.compose(T_other_piece, self.keyframes.pose(index))
-        near = self.keyframes.near(guess, other_piece, radius)
-        pairs += [(index, int(k)) for k in near[: config.loop_candidates] if index != piece]
-        # Where the guess is wrong, the robot's motion still bounds where the piece lies.
-        ring = self._reachable_candidates(index, piece, other_piece, radius)
-        bounded = [(index, k) for k in ring if (index, k) not in pairs]
+        pairs, bounded = self._guess_pairs(index, piece, keyframe, T_other_piece, depth, radius)
         for mine, first in pairs + bounded:
             predicted = se2.between(
                 self.keyframes.pose(first),
@@ -279,6 +266,37 @@ class PieceJoins(WindowMatcher):
             ):
                 return [self._join(first, mine, found, result.confidence)]
         return []
+
+    def _guess_pairs(
+        self,
+        index: int,
+        piece: int,
+        keyframe: int,
+        T_other_piece: Pose,
+        depth: int,
+        radius: float,
+    ) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
+        """The pairs (keyframe of this piece, of the other) :meth:`_join_through_guess`
+        matches: near where the robot was lost (a young piece's first attempt) and near where
+        the guess puts keyframe ``index`` (within ``radius``); then, apart, those on the ring
+        of keyframes the robot's motion allows."""
+        config = self.config
+        other_piece = self.keyframes.piece(keyframe)
+        pairs: list[tuple[int, int]] = []  # (keyframe of this piece, of the other)
+        young = len(self.keyframes.members(piece))
+        if 1 < young <= _WINDOW and depth == 0:
+            # Where the robot was lost: near the keyframe it was last placed by, whatever the
+            # guess's heading (a guess that is not confident may be turned round).
+            lost_at = self.keyframes.pose(keyframe)
+            around = self.keyframes.near(lost_at, other_piece, config.loop_radius)
+            pairs += [(piece, int(k)) for k in around[: config.loop_candidates]]
+        guess = se2.compose(T_other_piece, self.keyframes.pose(index))
+        near = self.keyframes.near(guess, other_piece, radius)
+        pairs += [(index, int(k)) for k in near[: config.loop_candidates] if index != piece]
+        # Where the guess is wrong, the robot's motion still bounds where the piece lies.
+        ring = self._reachable_candidates(index, piece, other_piece, radius)
+        bounded = [(index, k) for k in ring if (index, k) not in pairs]
+        return pairs, bounded
 
     def _join_believed(self, first: int, mine: int, T_first_mine: Pose) -> bool:
         """Does the evidence model believe the join that puts keyframe ``mine`` at

@@ -131,17 +131,7 @@ class LoopCloser(PieceJoins):
         started = time.perf_counter()
         index = scan.index
         before = self.keyframes.poses
-        self.keyframes.add(scan, pose, piece)
-        self.graph.add_node(index, pose, anchored=odometry is None)
-        if odometry is not None:
-            self.graph.add_edge(odometry)
-            previous = self.keyframes.pose(odometry.first)
-            step = float(np.hypot(pose[0] - previous[0], pose[1] - previous[1]))
-            self._path_since_closure[piece] = self._path_since_closure.get(piece, 0.0) + step
-        else:
-            self._path_since_closure[piece] = 0.0
-            if lost_from is not None:
-                self._lost(piece, lost_from)
+        self._enter(scan, pose, piece, odometry, lost_from)
         # The keyframe and its edge are in; every later step only improves the map. One that
         # fails (a bug) is reported and skipped, so the next keyframe finds the graph whole.
         errors: list[str] = []
@@ -171,6 +161,39 @@ class LoopCloser(PieceJoins):
             guarded(lambda: self.graph.optimize(iterations=3), None)
         self.keyframes.set_poses(self.graph.poses())
         optimise_seconds += time.perf_counter() - optimise_started
+        moved = self._moved_since(before, index)
+        self.local_edges += local
+        self.errors += len(errors)
+        seconds = time.perf_counter() - started
+        return BackendUpdate(moved, joins, closures, local, seconds, optimise_seconds, errors)
+
+    def _enter(
+        self,
+        scan: KeyframeScan,
+        pose: Pose,
+        piece: int,
+        odometry: Edge | None,
+        lost_from: LostFrom | None,
+    ) -> None:
+        """The new keyframe into the map and the graph (with the front end's edge), and the
+        path its piece has driven since its last closure; a piece's first keyframe starts
+        that path, and says where the robot was lost from."""
+        index = scan.index
+        self.keyframes.add(scan, pose, piece)
+        self.graph.add_node(index, pose, anchored=odometry is None)
+        if odometry is not None:
+            self.graph.add_edge(odometry)
+            previous = self.keyframes.pose(odometry.first)
+            step = float(np.hypot(pose[0] - previous[0], pose[1] - previous[1]))
+            self._path_since_closure[piece] = self._path_since_closure.get(piece, 0.0) + step
+        else:
+            self._path_since_closure[piece] = 0.0
+            if lost_from is not None:
+                self._lost(piece, lost_from)
+
+    def _moved_since(self, before: FloatArray, index: int) -> dict[int, Pose]:
+        """The keyframes whose pose changed since ``before`` (every keyframe's pose then), and
+        the new keyframe ``index``, with their poses now."""
         after = self.keyframes.poses
         count = min(len(before), len(after))
         changed = np.flatnonzero(
@@ -178,17 +201,7 @@ class LoopCloser(PieceJoins):
         )
         moved = {int(k): self.keyframes.pose(int(k)) for k in changed}
         moved[index] = self.keyframes.pose(index)
-        self.local_edges += local
-        self.errors += len(errors)
-        return BackendUpdate(
-            moved,
-            joins,
-            closures,
-            local,
-            time.perf_counter() - started,
-            optimise_seconds,
-            errors,
-        )
+        return moved
 
     def _local_edges(self, index: int, piece: int, odometry: Edge | None) -> int:
         """Edges to the nearest recent keyframes (not the front end's own reference)."""

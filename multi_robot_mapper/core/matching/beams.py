@@ -348,32 +348,34 @@ def seen_through_many(
     c, s = np.cos(transforms[:, 0])[:, None], np.sin(transforms[:, 0])[:, None]
     tx, ty = transforms[:, 1, None], transforms[:, 2, None]
     margin, spread = config.free_space_margin, config.free_space_spread
-    shape = (len(transforms), -1)
-
-    def judged(points: FloatArray, viewpoints: list[Viewpoint]) -> tuple[FloatArray, FloatArray]:
-        """(T, P) seen through / confirmed of points (already in the viewpoints' set frame,
-        one row per transform) by any of the viewpoints."""
-        hit = np.zeros(points.shape[:2], dtype=bool)
-        seen = np.zeros(points.shape[:2], dtype=bool)
-        for viewpoint in viewpoints:
-            local = se2.transform_points(se2.invert(viewpoint.T_set_laser), points.reshape(-1, 2))
-            h, k = _beam_evidence(viewpoint.scan, local, margin, spread)
-            hit |= h.reshape(shape)
-            seen |= k.reshape(shape)
-        return hit, seen
-
     if views1 is not None and len(points2):
         # S2 points in S1's frame: q = R p + t, for every transform.
         qx = c * points2[None, :, 0] - s * points2[None, :, 1] + tx
         qy = s * points2[None, :, 0] + c * points2[None, :, 1] + ty
-        hit, seen = judged(np.stack((qx, qy), axis=-1), views1)
+        hit, seen = _judged_by_any(np.stack((qx, qy), axis=-1), views1, margin, spread)
         through += hit @ weight2
         confirmed += seen @ weight2
     if views2 is not None and len(points1):
         # S1 points in S2's frame: p = R^T (q - t).
         dx, dy = points1[None, :, 0] - tx, points1[None, :, 1] - ty
         px, py = c * dx + s * dy, -s * dx + c * dy
-        hit, seen = judged(np.stack((px, py), axis=-1), views2)
+        hit, seen = _judged_by_any(np.stack((px, py), axis=-1), views2, margin, spread)
         through += hit @ weight1
         confirmed += seen @ weight1
     return through, confirmed
+
+
+def _judged_by_any(
+    points: FloatArray, viewpoints: list[Viewpoint], margin: float, spread: int
+) -> tuple[FloatArray, FloatArray]:
+    """(T, P) seen through / confirmed of points (already in the viewpoints' set frame,
+    one row per transform) by any of the viewpoints."""
+    shape = (len(points), -1)
+    hit = np.zeros(points.shape[:2], dtype=bool)
+    seen = np.zeros(points.shape[:2], dtype=bool)
+    for viewpoint in viewpoints:
+        local = se2.transform_points(se2.invert(viewpoint.T_set_laser), points.reshape(-1, 2))
+        h, k = _beam_evidence(viewpoint.scan, local, margin, spread)
+        hit |= h.reshape(shape)
+        seen |= k.reshape(shape)
+    return hit, seen

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -118,10 +119,55 @@ def integrate(
     """
     clock = _StageClock()
     rng = np.random.default_rng(config.seed)
+    shorter = _shorter_length(segments1, segments2)
+    source1, source2 = (segments1, segments2) if hypothesis_sets is None else hypothesis_sets
+    transforms, extras = _all_hypotheses(
+        source1, source2, heuristics, ordered, extra_hypotheses, config, rng
+    )
+    clock.lap("hypotheses")
+    if len(transforms) == 0:
+        return _no_match(0, 0, clock)
+    values, evaluated = pruned_values(segments1, segments2, transforms, config, extras)
+    # Alg. 4 l. 20-23 (keep the best), widened: the best few DISTINCT hypotheses are refused
+    # (l. 6-7) or refined, then ranked by their net score (overlap and the scans' beams).
+    candidates = _distinct_candidates(segments1, segments2, transforms, values, config)
+    clock.lap("evaluation")
+    if candidates.size == 0:
+        return _no_match(len(transforms), evaluated, clock)
+    refined = refine_many(segments1, segments2, transforms[candidates], config)
+    clock.lap("refinement")
+    ranked = _ranked(segments1, segments2, transforms, candidates, refined, views, config)
+    clock.lap("ranking")
+    return _judged_result(
+        segments1, segments2, ranked, shorter, views, config, judged, clock, transforms, evaluated
+    )
+
+
+def _no_match(hypotheses: int, evaluated: int, clock: _StageClock) -> MatchResult:
+    """No placement: of ``hypotheses`` hypotheses, ``evaluated`` were evaluated in full and
+    none was kept."""
+    return MatchResult(np.zeros(3), 0.0, 0.0, False, hypotheses, evaluated, seconds=clock.seconds)
+
+
+def _shorter_length(segments1: FloatArray, segments2: FloatArray) -> float:
+    """The total length of the shorter of the two sets (m; at least 1e-9)."""
     total1 = float(lines_of(segments1).length.sum()) if len(segments1) else 0.0
     total2 = float(lines_of(segments2).length.sum()) if len(segments2) else 0.0
-    shorter = max(min(total1, total2), 1e-9)
-    source1, source2 = (segments1, segments2) if hypothesis_sets is None else hypothesis_sets
+    return max(min(total1, total2), 1e-9)
+
+
+def _all_hypotheses(
+    source1: FloatArray,
+    source2: FloatArray,
+    heuristics: tuple[str, ...],
+    ordered: tuple[bool, bool],
+    extra_hypotheses: FloatArray | None,
+    config: IntegrateConfig,
+    rng: np.random.Generator,
+) -> tuple[FloatArray, int]:
+    """The hypotheses (theta, tx, ty) to evaluate, the extra ones first, and how many extra
+    ones there are: the extra ones (predictions), then the distinct ones of the landmarks of
+    the two sets (Alg. 2 and the heuristics of III-A) and of their end points."""
     marks1 = landmarks(source1, heuristics, config, ordered[0], rng) if len(source1) > 1 else None
     marks2 = landmarks(source2, heuristics, config, ordered[1], rng) if len(source2) > 1 else None
     raw = (
@@ -140,21 +186,32 @@ def integrate(
         if extra_hypotheses is None
         else np.asarray(extra_hypotheses, dtype=np.float64).reshape(-1, 3)
     )
-    transforms = np.vstack((extra, transforms))
-    clock.lap("hypotheses")
-    if len(transforms) == 0:
-        return MatchResult(np.zeros(3), 0.0, 0.0, False, 0, 0, seconds=clock.seconds)
-    values, evaluated = pruned_values(segments1, segments2, transforms, config, len(extra))
-    # Alg. 4 l. 20-23 (keep the best), widened: the best few DISTINCT hypotheses are refused
-    # (l. 6-7) or refined, then ranked by their net score (overlap and the scans' beams).
-    candidates = _distinct_candidates(segments1, segments2, transforms, values, config)
-    clock.lap("evaluation")
-    if candidates.size == 0:
-        return MatchResult(
-            np.zeros(3), 0.0, 0.0, False, len(transforms), evaluated, seconds=clock.seconds
-        )
-    refined = refine_many(segments1, segments2, transforms[candidates], config)
-    clock.lap("refinement")
+    return np.vstack((extra, transforms)), len(extra)
+
+
+class _Ranked(NamedTuple):
+    """The refined candidates and the slid hypotheses, their values and net scores, and the
+    row of the best one."""
+
+    transforms: FloatArray
+    values: FloatArray
+    scores: FloatArray
+    pick: int
+
+
+def _ranked(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    candidates: IntArray,
+    refined: FloatArray,
+    views: tuple[Views, Views],
+    config: IntegrateConfig,
+) -> _Ranked:
+    """The ``refined`` candidates (rows ``candidates`` of ``transforms``, refined) with the
+    hypotheses slid along corridors, ranked by their net score: a refined one that was refused
+    (or lost its overlap) falls back to its unrefined hypothesis, and the best one, when slid,
+    is refined too."""
     refined_values, scores, support, slide = _net_scores(
         segments1, segments2, refined, views, config
     )
@@ -186,8 +243,26 @@ def integrate(
             and not refused(segments1, segments2, polished, config)[0]
         ):
             refined[pick], refined_values[pick] = polished[0], polished_value[0]
-    best_T, best_value = refined[pick], float(refined_values[pick])
-    clock.lap("ranking")
+    return _Ranked(refined, refined_values, scores, pick)
+
+
+def _judged_result(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    ranked: _Ranked,
+    shorter: float,
+    views: tuple[Views, Views],
+    config: IntegrateConfig,
+    judged: Callable[[FloatArray], bool] | None,
+    clock: _StageClock,
+    transforms: FloatArray,
+    evaluated: int,
+) -> MatchResult:
+    """The best ranked placement as the match: its validity (net value, fraction and cross
+    support) and, where ``judged`` wants it, its confidence (of the ``transforms``
+    hypotheses, ``evaluated`` were evaluated in full)."""
+    refined, scores, pick = ranked.transforms, ranked.scores, ranked.pick
+    best_T, best_value = refined[pick], float(ranked.values[pick])
     # Validity on the net value: overlap that the other scan's free space contradicts counts
     # against it (two unrelated rectilinear places easily overlap by a third).
     through, _ = seen_through_many(segments1, segments2, best_T[None, :], views, config)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -162,13 +163,59 @@ def geometry_scores(
     empty = PairScores(*(np.zeros(0, dtype=np.int64),) * 3, np.zeros(0), np.zeros(0, dtype=bool))
     if len(transforms) == 0 or geometry.first.size == 0:
         return empty
-    lines1, lines2 = geometry.lines1, geometry.lines2
     h, a, b = _candidate_triples(geometry, transforms[:, 0], config.max_match_angle)
     if h.size == 0:
         return empty
     cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
     c, s = cos_h[h], sin_h[h]
     tx, ty = np.ascontiguousarray(transforms[:, 1])[h], np.ascontiguousarray(transforms[:, 2])[h]
+    triples = _Triples(h, a, b, c, s, tx, ty)
+    triples = triples.take(_within_reach(geometry, triples, config))
+    placed, d = _placed_pairs(geometry, triples)
+    # Most candidate triples are far apart: drop them before the overlap arithmetic.
+    near = np.flatnonzero(d <= config.match_distance)
+    h, a, b, d = triples.h[near], triples.a[near], triples.b[near], d[near]
+    placed = placed.take(near)
+    l1, l2 = _overlaps(placed, geometry.lines1.length[a], geometry.lines2.length[b])
+    crossing = _segments_cross(
+        placed.e1x,
+        placed.e1y,
+        placed.e2x,
+        placed.e2y,
+        placed.q1x,
+        placed.q1y,
+        placed.q2x,
+        placed.q2y,
+    )
+    penalty = np.where(crossing, 1.0, 0.95 ** (d / config.point_distance_tolerance))
+    value = 0.5 * (l1 + l2) * penalty
+    keep = value > 0.0
+    return PairScores(h[keep], a[keep], b[keep], value[keep], crossing[keep])
+
+
+class _Triples(NamedTuple):
+    """Candidate (hypothesis, s1, s2) triples: the hypothesis ``h``, the S1 segment ``a`` and
+    the S2 segment ``b``, with the hypothesis's cosine ``c``, sine ``s`` and translation
+    ``tx``, ``ty``."""
+
+    h: IntArray
+    a: IntArray
+    b: IntArray
+    c: FloatArray
+    s: FloatArray
+    tx: FloatArray
+    ty: FloatArray
+
+    def take(self, index: IntArray) -> _Triples:
+        """The triples at ``index``."""
+        h, a, b, c, s, tx, ty = self
+        return _Triples(h[index], a[index], b[index], c[index], s[index], tx[index], ty[index])
+
+
+def _within_reach(geometry: PairGeometry, triples: _Triples, config: IntegrateConfig) -> IntArray:
+    """The candidate triples whose midpoints are close enough for the pair to score."""
+    _, a, b, c, s, tx, ty = triples
+    lines1, lines2 = geometry.lines1, geometry.lines2
     # A pair scores only if it overlaps along one of its lines (l1 or l2 > 0 below) while one
     # segment's end points lie within match_distance of the other's line (d below). Then its
     # midpoints are at most reach apart: along the overlapping line by less than half the
@@ -183,8 +230,36 @@ def geometry_scores(
     m2x, m2y = (column[b] for column in geometry.second_centres)
     gap_x = c * m2x - s * m2y + tx - geometry.first_centres[0][a]
     gap_y = s * m2x + c * m2y + ty - geometry.first_centres[1][a]
-    close = np.flatnonzero(gap_x * gap_x + gap_y * gap_y <= reach * reach)
-    h, a, b, c, s, tx, ty = h[close], a[close], b[close], c[close], s[close], tx[close], ty[close]
+    return np.flatnonzero(gap_x * gap_x + gap_y * gap_y <= reach * reach)
+
+
+class _PlacedPairs(NamedTuple):
+    """Candidate pairs with S2 placed by their hypotheses: S2's end points q1, q2 and
+    direction v in S1's frame, S1's direction u and end points e1, e2."""
+
+    q1x: FloatArray
+    q1y: FloatArray
+    q2x: FloatArray
+    q2y: FloatArray
+    ux: FloatArray
+    uy: FloatArray
+    vx: FloatArray
+    vy: FloatArray
+    e1x: FloatArray
+    e1y: FloatArray
+    e2x: FloatArray
+    e2y: FloatArray
+
+    def take(self, index: IntArray) -> _PlacedPairs:
+        """The pairs at ``index``."""
+        return _PlacedPairs(*(column[index] for column in self))
+
+
+def _placed_pairs(geometry: PairGeometry, triples: _Triples) -> tuple[_PlacedPairs, FloatArray]:
+    """The candidate triples' pairs placed by their hypotheses (:class:`_PlacedPairs`) and
+    their distance d (Alg. 4 l. 9: the min over the two segments of the max distance of the
+    other's end points to its line)."""
+    _, a, b, c, s, tx, ty = triples
     # S2 end points under the hypothesis, and their distances to s1's line (Alg. 4 l. 9).
     p1x, p1y, p2x, p2y = (column[b] for column in geometry.second_columns)
     q1x = c * p1x - s * p1y + tx
@@ -192,7 +267,7 @@ def geometry_scores(
     q2x = c * p2x - s * p2y + tx
     q2y = s * p2x + c * p2y + ty
     ux, uy = (column[a] for column in geometry.first_direction)
-    ca = lines1.normal_offset[a]
+    ca = geometry.lines1.normal_offset[a]
     dq = np.maximum(np.abs(-uy * q1x + ux * q1y - ca), np.abs(-uy * q2x + ux * q2y - ca))
     wx, wy = (column[b] for column in geometry.second_direction)
     vx = c * wx - s * wy
@@ -200,20 +275,22 @@ def geometry_scores(
     e1x, e1y, e2x, e2y = (column[a] for column in geometry.first_columns)
     cb = -vy * q1x + vx * q1y
     de = np.maximum(np.abs(-vy * e1x + vx * e1y - cb), np.abs(-vy * e2x + vx * e2y - cb))
-    d = np.minimum(dq, de)
-    # Most candidate triples are far apart: drop them before the overlap arithmetic.
-    near = np.flatnonzero(d <= config.match_distance)
-    h, a, b, d = h[near], a[near], b[near], d[near]
-    q1x, q1y, q2x, q2y = q1x[near], q1y[near], q2x[near], q2y[near]
-    ux, uy, vx, vy = ux[near], uy[near], vx[near], vy[near]
-    e1x, e1y, e2x, e2y = e1x[near], e1y[near], e2x[near], e2y[near]
+    placed = _PlacedPairs(q1x, q1y, q2x, q2y, ux, uy, vx, vy, e1x, e1y, e2x, e2y)
+    return placed, np.minimum(dq, de)
+
+
+def _overlaps(
+    placed: _PlacedPairs, length1: FloatArray, length2: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """l1 and l2 of each placed pair: the overlap of s2 projected on s1's line with s1, and
+    the converse (``length1``, ``length2``: the lengths of s1 and s2)."""
+    q1x, q1y, q2x, q2y, ux, uy, vx, vy, e1x, e1y, e2x, e2y = placed
     # Overlaps along each line (s1 runs from e1 to e2 along u; s2 from q1 to q2 along v).
     sa1 = ux * e1x + uy * e1y
     sq1 = ux * q1x + uy * q1y
     sq2 = ux * q2x + uy * q2y
     l1 = np.clip(
-        np.minimum(sa1 + lines1.length[a], np.maximum(sq1, sq2))
-        - np.maximum(sa1, np.minimum(sq1, sq2)),
+        np.minimum(sa1 + length1, np.maximum(sq1, sq2)) - np.maximum(sa1, np.minimum(sq1, sq2)),
         0.0,
         None,
     )
@@ -221,16 +298,11 @@ def geometry_scores(
     se1 = vx * e1x + vy * e1y
     se2_ = vx * e2x + vy * e2y
     l2 = np.clip(
-        np.minimum(sb1 + lines2.length[b], np.maximum(se1, se2_))
-        - np.maximum(sb1, np.minimum(se1, se2_)),
+        np.minimum(sb1 + length2, np.maximum(se1, se2_)) - np.maximum(sb1, np.minimum(se1, se2_)),
         0.0,
         None,
     )
-    crossing = _segments_cross(e1x, e1y, e2x, e2y, q1x, q1y, q2x, q2y)
-    penalty = np.where(crossing, 1.0, 0.95 ** (d / config.point_distance_tolerance))
-    value = 0.5 * (l1 + l2) * penalty
-    keep = value > 0.0
-    return PairScores(h[keep], a[keep], b[keep], value[keep], crossing[keep])
+    return l1, l2
 
 
 def _segments_cross(

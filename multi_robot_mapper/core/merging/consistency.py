@@ -424,24 +424,17 @@ def accept_pairs(
     taken: list[PairVerdict] = []
     refused: list[PairVerdict] = []
 
-    def root(key: UnitKey) -> UnitKey:
-        while parent[key] != key:
-            parent[key] = parent[parent[key]]
-            key = parent[key]
-        return key
-
     for verdict in order:
         a, b = verdict.pair
-        if root(a) == root(b):
-            chain = _tree_path(tree, b, a)  # b ... a through the tree, then the new link a -> b
-            if closes([_best(v, x) for x, v in chain] + [_best(verdict, a)], units, config):
+        if _root(parent, a) == _root(parent, b):
+            if _closes_cycle(verdict, tree, units, config):
                 taken.append(verdict)
             else:
                 refused.append(
                     dataclasses.replace(verdict, accepted=False, reason="breaks a cycle")
                 )
             continue
-        group_a, group_b = placed[root(a)], placed[root(b)]
+        group_a, group_b = placed[_root(parent, a)], placed[_root(parent, b)]
         T_ra_rb = group_a[a] @ placement(verdict, a, units) @ se2.invert(group_b[b])
         joined = {**group_a, **{key: T_ra_rb @ T for key, T in group_b.items()}}
         judged = _judge_join(
@@ -457,13 +450,35 @@ def accept_pairs(
         if not judged.accepted:
             refused.append(judged)
             continue
-        del placed[root(b)]
-        placed[root(a)] = joined
-        parent[root(b)] = root(a)
+        del placed[_root(parent, b)]
+        placed[_root(parent, a)] = joined
+        parent[_root(parent, b)] = _root(parent, a)
         tree[a].append((b, judged))
         tree[b].append((a, judged))
         taken.append(judged)
     return Accepted(taken, refused, _ordered_groups(placed.values(), units), tree)
+
+
+def _root(parent: dict[UnitKey, UnitKey], key: UnitKey) -> UnitKey:
+    """The root of ``key``'s group in the union-find forest ``parent`` (its path halved on
+    the way)."""
+    while parent[key] != key:
+        parent[key] = parent[parent[key]]
+        key = parent[key]
+    return key
+
+
+def _closes_cycle(
+    verdict: PairVerdict,
+    tree: Mapping[UnitKey, list[tuple[UnitKey, PairVerdict]]],
+    units: Mapping[UnitKey, MapUnit],
+    config: MergeConfig,
+) -> bool:
+    """Does the pair of ``verdict``, between two maps of one group, close the cycle through
+    the group's ``tree`` (:func:`closes`)?"""
+    a, b = verdict.pair
+    chain = _tree_path(tree, b, a)  # b ... a through the tree, then the new link a -> b
+    return closes([_best(v, x) for x, v in chain] + [_best(verdict, a)], units, config)
 
 
 def _ordered_groups(

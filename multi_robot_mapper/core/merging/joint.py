@@ -145,23 +145,12 @@ def merge_joint(
     )
     matched = time.perf_counter()
     model = model if model is not None else installed_model()
-    new_state = JointState(matches)
-    if state is not None:
-        new_state.intra, new_state.seen = state.intra, state.seen
-        new_state.fusion = state.fusion
+    new_state = _next_state(matches, state)
     verdicts = _verdicts(units, matches, config, model, state, new_state)
-    reaches = robot_reaches(units, config.max_speed)
-
-    def conflict(group_a: Any, group_b: Any, T: FloatArray) -> float:
-        targets = {key: target_of(units[key], config) for key in (*group_a, *group_b)}
-        return group_conflict(group_a, group_b, T, units, targets, config)
-
-    accepted = accept_pairs(list(verdicts.values()), units, config, model, reaches, conflict)
+    accepted = _accepted_pairs(units, verdicts, config, model)
     checked = time.perf_counter()
     previous_reference = None if previous is None else previous.reference
-    group, ref_unit = _reference(accepted, units, chosen, previous_reference)
-    chains = chain_probabilities(ref_unit, [(*v.pair, v.probability) for v in accepted.pairs])
-    group = [key for key in group if chains.get(key, 0.0) >= config.join_probability]
+    group, ref_unit, chains = _placed_group(accepted, units, chosen, previous_reference, config)
     new_state.solution = solved(
         units,
         group,
@@ -177,6 +166,69 @@ def merge_joint(
         robots, units, accepted, verdicts, solution, ref_unit, chains, config, new_state.fusion
     )
     finished = time.perf_counter()
+    times = (started, matched, checked, optimised, finished)
+    _finish_update(result, units, solution, state, new_state, times)
+    result.stats.update(counts)
+    return result
+
+
+def _accepted_pairs(
+    units: Mapping[UnitKey, MapUnit],
+    verdicts: Mapping[tuple[UnitKey, UnitKey], PairVerdict],
+    config: MergeConfig,
+    model: JoinModel,
+) -> Accepted:
+    """The pairs of maps accepted over the groups (:func:`~core.merging.consistency.
+    accept_pairs`): no robot driving faster than ``max_speed`` between two of its pieces, and
+    a join of groups weighed with its walls in free space on every map of both."""
+    reaches = robot_reaches(units, config.max_speed)
+
+    def conflict(group_a: Any, group_b: Any, T: FloatArray) -> float:
+        targets = {key: target_of(units[key], config) for key in (*group_a, *group_b)}
+        return group_conflict(group_a, group_b, T, units, targets, config)
+
+    return accept_pairs(list(verdicts.values()), units, config, model, reaches, conflict)
+
+
+def _placed_group(
+    accepted: Accepted,
+    units: Mapping[UnitKey, MapUnit],
+    chosen: str | None,
+    previous: str | None,
+    config: MergeConfig,
+) -> tuple[list[UnitKey], UnitKey | None, dict[UnitKey, float]]:
+    """The maps placed in ``map`` (:func:`_reference`'s group, each joined to the reference
+    map with a probability of at least ``join_probability``), the reference map and each
+    map's probability of being joined right (:func:`chain_probabilities`)."""
+    group, ref_unit = _reference(accepted, units, chosen, previous)
+    chains = chain_probabilities(ref_unit, [(*v.pair, v.probability) for v in accepted.pairs])
+    group = [key for key in group if chains.get(key, 0.0) >= config.join_probability]
+    return group, ref_unit, chains
+
+
+def _next_state(matches: dict[MatchKey, MatchRecord], state: JointState | None) -> JointState:
+    """The state this update leaves to the next: its ``matches``, and what the last update's
+    ``state`` kept per content (intra-map edges, walls in free space, the fusion)."""
+    new_state = JointState(matches)
+    if state is not None:
+        new_state.intra, new_state.seen = state.intra, state.seen
+        new_state.fusion = state.fusion
+    return new_state
+
+
+def _finish_update(
+    result: MergeResult,
+    units: Mapping[UnitKey, MapUnit],
+    solution: Solution,
+    state: JointState | None,
+    new_state: JointState,
+    times: tuple[float, float, float, float, float],
+) -> None:
+    """``new_state`` completed for the next update (the links in the graph, every map's
+    content, and the seconds the update took after matching, unless nothing changed) and
+    kept in ``result``, with the update's timings (``times``: when it started, matching,
+    consistency, the graph and the fusion ended)."""
+    started, matched, checked, optimised, finished = times
     contents = {key: content_digest(unit) for key, unit in units.items()}
     rest = finished - matched
     if state is not None and state.contents == contents:
@@ -190,8 +242,6 @@ def merge_joint(
         "fusion_s": finished - optimised,
         "total_s": finished - started,
     }
-    result.stats.update(counts)
-    return result
 
 
 def _matching_budget(budget: float | None, state: JointState | None) -> float | None:
@@ -338,16 +388,7 @@ def _result(
     for key, T in solved.frames.items():
         frames.setdefault(key[0], {})[key[1]] = se2.pose_from_matrix(T)
     placements: dict[str, Pose | None] = {r: frames.get(r, {}).get(0) for r in robots}
-    keyframe_poses: dict[str, FloatArray] = {}
-    keyframe_index: dict[str, IntArray] = {}
-    for robot in robots:
-        keys = [key for key in solved.order if key[0] == robot]
-        if not keys:
-            continue
-        index = np.concatenate([units[key].index for key in keys])
-        poses = np.vstack([solved.poses[key] for key in keys])
-        order = np.argsort(index, kind="stable")
-        keyframe_index[robot], keyframe_poses[robot] = index[order], poses[order]
+    keyframe_index, keyframe_poses = _robot_keyframes(robots, units, solved)
     segments, owner_robot, owner_keyframe = fuse_keyframes(
         robots, units, solved.order, solved.poses, config, fusion
     )
@@ -362,24 +403,7 @@ def _result(
         segments=segments,
         segment_robot=owner_robot,
         timings={},
-        stats={
-            "maps_merged": len(solved.order),
-            "pairs_linked": len(accepted.pairs),
-            "pairs_consistent": sum(v.accepted for v in verdicts.values()),
-            "pairs_breaking_cycles": sum(v.reason == "breaks a cycle" for v in accepted.refused),
-            # joins that would make a robot drive faster than max_speed, and sets refused as
-            # no heavier than such a proven look-alike (consistency.accept_pairs)
-            "pairs_too_fast": sum(v.reason.startswith(TOO_FAST) for v in accepted.refused),
-            # joins whose probability fell short once weighed with every map of both groups
-            "pairs_doubted_by_groups": sum(
-                v.reason.startswith(GROUP_DOUBT) for v in accepted.refused
-            ),
-            "links_accepted": len(solved.accepted),
-            "link_candidates": sum(len(v.links) for v in verdicts.values()),
-            "graph_nodes": solved.nodes,
-            "graph_edges": solved.edges,
-            "graph_iterations": solved.iterations,
-        },
+        stats=_joint_stats(accepted, verdicts, solved),
         keyframe_poses=keyframe_poses,
         keyframe_index=keyframe_index,
         frames=frames,
@@ -397,6 +421,49 @@ def _result(
         if placements[robot] is None
     }
     return result
+
+
+def _robot_keyframes(
+    robots: list[str], units: Mapping[UnitKey, MapUnit], solved: Solution
+) -> tuple[dict[str, IntArray], dict[str, FloatArray]]:
+    """Each merged robot's keyframes (of every map of it in the graph), sorted by index:
+    their indices, and their optimised poses in ``map``."""
+    keyframe_poses: dict[str, FloatArray] = {}
+    keyframe_index: dict[str, IntArray] = {}
+    for robot in robots:
+        keys = [key for key in solved.order if key[0] == robot]
+        if not keys:
+            continue
+        index = np.concatenate([units[key].index for key in keys])
+        poses = np.vstack([solved.poses[key] for key in keys])
+        order = np.argsort(index, kind="stable")
+        keyframe_index[robot], keyframe_poses[robot] = index[order], poses[order]
+    return keyframe_index, keyframe_poses
+
+
+def _joint_stats(
+    accepted: Accepted,
+    verdicts: Mapping[tuple[UnitKey, UnitKey], PairVerdict],
+    solved: Solution,
+) -> dict[str, int]:
+    """The merge's counts: maps merged, pairs linked and refused (by reason), links and the
+    graph."""
+    return {
+        "maps_merged": len(solved.order),
+        "pairs_linked": len(accepted.pairs),
+        "pairs_consistent": sum(v.accepted for v in verdicts.values()),
+        "pairs_breaking_cycles": sum(v.reason == "breaks a cycle" for v in accepted.refused),
+        # joins that would make a robot drive faster than max_speed, and sets refused as
+        # no heavier than such a proven look-alike (consistency.accept_pairs)
+        "pairs_too_fast": sum(v.reason.startswith(TOO_FAST) for v in accepted.refused),
+        # joins whose probability fell short once weighed with every map of both groups
+        "pairs_doubted_by_groups": sum(v.reason.startswith(GROUP_DOUBT) for v in accepted.refused),
+        "links_accepted": len(solved.accepted),
+        "link_candidates": sum(len(v.links) for v in verdicts.values()),
+        "graph_nodes": solved.nodes,
+        "graph_edges": solved.edges,
+        "graph_iterations": solved.iterations,
+    }
 
 
 def _robot_links(

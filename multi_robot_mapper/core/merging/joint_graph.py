@@ -95,23 +95,7 @@ def _solve(
             graph.add_node(offsets[key] + row, (x, y, theta), anchored=anchored)
         for edge in _intra_edges(unit, offsets[key], config, intra):
             graph.add_edge(edge)
-    accepted_links: list[LinkCandidate] = []
-    placed_units = set(order)
-    for verdict in accepted.pairs:
-        for candidate in verdict.links:
-            if candidate.source not in placed_units or candidate.target not in placed_units:
-                continue
-            target, source = units[candidate.target], units[candidate.source]
-            graph.add_edge(
-                Edge(
-                    offsets[candidate.target] + target.row(candidate.keyframe),
-                    offsets[candidate.source] + source.row(candidate.centre),
-                    candidate.T_keyframe_centre,
-                    candidate.information,
-                    robust=True,
-                )
-            )
-            accepted_links.append(candidate)
+    accepted_links = _add_links(graph, accepted, units, offsets)
     iterations = graph.solve() if accepted_links else 0
     estimate = graph.poses()
     poses = {
@@ -127,6 +111,34 @@ def _solve(
             [se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in poses[key]]
         )
     return Solution(poses, frames, order, accepted_links, total, len(graph.edges), iterations)
+
+
+def _add_links(
+    graph: PoseGraph,
+    accepted: Accepted,
+    units: Mapping[UnitKey, MapUnit],
+    offsets: Mapping[UnitKey, int],
+) -> list[LinkCandidate]:
+    """Every accepted link between two maps in the graph (``offsets``: each map's first
+    node) added to it as a robust edge; the links added."""
+    accepted_links: list[LinkCandidate] = []
+    placed_units = set(offsets)
+    for verdict in accepted.pairs:
+        for candidate in verdict.links:
+            if candidate.source not in placed_units or candidate.target not in placed_units:
+                continue
+            target, source = units[candidate.target], units[candidate.source]
+            graph.add_edge(
+                Edge(
+                    offsets[candidate.target] + target.row(candidate.keyframe),
+                    offsets[candidate.source] + source.row(candidate.centre),
+                    candidate.T_keyframe_centre,
+                    candidate.information,
+                    robust=True,
+                )
+            )
+            accepted_links.append(candidate)
+    return accepted_links
 
 
 def _rigid_placements(

@@ -345,8 +345,7 @@ def merge(
     if chosen is not None and chosen not in clean:
         raise ValueError(f"reference robot {chosen!r} has no map; robots: {', '.join(robots)}")
     if not robots:
-        empty = np.zeros((0, 4))
-        return MergeResult([], {}, None, [], {}, empty, np.zeros(0, dtype=np.int64), {}, {})
+        return _no_maps()
     views = view_source(clean, viewpoints or {}, config)
     records, calls = pair_links(clean, config, None if previous is None else previous.pairs, views)
     pairs_done = time.perf_counter()
@@ -362,20 +361,11 @@ def merge(
     placed = place(chosen, robots, tree)
     used = [lk for lk in tree if lk.robot_a in placed and lk.robot_b in placed]
     tree_done = time.perf_counter()
-    # Global map: fuse each placed map, in the order robots were placed (reference first).
-    segments = np.zeros((0, 4))
-    owner = np.zeros(0, dtype=np.int64)
-    for robot, T_map_robot in placed.items():
-        moved = se2.transform_segments(T_map_robot, clean[robot])
-        index = np.full(len(moved), robots.index(robot), dtype=np.int64)
-        segments, owner = fuse_maps(segments, owner, moved, index, config)
+    segments, owner = _global_map(placed, clean, robots, config)
     finished = time.perf_counter()
-    placements: dict[str, Pose | None] = {
-        r: (se2.pose_from_matrix(placed[r]) if r in placed else None) for r in robots
-    }
     return MergeResult(
         robots=robots,
-        placements=placements,
+        placements=_placements(placed, robots),
         reference=chosen,
         links=used,
         pairs=records,
@@ -387,11 +377,50 @@ def merge(
             "fusion_s": finished - tree_done,
             "total_s": finished - started,
         },
-        stats={
-            "pairs_computed": sum(not r.reused for r in records.values()),
-            "pairs_reused": sum(r.reused for r in records.values()),
-            "integrate_calls": calls,
-            "links_valid": sum(lk.valid for lk in all_links),
-            "cycle_conflicts": len(cycle_conflicts(placed, all_links)),
-        },
+        stats=_merge_stats(records, calls, all_links, placed),
     )
+
+
+def _no_maps() -> MergeResult:
+    """The merge of no maps: nothing placed, an empty global map."""
+    empty = np.zeros((0, 4))
+    return MergeResult([], {}, None, [], {}, empty, np.zeros(0, dtype=np.int64), {}, {})
+
+
+def _placements(placed: Mapping[str, FloatArray], robots: list[str]) -> dict[str, Pose | None]:
+    """Each robot's frame in ``map`` as a pose (None: not placed)."""
+    return {r: (se2.pose_from_matrix(placed[r]) if r in placed else None) for r in robots}
+
+
+def _global_map(
+    placed: Mapping[str, FloatArray],
+    maps: Mapping[str, FloatArray],
+    robots: list[str],
+    config: MergeConfig,
+) -> tuple[FloatArray, IntArray]:
+    """The global map: each placed robot's map moved into ``map`` and fused, in the order
+    the robots were placed (the reference first); its segments and each one's robot."""
+    segments = np.zeros((0, 4))
+    owner = np.zeros(0, dtype=np.int64)
+    for robot, T_map_robot in placed.items():
+        moved = se2.transform_segments(T_map_robot, maps[robot])
+        index = np.full(len(moved), robots.index(robot), dtype=np.int64)
+        segments, owner = fuse_maps(segments, owner, moved, index, config)
+    return segments, owner
+
+
+def _merge_stats(
+    records: Mapping[tuple[str, str], PairRecord],
+    calls: int,
+    links: Sequence[Link],
+    placed: Mapping[str, FloatArray],
+) -> dict[str, int]:
+    """A merge's counts: pairs matched and reused, INTEGRATE calls, valid links, and valid
+    links that disagree with the placements."""
+    return {
+        "pairs_computed": sum(not r.reused for r in records.values()),
+        "pairs_reused": sum(r.reused for r in records.values()),
+        "integrate_calls": calls,
+        "links_valid": sum(lk.valid for lk in links),
+        "cycle_conflicts": len(cycle_conflicts(placed, links)),
+    }

@@ -166,15 +166,34 @@ def match_maps(
     refined, scores = places
     best = int(np.argmax(scores))
     rivals = np.array([_distinct(row, refined[best]) for row in refined], dtype=bool)
-    rival = float(scores[rivals].max()) if rivals.any() else 0.0
-    score = float(scores[best])
-    uniqueness = score / rival if rival > 0.0 else (np.inf if score > 0.0 else 0.0)
+    uniqueness = _uniqueness(scores, best, rivals)
     viewed = views_a is not None and views_b is not None
+    result = _place_evaluated(
+        judge_a, judge_b, candidates, refined[best], refined[~rivals], viewed, config
+    )
+    if result.value <= 0.0:
+        return MapMatch(result, 0.0, False, _INTEGRATE_CALLS, 0.0, uniqueness)
+    return _judged_link(
+        map_a, map_b, judge_a, judge_b, views_a, views_b, result, uniqueness, config
+    )
+
+
+def _place_evaluated(
+    judge_a: FloatArray,
+    judge_b: FloatArray,
+    candidates: FloatArray,
+    chosen: FloatArray,
+    same: FloatArray,
+    viewed: bool,
+    config: MergeConfig,
+) -> MatchResult:
+    """INTEGRATE's evaluation of the ``chosen`` place on the longest segments ``judge_a`` and
+    ``judge_b``, from the refined places ``same`` as it and the candidates near it."""
     # INTEGRATE evaluates the chosen place (Alg. 4): every start there (the refined one and
     # the candidates near it), the best refined.
-    near = [row for row in candidates if not _distinct(row, refined[best])]
-    same_place = np.vstack((refined[~rivals], *near))
-    result = integrate(
+    near = [row for row in candidates if not _distinct(row, chosen)]
+    same_place = np.vstack((same, *near))
+    return integrate(
         judge_a,
         judge_b,
         config.link_config(hypotheses=len(same_place), viewed=viewed),
@@ -182,9 +201,34 @@ def match_maps(
         ordered=(False, False),
         extra_hypotheses=same_place,
     )
-    calls = 2  # INTEGRATE's candidates, and the evaluation
-    if result.value <= 0.0:
-        return MapMatch(result, 0.0, False, calls, 0.0, uniqueness)
+
+
+_INTEGRATE_CALLS = 2  # per pair of maps: INTEGRATE's candidates, and the evaluation
+
+
+def _uniqueness(scores: FloatArray, best: int, rivals: NDArray[np.bool_]) -> float:
+    """The best place's score over its best rival's (``rivals`` of ``scores``): inf without a
+    rival scoring above 0, and 0 when the best does not."""
+    rival = float(scores[rivals].max()) if rivals.any() else 0.0
+    score = float(scores[best])
+    return score / rival if rival > 0.0 else (np.inf if score > 0.0 else 0.0)
+
+
+def _judged_link(
+    map_a: FloatArray,
+    map_b: FloatArray,
+    judge_a: FloatArray,
+    judge_b: FloatArray,
+    views_a: MapViews | None,
+    views_b: MapViews | None,
+    result: MatchResult,
+    uniqueness: float,
+    config: MergeConfig,
+) -> MapMatch:
+    """INTEGRATE's evaluation of the chosen place (on the longest segments ``judge_a`` and
+    ``judge_b``) as a link, judged (:func:`match_maps`, step 3): the ``link_*`` thresholds,
+    the tight overlap, uniqueness with both robots' views, free space with either's."""
+    viewed = views_a is not None and views_b is not None
     tight = tight_fraction(judge_a, judge_b, result.T_1_2, config)
     valid = result.valid and tight >= (
         config.viewed_link_min_tight_fraction if viewed else config.link_min_tight_fraction
@@ -195,7 +239,7 @@ def match_maps(
     if valid and (views_a is not None or views_b is not None):
         through = free_space_conflict(map_a, views_a, map_b, views_b, result.matrix, config)
         valid = through <= seen_through_allowance(result.value, config)
-    return MapMatch(result, tight, valid, calls, through, uniqueness)
+    return MapMatch(result, tight, valid, _INTEGRATE_CALLS, through, uniqueness)
 
 
 def no_match() -> MapMatch:

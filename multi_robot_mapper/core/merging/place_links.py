@@ -235,36 +235,55 @@ def match_place(
     if best.value <= 0.0 or best.evidence is None:
         return []
     found = [_candidate(place, own, unit, crop, best, 0, config)]
+    rival = _best_rival(crop, own, hypotheses, best.T_1_2, best.evidence.score, sides, settings)
+    if rival is not None:
+        found.append(_candidate(place, own, unit, crop, rival, 1, config))
+    return found
+
+
+def _best_rival(
+    crop: FloatArray,
+    own: FloatArray,
+    hypotheses: FloatArray,
+    best_T: FloatArray,
+    best_score: float,
+    sides: tuple[list[Viewpoint] | None, list[Viewpoint] | None],
+    settings: IntegrateConfig,
+) -> MatchResult | None:
+    """The best rival of the best placement ``best_T`` (its score ``best_score``) of the
+    place's segments ``own`` on the target's ``crop``, with its confidence against the best
+    placement; None when every hypothesis lies at the best placement or the rival's
+    verification finds nothing else."""
     # The best rival: the same verification without the hypotheses at the best placement;
     # its confidence is then judged with the best placement as *its* rival (a tie leaves both
     # unsure, a clear winner leaves the rival none).
-    others = np.array([_differs(row, best.T_1_2) for row in hypotheses], dtype=bool)
-    if others.any():
-        rival = integrate(
-            crop,
-            own,
-            settings,
-            heuristics=(),
-            ordered=(False, False),
-            extra_hypotheses=hypotheses[others],
-            views=sides,
-        )
-        if rival.value > 0.0 and rival.evidence is not None and _differs(rival.T_1_2, best.T_1_2):
-            evidence = match_evidence(
-                crop,
-                own,
-                rival.T_1_2,
-                sides,
-                settings,
-                score=rival.evidence.score,
-                rival_score=best.evidence.score,
-                rival_T=best.T_1_2,
-                support=rival.evidence.support,
-                fraction=rival.evidence.fraction,
-            )
-            judged = dataclasses.replace(rival, confidence=confidence(evidence.features()))
-            found.append(_candidate(place, own, unit, crop, judged, 1, config))
-    return found
+    others = np.array([_differs(row, best_T) for row in hypotheses], dtype=bool)
+    if not others.any():
+        return None
+    rival = integrate(
+        crop,
+        own,
+        settings,
+        heuristics=(),
+        ordered=(False, False),
+        extra_hypotheses=hypotheses[others],
+        views=sides,
+    )
+    if not (rival.value > 0.0 and rival.evidence is not None and _differs(rival.T_1_2, best_T)):
+        return None
+    evidence = match_evidence(
+        crop,
+        own,
+        rival.T_1_2,
+        sides,
+        settings,
+        score=rival.evidence.score,
+        rival_score=best_score,
+        rival_T=best_T,
+        support=rival.evidence.support,
+        fraction=rival.evidence.fraction,
+    )
+    return dataclasses.replace(rival, confidence=confidence(evidence.features()))
 
 
 def _fit(evidence: MatchEvidence) -> float:
