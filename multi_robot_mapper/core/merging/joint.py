@@ -176,7 +176,7 @@ def _accepted_pairs(
     units: Mapping[UnitKey, MapUnit],
     verdicts: Mapping[tuple[UnitKey, UnitKey], PairVerdict],
     config: MergeConfig,
-    model: JoinModel,
+    model: LogisticModel,
 ) -> Accepted:
     """The pairs of maps accepted over the groups (:func:`~core.merging.consistency.
     accept_pairs`): no robot driving faster than ``max_speed`` between two of its pieces, and
