@@ -63,6 +63,11 @@ def test_run_records_what_made_a_table_and_render_writes_it_between_the_markers(
     assert untouched.read_text() == "no marker here\n"
 
 
+def test_an_empty_span_is_filled() -> None:
+    text, spans = results.replace_block("a\n<!-- results:x -->\n<!-- /results:x -->\n", "x", "T")
+    assert spans == 1 and text == "a\n<!-- results:x -->\nT\n<!-- /results:x -->\n"
+
+
 def test_a_block_never_run_is_left_as_it_is(tmp_path: Path) -> None:
     doc = tmp_path / "doc.md"
     doc.write_text("<!-- results:merge_table -->\nkept\n<!-- /results:merge_table -->\n")
