@@ -60,6 +60,14 @@ class Block:
         return self.work or self.name
 
 
+def _backend_block(name: str, question: str, scenarios: tuple[str, ...], hours: float) -> Block:
+    """A block of ``bench.backend_decisions`` on ``scenarios`` (its arguments), the back end as
+    shipped, and its table."""
+    run = ("bench.backend_decisions", *scenarios, "--gate", "model", "--jobs", "2")
+    table = ("bench.backend_decisions", "--table", "--work", "{work}")
+    return Block(name, question, ((*run, "--work", "{work}"),), table, hours=hours)
+
+
 BLOCKS = (
     Block(
         "merge_table",
@@ -83,28 +91,16 @@ BLOCKS = (
         ("bench.merge_table", "--summary", "--work", "{work}"),
         work="merge_table",
     ),
-    Block(
+    _backend_block(
         "backend_carmen",
         "The back end's loop closures and joins on every shared-log cut, judged by the truth",
-        (
-            (
-                *("bench.backend_decisions", "--scenarios", *_CARMEN_CUTS),
-                *("--gate", "model", "--jobs", "2", "--work", "{work}"),
-            ),
-        ),
-        ("bench.backend_decisions", "--table", "--work", "{work}"),
+        ("--scenarios", *_CARMEN_CUTS),
         hours=0.8,
     ),
-    Block(
+    _backend_block(
         "backend_generated",
         "The back end's decisions on generated buildings no model was fitted on (100-119)",
-        (
-            (
-                *("bench.backend_decisions", "--generated", "100", "20"),
-                *("--gate", "model", "--jobs", "2", "--work", "{work}"),
-            ),
-        ),
-        ("bench.backend_decisions", "--table", "--work", "{work}"),
+        ("--generated", "100", "20"),
         hours=0.5,
     ),
     Block(
