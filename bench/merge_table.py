@@ -28,6 +28,7 @@ import sys
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 from bench.harness import OUTPUT, imported_bag, mrm, present_logs
@@ -120,14 +121,16 @@ def table_row(row: dict[str, Any]) -> str:
 
 # What each shared log is, for the summary (its place and how far apart its scans are: the
 # median distance and turn between consecutive scans).
-LOG_PLACES = {
-    "freiburg-079": "university building, dense (0.09 m, 3.3°)",
-    "intel": "research lab (0.55 m, 18°)",
-    "csail": "university building (0.94 m, 22°)",
-    "fhw": "museum (0.83 m, 13°)",
-    "aces": "long corridors (0.74 m, 15°)",
-    "edmonton": "crowded convention hall (1.00 m, 8.8°)",
-}
+LOG_PLACES = MappingProxyType(
+    {
+        "freiburg-079": "university building, dense (0.09 m, 3.3°)",
+        "intel": "research lab (0.55 m, 18°)",
+        "csail": "university building (0.94 m, 22°)",
+        "fhw": "museum (0.83 m, 13°)",
+        "aces": "long corridors (0.74 m, 15°)",
+        "edmonton": "crowded convention hall (1.00 m, 8.8°)",
+    }
+)
 SUMMARY_COLUMNS = (
     "log | place, spacing of the scans | pair_success 4 / 2 robots | unposed 4 / 2 | worst "
     "own-frame ATE, 2 and 4 robots (m) | merged 2 / 4 / 8 | ATE of the merged robots 2 / 4 / 8 (m)"
