@@ -24,11 +24,12 @@ from multi_robot_mapper.core.evidence.model import (
     CLOSURE_MODEL_FILE,
     FEATURES,
     PIECE_JOIN_MODEL_FILE,
-    JoinModel,
     installed_model,
     join_features,
+    load_join_model,
 )
 from multi_robot_mapper.core.evidence.placement import PlacementEvidence, placement_evidence
+from multi_robot_mapper.core.logistic import LogisticModel
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult
 from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.simulation import drive_path
@@ -188,7 +189,7 @@ def test_what_is_published_carries_its_probability() -> None:
 def test_the_join_model_is_data_the_package_ships() -> None:
     model = installed_model()
     assert model.features and len(model.weights) == len(model.features)
-    assert JoinModel.load(model.dumps()) == model
+    assert load_join_model(model.dumps()) == model
     # More wall that no rival explains never makes a placement less likely.
     weak = {
         "margin": 2.0,
@@ -210,7 +211,7 @@ def test_the_back_end_weighs_a_join_of_pieces_below_a_loop_closure() -> None:
     closure = installed_model(CLOSURE_MODEL_FILE)
     join = installed_model(PIECE_JOIN_MODEL_FILE)
     for model in (closure, join):
-        assert JoinModel.load(model.dumps()) == model
+        assert load_join_model(model.dumps()) == model
         assert set(model.features) <= set(FEATURES)
     evidence = PlacementEvidence(20.0, 5.0, 20.0, np.zeros(3), None, 0.0, 20.0)
     rivalled = PlacementEvidence(20.0, 20.0, 20.0, np.zeros(3), None, 0.0, 20.0)
@@ -231,7 +232,7 @@ def test_a_wrong_join_does_not_move_the_reference() -> None:
     names = sorted(world)
     frames = dict(zip(names, random_frames(len(names), seed=5), strict=True))
     keyframes = {name: moved(world[name], frames[name]) for name in names}
-    believing = JoinModel(FEATURES, 20.0, (0.0,) * len(FEATURES), "believes everything")
+    believing = LogisticModel(FEATURES, 20.0, (0.0,) * len(FEATURES), "believes everything")
     result = merge_joint(keyframes, CONFIG, budget=0.0, model=believing)
     assert result.placements["stranger"] is not None  # joined, wrongly
     reference = result.reference

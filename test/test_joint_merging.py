@@ -21,12 +21,13 @@ from hypothesis import strategies as st
 from test_merging import LASER, SIMULATED_WORLD_JOIN_PROBABILITY, random_frames, stranger_walls
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.evidence.model import FEATURES, JoinModel
+from multi_robot_mapper.core.evidence.model import FEATURES
 from multi_robot_mapper.core.evidence.placement import PlacementEvidence
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping import Keyframe
+from multi_robot_mapper.core.logistic import LogisticModel
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult
 from multi_robot_mapper.core.merging.consistency import (
@@ -336,11 +337,11 @@ def link(
     )
 
 
-def certain(probability: float = 0.999) -> JoinModel:
+def certain(probability: float = 0.999) -> LogisticModel:
     """A join model that gives every placement ``probability`` (its evidence aside): the
     tests of sets, cycles and motion below are about links, not the evidence model
     (test_evidence.py)."""
-    return JoinModel(
+    return LogisticModel(
         FEATURES, float(np.log(probability / (1.0 - probability))), (0.0,) * len(FEATURES), ""
     )
 

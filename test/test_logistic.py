@@ -37,7 +37,7 @@ def test_a_decision_model_weighs_as_the_join_model_did(name: str) -> None:
     model = evidence_model.installed_model(name)
     for row in feature_rows(50, len(evidence_model.FEATURES)):
         values = dict(zip(evidence_model.FEATURES, row.tolist(), strict=True))
-        # JoinModel.probability before core/logistic.py, on the file's own numbers.
+        # the join model's probability before core/logistic.py, on the file's own numbers.
         z = float(data["intercept"]) + sum(
             float(w) * values[f] for f, w in zip(data["features"], data["weights"], strict=True)
         )

@@ -60,14 +60,6 @@ def installed_model(name: str = MODEL_FILE) -> LogisticModel:
     return load_join_model(path.read_text(encoding="utf-8"), str(path))
 
 
-class JoinModel(LogisticModel):
-    """A decision model under the name the tests build and read one by (test_evidence.py,
-    test_joint_merging.py): a :class:`~multi_robot_mapper.core.logistic.LogisticModel`,
-    which is what the package passes around."""
-
-    load = staticmethod(load_join_model)
-
-
 def join_features(ways: Sequence[PlacementEvidence], conflict: float = 0.0) -> dict[str, float]:
     """The model's features of a decision from its evidence (:mod:`.placement`), measured one
     way or both (the weaker way counts): margin and score (m), the rival's share, the walls
