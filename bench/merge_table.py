@@ -144,38 +144,47 @@ def summary_rows(rows: list[dict[str, Any]]) -> list[str]:
     for row in rows:
         if "metrics" in row:
             by_log.setdefault(row["log"], {})[row["robots"]] = row["metrics"]
-    lines = []
-    for log, cuts in by_log.items():
+    return [_summary_row(log, cuts) for log, cuts in by_log.items()]
 
-        def pick(k: int, figure: Any, cuts: dict[int, dict[str, Any]] = cuts) -> str:
-            return figure(cuts[k]) if k in cuts else "—"
 
-        def unposed(m: dict[str, Any]) -> str:
-            return f"{100.0 * m['scans_unposed'] / max(m['scans_total'], 1):.1f} %"
+def _pair_success(m: dict[str, Any]) -> str:
+    return fmt(m["pair_success"])
 
-        def merged_ate(m: dict[str, Any]) -> str:
-            return fmt(m["ate_rmse_m"]) if m["robots_merged"] > 1 else "—"
 
-        own = [
-            r["ate_own_frame_m"]
-            for k in (2, 4)
-            for r in cuts.get(k, {}).get("robots", {}).values()
-            if r.get("ate_own_frame_m") is not None
-        ]
-        cells = [
-            log,
-            LOG_PLACES.get(log, ""),
-            f"{pick(4, lambda m: fmt(m['pair_success']))} / "
-            f"{pick(2, lambda m: fmt(m['pair_success']))}",
-            f"{pick(4, unposed)} / {pick(2, unposed)}",
-            fmt(max(own), 2) if own else "—",
-            ", ".join(
-                pick(k, lambda m: f"{m['robots_merged']}/{m['robots_total']}") for k in (2, 4, 8)
-            ),
-            ", ".join(pick(k, merged_ate) for k in (2, 4, 8)),
-        ]
-        lines.append("| " + " | ".join(cells) + " |")
-    return lines
+def _unposed(m: dict[str, Any]) -> str:
+    return f"{100.0 * m['scans_unposed'] / max(m['scans_total'], 1):.1f} %"
+
+
+def _merged(m: dict[str, Any]) -> str:
+    return f"{m['robots_merged']}/{m['robots_total']}"
+
+
+def _merged_ate(m: dict[str, Any]) -> str:
+    return fmt(m["ate_rmse_m"]) if m["robots_merged"] > 1 else "—"
+
+
+def _summary_row(log: str, cuts: dict[int, dict[str, Any]]) -> str:
+    """The summary row of one log from the metrics of its cuts (by robot count)."""
+
+    def each(counts: tuple[int, ...], figure: Any, joint: str) -> str:
+        return joint.join(figure(cuts[k]) if k in cuts else "—" for k in counts)
+
+    own = [
+        r["ate_own_frame_m"]
+        for k in (2, 4)
+        for r in cuts.get(k, {}).get("robots", {}).values()
+        if r.get("ate_own_frame_m") is not None
+    ]
+    cells = [
+        log,
+        LOG_PLACES.get(log, ""),
+        each((4, 2), _pair_success, " / "),
+        each((4, 2), _unposed, " / "),
+        fmt(max(own), 2) if own else "—",
+        each((2, 4, 8), _merged, ", "),
+        each((2, 4, 8), _merged_ate, ", "),
+    ]
+    return "| " + " | ".join(cells) + " |"
 
 
 def print_table(path: Path, summary: bool) -> None:
