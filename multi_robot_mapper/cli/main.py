@@ -14,6 +14,13 @@ import threading
 from collections.abc import Sequence
 from pathlib import Path
 
+from multi_robot_mapper.cli.interrupts import (
+    InterruptLatch,
+    caused_by_interrupt,
+    interrupt_received,
+    raise_if_interrupted,
+)
+
 DESCRIPTION = (
     "Multi-robot 2-D mapping from laser scans without odometry: bags in, one merged map out."
 )
@@ -184,6 +191,26 @@ def _command_of(argv: Sequence[str]) -> str:
     return next((a for a in argv if not a.startswith("-")), "")
 
 
+def _interrupted(name: str, terminated: bool, as_program: bool, in_main_thread: bool) -> int:
+    """Say that the command was interrupted (SIGINT) or terminated (SIGTERM): one line, exit
+    code 130 or 143."""
+    print(
+        f"{name}: {'terminated' if terminated else 'interrupted'}; nothing half-written was left",
+        file=sys.stderr,
+    )
+    code = 143 if terminated else 130
+    if as_program and in_main_thread:
+        # Everything was cleaned up on the way here. Exit now: a second Ctrl-C during the
+        # interpreter's shutdown would print a traceback, and an interrupt that went
+        # through code a C++ extension ran with PyRun_String (gtsam's pybind11, while
+        # importing) makes the interpreter kill itself with SIGINT at exit (-2, not 130).
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; exit codes: 0 done, 1 done with a warning, 2 a user error, 130 Ctrl-C,
     143 SIGTERM. ``argv`` None: this process is ``mrm`` (sys.argv; a second Ctrl-C while the
@@ -192,40 +219,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     name = " ".join(["mrm", _command_of(words)]).strip()
     in_main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
+    previous_term = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
+    previous_int = signal.signal(signal.SIGINT, InterruptLatch()) if in_main_thread else None
     try:
         args = build_parser().parse_args(words)
+        raise_if_interrupted()  # one a library swallowed while the commands' imports ran
         name = f"mrm {args.command}"
         return int(args.func(args))
     except KeyboardInterrupt as exc:
-        terminated = isinstance(exc, Terminated)
-        print(
-            f"{name}: {'terminated' if terminated else 'interrupted'}; nothing half-written "
-            "was left",
-            file=sys.stderr,
-        )
-        code = 143 if terminated else 130
-        if as_program and in_main_thread:
-            # Everything was cleaned up on the way here. Exit now: a second Ctrl-C during the
-            # interpreter's shutdown would print a traceback, and an interrupt that went
-            # through code a C++ extension ran with PyRun_String (gtsam's pybind11, while
-            # importing) makes the interpreter kill itself with SIGINT at exit (-2, not 130).
-            signal.signal(signal.SIGINT, signal.SIG_IGN)
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(code)
-        return code
+        return _interrupted(name, isinstance(exc, Terminated), as_program, in_main_thread)
     except BrokenPipeError:  # `mrm ... | head` closed the pipe: not an error
         sys.stderr.close()
         return 0
     except Exception as exc:
+        if interrupt_received() or caused_by_interrupt(exc):
+            return _interrupted(name, False, as_program, in_main_thread)
         if not _is_user_error(exc):
             raise
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        if previous_term is not None:
+            signal.signal(signal.SIGTERM, previous_term)
+        if previous_int is not None:
+            signal.signal(signal.SIGINT, previous_int)
 
 
 if __name__ == "__main__":

@@ -7,6 +7,8 @@ import sys
 import time
 from typing import TextIO
 
+from multi_robot_mapper.cli.interrupts import raise_if_interrupted
+
 BAR_PERIOD_S = 0.1  # a terminal's bar is redrawn at most this often
 LINE_PERIOD_S = 30.0  # elsewhere, a line at most this often (and at each new stage)
 
@@ -31,6 +33,7 @@ class ProgressBar:
         self._drawn = False
 
     def __call__(self, stage: str, done: int, total: int) -> None:
+        raise_if_interrupted()  # a Ctrl-C a library swallowed (cli/interrupts.py) stops here
         now = time.monotonic()
         kind = stage.split(" ")[0]  # "mapping robot2" is the stage "mapping"
         new_stage = kind != self._stage
