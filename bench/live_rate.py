@@ -59,17 +59,17 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from sensor_msgs.msg import LaserScan  # noqa: E402
 
 from bench.harness import carmen_log  # noqa: E402
 from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.config import parse_override  # noqa: E402
+from multi_robot_mapper.core.mapper_config import RobotMapperConfig  # noqa: E402
 from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, simulate_robots  # noqa: E402
 from multi_robot_mapper.core.worlds import ROUTES  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, monotonic_stamps, read_carmen  # noqa: E402
+from multi_robot_mapper.io.config_files import load_config  # noqa: E402
 from multi_robot_mapper.io.messages import scan_to_msg, stamp_from_seconds  # noqa: E402
 from multi_robot_mapper.ros.robot_mapper import RobotMapper  # noqa: E402
 from multi_robot_mapper.ros.testing import isolated_context, spin_until  # noqa: E402
@@ -159,11 +159,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         for scan, stamp in zip(robot.scans, robot.stamps, strict=True)
     ]
     simulated_s = time.monotonic() - sim_start
-    overrides = [Parameter(name, value=value) for name, value in map(parse_override, args.set)]
+    # Any field, user parameter or fixed constant: the node is built with the whole config.
+    config = load_config(RobotMapperConfig, overrides=args.set)
     published_at: dict[Key, float] = {}
 
     with isolated_context() as context:
-        node = TimedMapper(context=context, namespace="robot1", parameter_overrides=overrides)
+        node = TimedMapper(context=context, namespace="robot1", config=config)
         node.warnings.log = lambda message: None  # counted below instead of printed
         driver = Node("live_driver", context=context)
         scan_pub = driver.create_publisher(LaserScan, "/robot1/scan", qos_profile_sensor_data)
@@ -325,7 +326,8 @@ def main() -> None:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="robot_mapper parameter override, e.g. local_mapping.keyframe_distance=0.5",
+        help="robot_mapper config override, any field (a fixed constant too), e.g. "
+        "local_mapping.keyframe_distance=0.5",
     )
     parser.add_argument(
         "--cpu", type=int, default=None, help="pin the whole process (node, driver, DDS) to a CPU"

@@ -20,6 +20,8 @@ from test_map_merger_node import _partial_map_message
 from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 from visualization_msgs.msg import Marker, MarkerArray
 
+from multi_robot_mapper.core.config import config_from_flat
+from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.io.messages import pose_stamped, stamp_from_seconds
 from multi_robot_mapper.ros.map_merger import MapMerger
 
@@ -55,9 +57,9 @@ def merger(ros_context) -> Iterator[MapMerger]:
             Parameter("merge_worker", value=False),  # merges in this process: deterministic
             Parameter("merge.update_budget", value=0.0),  # every place matched: deterministic
             Parameter("merge.join_probability", value=SIMULATED_WORLD_JOIN_PROBABILITY),
-            Parameter("max_keyframes_per_map", value=500),
-            Parameter("max_segments_per_map", value=5000),
         ],
+        # Fixed constants (not ROS parameters) lowered so that small maps reach the limits.
+        config=MapMergerConfig(max_keyframes_per_map=500, max_segments_per_map=5000),
     )
     node.logged = []  # type: ignore[attr-defined]
     node.warnings.log = node.logged.append  # type: ignore[attr-defined]
@@ -250,8 +252,8 @@ def test_a_merge_error_after_an_unmerged_note_is_logged_not_raised(ros_context) 
         parameter_overrides=[
             Parameter("robots", value="alpha,charlie"),
             Parameter("merge_worker", value=False),
-            Parameter("merge.link_min_wall", value=1000.0),  # no link: one robot unmerged
         ],
+        config=config_from_flat(MapMergerConfig, {"merge.link_min_wall": 1000.0}),  # no link
     )
     try:
         deliver(node, "alpha", message("alpha"))

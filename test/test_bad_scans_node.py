@@ -32,6 +32,7 @@ from test_robot_mapper_node import (
 from visualization_msgs.msg import Marker
 
 from multi_robot_mapper.core.config import ConfigError
+from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import raycast
 from multi_robot_mapper.io.messages import (
@@ -92,9 +93,7 @@ def test_each_scan_is_processed_with_its_own_beam_count(ros_context) -> None:
     # The same room seen by lasers of 361, 181, 1441, 361 and 91 beams, one after the other
     # (each geometry taken as it comes: geometry_change_scans 1): every segment lies on the
     # room's walls only if each scan got its own beam angles.
-    harness = Harness(
-        ros_context, parameter_overrides=[Parameter("geometry_change_scans", value=1)]
-    )
+    harness = Harness(ros_context, config=RobotMapperConfig(geometry_change_scans=1))
     try:
         for t, beams in ((1.0, 361), (2.0, 181), (3.0, 1441), (4.0, 361), (5.0, 91)):
             msg = scan_to_msg(room_scan(beams), "robot1/laser", stamp_from_seconds(t))
@@ -218,17 +217,17 @@ def test_a_flood_of_10000_beam_scans_at_40_hz_keeps_latency_bounded(ros_context)
 def test_parameter_ranges_reach_ros_and_out_of_range_sets_keep_the_old_value(ros_context) -> None:
     node = RobotMapper(context=ros_context)
     try:
-        name = "local_mapping.integrate.slide_step"
+        name = "extraction.split_tolerance"
         (descriptor,) = node.describe_parameters([name])
         (allowed,) = descriptor.floating_point_range
-        assert (allowed.from_value, allowed.to_value) == (0.005, 10.0)
+        assert (allowed.from_value, allowed.to_value) == (0.001, 1.0)
         (result,) = node.set_parameters([Parameter(name, value=1e-12)])
         assert not result.successful
-        assert node.config.local_mapping.integrate.slide_step == 0.1
-        assert node.get_parameter(name).value == 0.1
+        assert node.config.extraction.split_tolerance == 0.025
+        assert node.get_parameter(name).value == 0.025
         (result,) = node.set_parameters([Parameter("partial_map_period", value=1e-9)])
         assert not result.successful and node.config.partial_map_period == 1.0
-        (descriptor,) = node.describe_parameters(["extraction.max_beams"])
+        (descriptor,) = node.describe_parameters(["copy_window"])
         assert descriptor.integer_range[0].to_value == 1_000_000
     finally:
         node.destroy_node()
@@ -236,7 +235,7 @@ def test_parameter_ranges_reach_ros_and_out_of_range_sets_keep_the_old_value(ros
 
 @pytest.mark.parametrize(
     ("name", "value"),
-    [("local_mapping.integrate.slide_step", 1e-12), ("partial_map_period", 1e-9)],
+    [("extraction.split_tolerance", 1e-12), ("partial_map_period", 1e-9)],
 )
 def test_a_start_with_a_parameter_out_of_range_is_refused_clearly(
     ros_context, name: str, value: float

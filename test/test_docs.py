@@ -149,8 +149,9 @@ def test_every_mrm_command_a_page_shows_parses(page: Path) -> None:
 
 
 def test_the_readme_parameters_are_real_with_their_defaults() -> None:
-    """The README's table of the parameters a user tunes: each row's node has the parameter,
-    and the default shown is the dataclass default."""
+    """The README's table of the parameters a user tunes: each row's node has the parameter as
+    a user parameter (a ROS parameter, not a fixed constant), and the default shown is the
+    dataclass default."""
     specs = {
         "robot_mapper": {s.name: s for s in field_specs(RobotMapperConfig)},
         "map_merger": {s.name: s for s in field_specs(MapMergerConfig)},
@@ -163,4 +164,5 @@ def test_the_readme_parameters_are_real_with_their_defaults() -> None:
     assert len(rows) >= 12, "the README's parameter table has fewer than a dozen rows"
     for node, name, default in rows:
         assert name in specs[node], f"{node} has no parameter {name}"
+        assert specs[node][name].user, f"{name} is a fixed constant of {node}, not a parameter"
         assert default == default_text(specs[node][name].default), name

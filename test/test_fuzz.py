@@ -44,6 +44,7 @@ from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 from test_robot_mapper_node import room_scan
 from visualization_msgs.msg import Marker, MarkerArray
 
+from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.io.messages import scan_to_msg, stamp_from_seconds
 from multi_robot_mapper.ros.map_merger import MapMerger
 from multi_robot_mapper.ros.robot_mapper import RobotMapper
@@ -305,12 +306,12 @@ def merger_node() -> Iterator[tuple[MapMerger, list[object], dict]]:
             parameter_overrides=[
                 Parameter("robots", value=",".join(NAMES)),
                 Parameter("merge_worker", value=False),
-                Parameter("max_segments_per_map", value=3000),
                 # Every place matched in each merge: a time budget would make what a merge
                 # links (and so the good robots' placements) depend on the machine's load.
                 Parameter("merge.update_budget", value=0.0),
                 Parameter("merge.join_probability", value=SIMULATED_WORLD_JOIN_PROBABILITY),
             ],
+            config=MapMergerConfig(max_segments_per_map=3000),  # a fixed constant, lowered
         )
         node.warnings.log = node.notes.log = lambda message: None
         sent = record_publications(node)

@@ -380,10 +380,10 @@ def test_runtime_parameter_changes_are_validated(ros_context) -> None:
     try:
         results = node.set_parameters([Parameter("method", value="icp")])
         assert not results[0].successful and "icp" in results[0].reason
-        results = node.set_parameters([Parameter("merge.ffs.sigma_end", value=1.0)])
-        assert not results[0].successful and "sigma_end" in results[0].reason
-        results = node.set_parameters([Parameter("merge.link_min_value", value=-1.0)])
-        assert not results[0].successful and "link_min_value" in results[0].reason
+        results = node.set_parameters([Parameter("merge.ffs.time_budget", value=-1.0)])
+        assert not results[0].successful and "time_budget" in results[0].reason
+        results = node.set_parameters([Parameter("merge.join_probability", value=0.2)])
+        assert not results[0].successful and "join_probability" in results[0].reason
         results = node.set_parameters([Parameter("merge_period", value=0.25)])
         assert results[0].successful and node._merge_timer.timer_period_ns == 250_000_000
         assert node.config.method == "pivot"

@@ -17,8 +17,9 @@ from sensor_msgs.msg import LaserScan
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.config import ConfigError
+from multi_robot_mapper.core.config import ConfigError, config_from_flat
 from multi_robot_mapper.core.local_mapping import attempts as front_end_attempts
+from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, raycast, simulate_robots
 from multi_robot_mapper.core.worlds import polygon
@@ -212,9 +213,7 @@ def test_bad_scan_warns_once_names_the_problem_and_the_node_goes_on(
 
 def test_negative_increment_scan_gives_the_same_segments(ros_context) -> None:
     # Two lasers' geometries in one stream: each taken as it comes (geometry_change_scans 1).
-    harness = Harness(
-        ros_context, parameter_overrides=[Parameter("geometry_change_scans", value=1)]
-    )
+    harness = Harness(ros_context, config=RobotMapperConfig(geometry_change_scans=1))
     try:
         _compare_forward_and_reversed(harness)
     finally:
@@ -439,12 +438,12 @@ def test_map_frame_default_follows_the_namespace_and_can_be_set(ros_context) -> 
 
 
 def test_local_mapping_parameters_two_levels_deep_reach_the_mapper(ros_context) -> None:
+    # A fixed constant two levels deep comes from the config the node is built with.
+    fixed = {"local_mapping.integrate.point_distance_tolerance": 0.08}
     node = RobotMapper(
         context=ros_context,
-        parameter_overrides=[
-            Parameter("local_mapping.integrate.point_distance_tolerance", value=0.08),
-            Parameter("local_mapping.keyframe_distance", value=0.7),
-        ],
+        parameter_overrides=[Parameter("local_mapping.keyframe_distance", value=0.7)],
+        config=config_from_flat(RobotMapperConfig, fixed),
     )
     try:
         assert node.mapper.config.integrate.point_distance_tolerance == 0.08

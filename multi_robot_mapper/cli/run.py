@@ -79,23 +79,32 @@ def ros_arguments(args: argparse.Namespace) -> list[str]:
 def node_parameters(items: list[str]) -> tuple[list[Any], list[Any]]:
     """``-p NAME:=VALUE`` options as the robot_mappers' and the merger's parameters: each goes
     to the nodes that have it (a name neither node has is an error, as ``ros2 run`` would
-    ignore it without a word)."""
+    ignore it without a word; a fixed constant is refused saying so)."""
     from rclpy.parameter import Parameter
 
-    from multi_robot_mapper.core.config import field_specs, parse_override
+    from multi_robot_mapper.core.config import (
+        field_specs,
+        fixed_message,
+        parse_override,
+        user_specs,
+    )
     from multi_robot_mapper.core.mapper_config import RobotMapperConfig
     from multi_robot_mapper.core.merger_config import MapMergerConfig
 
-    kinds = {s.name: s.kind for c in (RobotMapperConfig, MapMergerConfig) for s in field_specs(c)}
-    mapper_names = {spec.name for spec in field_specs(RobotMapperConfig)}
-    merger_names = {spec.name for spec in field_specs(MapMergerConfig)} - {"robots", "method"}
+    kinds = {s.name: s.kind for c in (MapMergerConfig, RobotMapperConfig) for s in field_specs(c)}
+    mapper_fields = {spec.name for spec in field_specs(RobotMapperConfig)}
+    mapper_names = {spec.name for spec in user_specs(RobotMapperConfig)}
+    merger_names = {spec.name for spec in user_specs(MapMergerConfig)} - {"robots", "method"}
     mapper, merger = [], []
     for item in items:
         if ":=" not in item:
             raise CliError(f"-p {item!r}: write NAME:=VALUE (as ros2 run's -p)")
         name, value = parse_override(item.replace(":=", "=", 1))
         if name not in mapper_names | merger_names:
-            raise CliError(f"-p {name}: neither robot_mapper nor map_merger has this parameter")
+            if name not in kinds or name in ("robots", "method"):
+                raise CliError(f"-p {name}: neither robot_mapper nor map_merger has this parameter")
+            node = "robot_mapper" if name in mapper_fields else "map_merger"
+            raise CliError(f"-p {name}: {fixed_message([name], node)}")
         if kinds[name] is float and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)  # -p max_scan_rate:=10 means 10.0
         parameter = Parameter(name, value=value)

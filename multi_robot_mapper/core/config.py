@@ -4,6 +4,11 @@ Every component has one frozen dataclass whose fields carry their default, unit,
 bounds. The same functions load it from a flat ``{"section.name": value}`` mapping, whatever
 that mapping came from: ROS parameters, a YAML file in ``config/`` or ``mrm --set`` options.
 Values are validated on load and errors name the parameter, the value and the rule broken.
+
+A field given ``tune`` (when a user changes it) is a *user parameter*: a ROS parameter of its
+node and a key of ``config/<node>.yaml``. Every other field is a *fixed constant*: its default
+holds in the nodes, and only ``mrm --set`` / ``--config`` (experiments offline) or a config
+built in Python change it.
 """
 
 from __future__ import annotations
@@ -33,8 +38,10 @@ def param(
     maximum: float | None = None,
     exclusive_minimum: bool = False,
     choices: tuple[str, ...] | None = None,
+    tune: str = "",
 ) -> Any:
-    """A documented configuration field (use as a dataclass field default)."""
+    """A documented configuration field (use as a dataclass field default); ``tune`` says when
+    a user changes it and makes it a user parameter (at most 30 per node)."""
     metadata = {
         "unit": unit,
         "doc": doc,
@@ -42,6 +49,7 @@ def param(
         "maximum": maximum,
         "exclusive_minimum": exclusive_minimum,
         "choices": choices,
+        "tune": tune,
     }
     return dataclasses.field(default=default, metadata=metadata)
 
@@ -59,6 +67,12 @@ class FieldSpec:
     maximum: float | None
     exclusive_minimum: bool
     choices: tuple[str, ...] | None
+    tune: str = ""  # when a user changes it; empty: a fixed constant
+
+    @property
+    def user(self) -> bool:
+        """A user parameter (a ROS parameter of its node), not a fixed constant."""
+        return bool(self.tune)
 
     def within(self, value: float) -> bool:
         """Whether a number lies in this field's declared range."""
@@ -117,9 +131,32 @@ def _field_specs(cls: type, prefix: str) -> tuple[FieldSpec, ...]:
                 maximum=md.get("maximum"),
                 exclusive_minimum=bool(md.get("exclusive_minimum", False)),
                 choices=md.get("choices"),
+                tune=md.get("tune", ""),
             )
         )
     return tuple(specs)
+
+
+def user_specs(cls: type) -> list[FieldSpec]:
+    """The user parameters of a node's config class: its ROS parameters, in field order."""
+    return [spec for spec in field_specs(cls) if spec.user]
+
+
+def fixed_message(names: list[str], node: str) -> str:
+    """One line refusing fixed constants given to a node as ROS parameters, naming them and
+    saying how an experiment reaches them instead."""
+    which = ", ".join(repr(n) for n in names)
+    what = (
+        "is a fixed constant of {node}, not a ROS parameter"
+        if len(names) == 1
+        else "are fixed constants of {node}, not ROS parameters"
+    ).format(node=node)
+    by_set = node == "robot_mapper" or all(n.startswith("merge.") for n in names)
+    option = "--set NAME=VALUE" if by_set else "--merger-config FILE"
+    return (
+        f"{which} {what} (docs/parameters.md says which is which); for an experiment, "
+        f"change it offline: mrm replay ... {option}"
+    )
 
 
 def _coerce(spec: FieldSpec, value: Any) -> Any:

@@ -19,6 +19,8 @@ class ExtractionConfig:
         doc="tau: consecutive points farther apart start a new cluster (Amigoni III-D, Wolter 3.1)",
         minimum=0.01,
         maximum=10.0,
+        tune="a sparse laser (1 degree beams on walls 10 m away land 0.17 m apart): raise it so "
+        "walls stay whole; lower it to keep near objects apart",
     )
     split_tolerance: float = param(
         0.025,
@@ -26,6 +28,8 @@ class ExtractionConfig:
         doc="kappa: recursive split stops when every point is this close to its segment",
         minimum=0.001,
         maximum=1.0,
+        tune="a noisier laser (range noise above 1-2 cm): raise it, or walls come out as zigzags "
+        "of short segments",
     )
     min_cluster_points: int = param(
         2,
@@ -39,6 +43,8 @@ class ExtractionConfig:
         unit="",
         doc="polyline simplifier: recursive split (tolerance kappa) or Discrete Curve Evolution",
         choices=("split", "dce"),
+        tune="to try Discrete Curve Evolution (Wolter's simplifier) instead of the recursive "
+        "split: 'dce'",
     )
     dce_threshold: float = param(
         0.005,
@@ -46,6 +52,7 @@ class ExtractionConfig:
         doc="DCE removes vertices while the least relevance K(u,v,w) (Wolter eq. 1) is below this",
         minimum=0.0001,
         maximum=1.0,
+        tune="with simplifier 'dce' only: raise it for a noisier laser",
     )
     max_beams: int = param(
         100_000,
@@ -63,6 +70,8 @@ class ExtractionConfig:
         "depth cameras through (about 1 rad)",
         minimum=0.0,
         maximum=2.0 * math.pi,
+        tune="a sensor narrower than 0.5 rad (a depth camera's fake scan is about 1 rad) is "
+        "refused: lower it to map with one",
     )
 
     def __post_init__(self) -> None:

@@ -23,6 +23,7 @@ class RobotMapperConfig:
         doc="the same kind of bad-scan warning is logged at most once per this period",
         minimum=0.0,
         maximum=3600.0,
+        tune="shorter while you chase bad input, longer for quieter logs",
     )
     segment_marker_width: float = param(
         0.03,
@@ -30,6 +31,7 @@ class RobotMapperConfig:
         doc="line width of the segment markers (visualisation only)",
         minimum=0.001,
         maximum=10.0,
+        tune="the map looks too thin or too thick in RViz at your zoom",
     )
     partial_map_period: float = param(
         1.0,
@@ -37,6 +39,8 @@ class RobotMapperConfig:
         doc="the whole partial map is republished at most once per this period, when it changed",
         minimum=0.05,
         maximum=3600.0,
+        tune="longer on a thin radio link (the map goes out less often); shorter to see the map "
+        "sooner",
     )
     scan_max_queue_delay: float = param(
         0.5,
@@ -46,6 +50,8 @@ class RobotMapperConfig:
         "come faster than they can be mapped",
         minimum=0.01,
         maximum=60.0,
+        tune="longer on a slow computer that maps in bursts (more scans mapped, more latency); "
+        "shorter keeps the pose fresher",
     )
     stamp_reset_jump: float = param(
         5.0,
@@ -63,6 +69,8 @@ class RobotMapperConfig:
         "off, a corrupt stamp); not checked while a simulated clock has not started",
         minimum=0.0,
         maximum=1e6,
+        tune="raise it to the clock offset of robots whose clocks are not synchronised with this "
+        "computer's (no NTP or chrony)",
     )
     stamp_gap_periods: float = param(
         10.0,
@@ -101,11 +109,14 @@ class RobotMapperConfig:
         "is refused (copied_ranges): no laser reads the same twice; 0: not checked",
         minimum=0,
         maximum=1000000,
+        tune="a simulated laser without noise (it reads the same ranges twice while the robot "
+        "stands): 0",
     )
     map_frame: str = param(
         "",
         unit="",
         doc="frame of partial_map and pose; empty means '<namespace>/map' ('map' at the root)",
+        tune="your robot's map frame has another name",
     )
     max_scan_rate: float = param(
         0.0,
@@ -115,6 +126,7 @@ class RobotMapperConfig:
         "CPU: set it when many robots share one computer (slam_toolbox's throttle_scans)",
         minimum=0.0,
         maximum=1000.0,
+        tune="many robots on one computer: 10 maps a quarter of a 40 Hz laser's scans",
     )
     backend_process: bool = param(
         True,
@@ -123,6 +135,8 @@ class RobotMapperConfig:
         "process: on a thread of this process it would take Python's interpreter lock from "
         "the scan callback for hundreds of milliseconds per keyframe; false: on a thread. "
         "Read when the node starts (and when its map starts over)",
+        tune="a computer with one core or little memory (false: no second process per robot), or "
+        "to debug the back end in one process",
     )
     diagnostics_period: float = param(
         1.0,
@@ -131,6 +145,7 @@ class RobotMapperConfig:
         "goes out on /diagnostics",
         minimum=0.01,
         maximum=3600.0,
+        tune="your diagnostics aggregator or monitor expects another rate",
     )
     stale_timeout: float = param(
         5.0,
@@ -139,6 +154,7 @@ class RobotMapperConfig:
         "when use_sim_time is set)",
         minimum=0.01,
         maximum=86400.0,
+        tune="longer for a laser slower than 1 Hz or scans that pause (a bag played in pieces)",
     )
 
     def __post_init__(self) -> None:

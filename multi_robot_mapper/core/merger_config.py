@@ -22,6 +22,7 @@ class MapMergerConfig:
         unit="",
         doc="comma-separated robot namespaces to merge (e.g. 'robot1,robot2'); empty: "
         "discover every '<namespace>/partial_map' topic as it appears",
+        tune="to merge exactly the robots listed (empty discovers every '*/partial_map')",
     )
     discovery_period: float = param(
         2.0,
@@ -30,6 +31,7 @@ class MapMergerConfig:
         "(only when robots is empty)",
         minimum=0.05,
         maximum=3600.0,
+        tune="shorter to find robots that join the team sooner",
     )
     merge_period: float = param(
         1.0,
@@ -37,11 +39,13 @@ class MapMergerConfig:
         doc="how often the partial maps are merged again, when one of them changed",
         minimum=0.05,
         maximum=3600.0,
+        tune="longer with many robots or a slow computer; shorter to see merges sooner",
     )
     map_frame: str = param(
         "map",
         unit="",
         doc="frame of global_map and of every robot frame's pose (the reference robot's map)",
+        tune="your fleet's global frame has another name",
     )
     method: str = param(
         "pivot",
@@ -50,6 +54,7 @@ class MapMergerConfig:
         "their places match, consistent links only, optimised together) or 'ffs' (the same, "
         "then Force Field Simulation moves every merged keyframe at once: merge.ffs.*)",
         choices=METHODS,
+        tune="to try Force Field Simulation after the joint graph (no gain measured yet): 'ffs'",
     )
     marker_width: float = param(
         0.05,
@@ -57,6 +62,7 @@ class MapMergerConfig:
         doc="line width of the global map's segment markers (visualisation only)",
         minimum=0.001,
         maximum=10.0,
+        tune="the global map looks too thin or too thick in RViz at your zoom",
     )
     merge_worker: bool = param(
         True,
@@ -64,6 +70,7 @@ class MapMergerConfig:
         doc="merge in a worker process: a merge is seconds of numpy work, and in this "
         "process it would take Python's interpreter lock from the subscriptions (and from "
         "any node spun in the same process, as in tests); false: merge in this process",
+        tune="a computer with one core or little memory, or to debug a merge in one process: false",
     )
     warning_period: float = param(
         10.0,
@@ -72,6 +79,7 @@ class MapMergerConfig:
         "most once per this period",
         minimum=0.0,
         maximum=3600.0,
+        tune="shorter while you chase bad input, longer for quieter logs",
     )
     max_keyframes_per_map: int = param(
         50_000,
@@ -96,6 +104,8 @@ class MapMergerConfig:
         "maps reaching 200 m from their origins: 0.8 GB and 13 s on one core)",
         minimum=1.0,
         maximum=100_000.0,
+        tune="a site reaching farther than 200 m from a robot's start: raise it (memory grows "
+        "with its square)",
     )
     stale_timeout: float = param(
         5.0,
@@ -105,6 +115,7 @@ class MapMergerConfig:
         "use_sim_time is set)",
         minimum=0.01,
         maximum=86400.0,
+        tune="longer for robots that publish rarely (a thin radio link, a long partial_map_period)",
     )
     diagnostics_period: float = param(
         1.0,
@@ -113,21 +124,27 @@ class MapMergerConfig:
         "rate, merge score) goes out on /diagnostics",
         minimum=0.01,
         maximum=3600.0,
+        tune="your diagnostics aggregator or monitor expects another rate",
     )
     map_file: str = param(
         "~/.ros/multi_robot_mapper/global_map.json",
         unit="",
         doc="file the save_map and load_map services (std_srvs/Trigger) write and read: every "
         "robot's partial map and placement, and the global map",
+        tune="to keep saved maps elsewhere (one file per site)",
     )
     save_on_shutdown: bool = param(
-        False, unit="", doc="save the map to map_file when the node shuts down"
+        False,
+        unit="",
+        doc="save the map to map_file when the node shuts down",
+        tune="to keep the map when the merger stops: true",
     )
     load_on_start: bool = param(
         False,
         unit="",
         doc="load map_file at start-up when it exists (live robots' maps then replace the "
         "saved ones of the same session)",
+        tune="to go on from the saved map (a team continuing yesterday's map): true",
     )
     keep_sessions: int = param(
         2,
@@ -137,6 +154,8 @@ class MapMergerConfig:
         "per robot (the oldest goes first)",
         minimum=0,
         maximum=100,
+        tune="fewer for robots that restart often (memory and merge time); 0 drops a restarted "
+        "robot's earlier map",
     )
     grid: GridConfig = dataclasses.field(default_factory=GridConfig)
     merge: MergeConfig = dataclasses.field(default_factory=MergeConfig)

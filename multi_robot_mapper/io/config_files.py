@@ -6,6 +6,7 @@ same file serves ``ros2 run ... --params-file`` and ``mrm ... --config``.
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
@@ -20,6 +21,7 @@ from multi_robot_mapper.core.config import (
     field_specs,
     flatten_mapping,
     parse_override,
+    user_specs,
 )
 
 C = TypeVar("C")
@@ -130,17 +132,31 @@ def params_file_header(node: str) -> str:
     mapper = node == "robot_mapper"
     namespace = " -r __ns:=/robot1" if mapper else ""
     option = "--config" if mapper else "replay --merger-config"
-    return (
-        f"# {node} parameters (ROS 2 params-file layout; also read by `mrm {option}`).\n"
-        "# Units are SI. Generated from the dataclass defaults in multi_robot_mapper/core by\n"
-        f"# `make config` (a test keeps them equal). Use: ros2 run multi_robot_mapper {node}\n"
-        f"#   --ros-args{namespace} --params-file config/{node}.yaml\n"
+    experiment = (
+        "`mrm --set NAME=VALUE`"
+        if mapper
+        else "`mrm replay --merger-config FILE` (merge.*: also --set)"
     )
+    text = (
+        f"{node}'s user parameters: its only ROS parameters, each with its range, unit, "
+        f"meaning and when to change it. ROS 2 params-file layout, also read by `mrm {option}`; "
+        "units are SI. Every other field is a fixed constant (docs/parameters.md): a params "
+        f"file naming one is refused; {experiment} reaches it for experiments offline. "
+        "Generated from the dataclass defaults in multi_robot_mapper/core by `make config` (a "
+        "test keeps them equal)."
+    )
+    lines = [f"# {line}" for line in textwrap.wrap(text, width=97)]
+    lines += [
+        f"# Use: ros2 run multi_robot_mapper {node} --ros-args{namespace}",
+        f"#   --params-file config/{node}.yaml",
+    ]
+    return "\n".join(lines) + "\n"
 
 
 def default_params_file(config_class: type, node: str = "robot_mapper") -> str:
-    """A ROS 2 params file holding every parameter of ``config_class`` at its default, each
-    with its unit and meaning as a comment (``config/<node>.yaml`` is this text)."""
+    """A ROS 2 params file holding every user parameter of ``config_class`` at its default,
+    each with its range, unit, meaning and when to change it as a comment (``config/<node>.yaml``
+    is this text)."""
     return params_file_header(node) + "/**:\n" + _parameters_section(config_class)
 
 
@@ -155,8 +171,9 @@ def system_params_file() -> str:
     from multi_robot_mapper.core.merger_config import MapMergerConfig
 
     header = (
-        "# Parameters of every node of multi_robot_mapper (ROS 2 params-file layout), one\n"
-        "# section per node name in any namespace. Generated from the dataclass defaults by\n"
+        "# The user parameters of every node of multi_robot_mapper (ROS 2 params-file layout),\n"
+        "# one section per node name in any namespace; the fixed constants are in\n"
+        "# docs/parameters.md. Generated from the dataclass defaults by\n"
         "# `make config` (a test keeps it equal). Use: mrm run --robots robot1,robot2\n"
         f"#   --params-file config/{SYSTEM_PARAMS_FILE}, the launch file, or\n"
         "#   ros2 run multi_robot_mapper <node> --ros-args --params-file <this file>\n"
@@ -171,33 +188,38 @@ def system_params_file() -> str:
 
 
 def _parameters_section(config_class: type) -> str:
-    """``  ros__parameters:`` and every field of ``config_class`` at its default."""
-
-    def scalar(value: Any) -> str:
-        if isinstance(value, bool):
-            return "true" if value else "false"
-        if isinstance(value, str):
-            return yaml.safe_dump(value, default_style='"').strip()
-        return repr(value)
-
-    rows: list[tuple[str, str | None]] = []
+    """``  ros__parameters:`` and every user parameter of ``config_class`` at its default, each
+    under a comment of its range (or unit), meaning and when to change it."""
+    lines = ["  ros__parameters:"]
     opened: set[str] = set()
-    for spec in field_specs(config_class):
+    for spec in user_specs(config_class):
         parts = spec.name.split(".")
         for depth in range(len(parts) - 1):
             section = ".".join(parts[: depth + 1])
             if section not in opened:
                 opened.add(section)
-                rows.append((f"{'    ' + '  ' * depth}{parts[depth]}:", None))
-        if spec.minimum is not None or spec.maximum is not None:
-            unit = f"{spec.range_text()}: "
-        else:
-            unit = f"{spec.unit}, " if spec.unit else ""
+                lines.append(f"{'    ' + '  ' * depth}{parts[depth]}:")
         indent = "    " + "  " * (len(parts) - 1)
-        rows.append((f"{indent}{parts[-1]}: {scalar(spec.default)}", f"# {unit}{spec.doc}"))
-    width = max(len(text) for text, comment in rows if comment is not None) + 1
-    body = [text if comment is None else f"{text.ljust(width)}{comment}" for text, comment in rows]
-    return "  ros__parameters:\n" + "\n".join(body) + "\n"
+        comment = f"{_bounds_text(spec)}{spec.doc}. When to change it: {spec.tune}."
+        width = 99 - len(indent) - 2
+        lines += [f"{indent}# {line}" for line in textwrap.wrap(comment, width=width)]
+        lines.append(f"{indent}{parts[-1]}: {_yaml_scalar(spec.default)}")
+    return "\n".join(lines) + "\n"
+
+
+def _bounds_text(spec: FieldSpec) -> str:
+    """``[0.01, 10] m: ``, ``Hz: `` or nothing: what a YAML comment starts with."""
+    if spec.minimum is not None or spec.maximum is not None:
+        return f"{spec.range_text()}: "
+    return f"{spec.unit}: " if spec.unit else ""
+
+
+def _yaml_scalar(value: bool | int | float | str) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return yaml.safe_dump(value, default_style='"').strip()
+    return repr(value)
 
 
 PARAMETERS_DOC = "parameters.md"
@@ -208,19 +230,30 @@ _PARAMETERS_HEADER = """\
      config dataclasses, as config/*.yaml is; test/test_docs.py keeps it equal. Do not edit:
      change the field's param(...) in multi_robot_mapper/core and run `make config`. -->
 
-Every parameter of both nodes, with its default, its range and its unit (SI). The same dotted
-names work as ROS parameters (`--params-file`, `-p NAME:=VALUE`, `ros2 param set`), in YAML
-(`mrm ... --config FILE`, `mrm replay ... --merger-config FILE`) and as `mrm ... --set
-NAME=VALUE`. A value outside its range, or an unknown name, is refused with one line naming it
-(exit code 2; a refused `ros2 param set` keeps the old value). The README lists the dozen a user
-tunes; [architecture.md](architecture.md) says what each stage does with them.
+Every field of both nodes' configs, with its default, its range and its unit (SI), in two kinds:
+
+- **User parameters**, at most 30 per node: the ones a user has a reason to change, each with
+  when to change it. They are the node's only ROS parameters (`--params-file`, `-p NAME:=VALUE`,
+  `ros2 param set`; `ros2 param describe` shows each range) and the only keys of its
+  `config/<node>.yaml`.
+- **Fixed constants**: every other field. The nodes use its default; its meaning says why it is
+  that value. A params file or `-p` naming one is refused with one line naming it.
+
+For experiments, `mrm ... --set NAME=VALUE` and `mrm ... --config FILE` reach every field of the
+robot mapper, user parameter or fixed constant, offline (the merger's: `mrm replay ...
+--merger-config FILE`, its `merge.*` also by `--set merge.NAME=VALUE`); code that builds a node in
+Python gives it a whole config (`RobotMapper(config=...)`, `MapMerger(config=...)`). A value
+outside its range, or an unknown name, is refused with one line naming it (exit code 2; a refused
+`ros2 param set` keeps the old value). [architecture.md](architecture.md) says what each stage does
+with them.
 """
 
 
 def parameters_markdown() -> str:
-    """``docs/parameters.md``: every parameter of both nodes, generated like ``config/*.yaml``
-    from the documented dataclass defaults (default, range, unit, meaning; a table per
-    section, each naming the config class it comes from)."""
+    """``docs/parameters.md``: every field of both nodes, generated like ``config/*.yaml`` from
+    the documented dataclass defaults: a table of each node's user parameters (default, range,
+    unit, meaning, when to change it), then its fixed constants, a table per section, each
+    naming the config class it comes from."""
     from multi_robot_mapper.core.mapper_config import RobotMapperConfig
     from multi_robot_mapper.core.merger_config import MapMergerConfig
 
@@ -229,14 +262,21 @@ def parameters_markdown() -> str:
         ("robot_mapper", RobotMapperConfig),
         ("map_merger", MapMergerConfig),
     ):
+        users = user_specs(config_class)
+        fixed = len(field_specs(config_class)) - len(users)
         parts.append(
-            f"\n## {node}\n\nIts params file is `config/{node}.yaml`; "
-            f"`config/{SYSTEM_PARAMS_FILE}` holds the same as its `/**/{node}` section.\n"
+            f"\n## {node}\n\n{len(users)} user parameters and {fixed} fixed constants. Its "
+            f"params file is `config/{node}.yaml`;\n`config/{SYSTEM_PARAMS_FILE}` holds the "
+            f"same as its `/**/{node}` section.\n\n### {node}'s user parameters\n\n"
+            "| parameter | default | range | unit | meaning | when to change it |\n"
+            "| --- | --- | --- | --- | --- | --- |\n"
+            + "".join(_parameter_row(spec, spec.tune) for spec in users)
+            + f"\n### {node}'s fixed constants\n"
         )
         for prefix, section_class, specs in _sections(config_class):
-            title = f"`{prefix}.*`" if prefix else f"{node}'s own parameters"
+            title = f"`{prefix}.*`" if prefix else f"{node}'s own fields"
             parts.append(
-                f"\n### {title}\n\n`{section_class.__name__}` ({_source_of(section_class)})\n\n"
+                f"\n#### {title}\n\n`{section_class.__name__}` ({_source_of(section_class)})\n\n"
                 "| parameter | default | range | unit | meaning |\n"
                 "| --- | --- | --- | --- | --- |\n" + "".join(_parameter_row(s) for s in specs)
             )
@@ -249,15 +289,19 @@ def _source_of(config_class: type) -> str:
 
 
 def _sections(config_class: type) -> list[tuple[str, type, list[FieldSpec]]]:
-    """``(prefix, class, specs)`` per nested config dataclass, in field order; the scalar
-    fields of each section only (the nested sections follow as sections of their own)."""
+    """``(prefix, class, specs)`` per nested config dataclass, in field order; the fixed
+    constants of each section only (the nested sections follow as sections of their own)."""
     import dataclasses
     import typing
 
     sections: list[tuple[str, type, list[FieldSpec]]] = []
 
     def walk(cls: type, prefix: str) -> None:
-        own = [spec for spec in field_specs(cls, prefix) if "." not in spec.name[len(prefix) :]]
+        own = [
+            spec
+            for spec in field_specs(cls, prefix)
+            if "." not in spec.name[len(prefix) :] and not spec.user
+        ]
         sections.append((prefix.rstrip("."), cls, own))
         hints = typing.get_type_hints(cls)
         for f in dataclasses.fields(cls):
@@ -277,8 +321,8 @@ def default_text(value: bool | int | float | str) -> str:
     return repr(value)
 
 
-def _parameter_row(spec: FieldSpec) -> str:
-    """One table row: name, default, range (or choices), unit, meaning."""
+def _parameter_row(spec: FieldSpec, *extra: str) -> str:
+    """One table row: name, default, range (or choices), unit, meaning (and ``extra`` cells)."""
 
     def cell(text: str) -> str:  # a table cell: no column break, no HTML tag ('<namespace>')
         return text.replace("|", "\\|").replace("<", "\\<").replace("\n", " ")
@@ -290,7 +334,14 @@ def _parameter_row(spec: FieldSpec) -> str:
     else:
         bounds = ""
     default = default_text(spec.default)
-    cells = (f"`{spec.name}`", f"`{default}`", cell(bounds), cell(spec.unit), cell(spec.doc))
+    cells = (
+        f"`{spec.name}`",
+        f"`{default}`",
+        cell(bounds),
+        cell(spec.unit),
+        cell(spec.doc),
+        *(cell(text) for text in extra),
+    )
     return "| " + " | ".join(cells) + " |\n"
 
 

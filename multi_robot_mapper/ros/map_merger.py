@@ -55,25 +55,22 @@ import sys
 import threading
 import time
 import traceback
-from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.timer import Timer
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.config import ConfigError, config_from_flat, field_specs
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeResult
@@ -113,7 +110,7 @@ from multi_robot_mapper.ros.merger_state import (
     robot_statuses,
     store_partial_map,
 )
-from multi_robot_mapper.ros.parameters import declare_config
+from multi_robot_mapper.ros.parameters import declare_config, on_config_change
 from multi_robot_mapper.ros.saved_map_services import SavedMapServices
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
 from multi_robot_mapper.ros.worker_process import WorkerProcess
@@ -135,11 +132,17 @@ PARTIAL_MAP_TYPE = "visualization_msgs/msg/MarkerArray"
 
 
 class MapMerger(SavedMapServices, Node):
-    """Merges the partial maps of robots whose relative poses are unknown."""
+    """Merges the partial maps of robots whose relative poses are unknown.
 
-    def __init__(self, node_name: str = "map_merger", **kwargs: object) -> None:
+    ``config`` (default: the dataclass defaults) gives the fixed constants and the defaults of
+    the ROS parameters: code that builds the node in Python (tests, experiments) changes a fixed
+    constant there."""
+
+    def __init__(
+        self, node_name: str = "map_merger", config: MapMergerConfig | None = None, **kwargs: object
+    ) -> None:
         super().__init__(node_name, **kwargs)  # type: ignore[arg-type]
-        self.config = declare_config(self, MapMergerConfig)
+        self.config = declare_config(self, MapMergerConfig, config)
         self.config.require_implemented()
         self.notes = ThrottledWarnings(self.get_logger().info, self.config.warning_period)
         self.warnings = ThrottledWarnings(self.get_logger().warning, self.config.warning_period)
@@ -185,22 +188,10 @@ class MapMerger(SavedMapServices, Node):
                 Trigger, "load_map", self._on_load, callback_group=self._input_groups
             ),
         ]
-        self._discovery_timer = self.create_timer(
-            self.config.discovery_period,
-            self.guard("discover", self.discover),
-            callback_group=self._input_groups,
-        )
-        self._merge_timer = self.create_timer(
-            self.config.merge_period,
-            self.guard("merge", self.merge_now),
-            callback_group=self._merge_group,
-        )
-        self._diagnostics_timer = self.create_timer(
-            self.config.diagnostics_period,
-            self.publish_diagnostics,
-            callback_group=self._input_groups,
-        )
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._discovery_timer = self._timer("discovery")
+        self._merge_timer = self._timer("merge")
+        self._diagnostics_timer = self._timer("diagnostics")
+        on_config_change(self, lambda: self.config, self._reconfigure)
         if self.config.load_on_start:
             self._load_at_start()
         self.discover()
@@ -523,20 +514,28 @@ class MapMerger(SavedMapServices, Node):
 
     # --- Parameters -------------------------------------------------------------------------
 
-    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        values: dict[str, Any] = {
-            spec.name: self.get_parameter(spec.name).value for spec in field_specs(MapMergerConfig)
-        }
-        values.update({p.name: p.value for p in params})
-        try:
-            config = config_from_flat(MapMergerConfig, values)
-            config.require_implemented()
-            self._apply_config(config)
-        except ConfigError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        except Exception as exc:  # never into the executor
-            return SetParametersResult(successful=False, reason=f"not applied: {exc}")
-        return SetParametersResult(successful=True)
+    def _timer(self, which: str) -> Timer:
+        """A new timer of ``which`` (discovery, merge or diagnostics) at its configured period."""
+        if which == "discovery":
+            callback = self.guard("discover", self.discover)
+            return self.create_timer(
+                self.config.discovery_period, callback, callback_group=self._input_groups
+            )
+        if which == "merge":
+            callback = self.guard("merge", self.merge_now)
+            return self.create_timer(
+                self.config.merge_period, callback, callback_group=self._merge_group
+            )
+        return self.create_timer(
+            self.config.diagnostics_period,
+            self.publish_diagnostics,
+            callback_group=self._input_groups,
+        )
+
+    def _reconfigure(self, config: MapMergerConfig) -> None:
+        """A ``ros2 param set`` change: refused (ConfigError) for a method not implemented."""
+        config.require_implemented()
+        self._apply_config(config)
 
     def _apply_config(self, config: MapMergerConfig) -> None:
         old = self.config
@@ -544,25 +543,13 @@ class MapMerger(SavedMapServices, Node):
         self.notes.period = self.warnings.period = config.warning_period
         if config.discovery_period != old.discovery_period:
             self.destroy_timer(self._discovery_timer)
-            self._discovery_timer = self.create_timer(
-                config.discovery_period,
-                self.guard("discover", self.discover),
-                callback_group=self._input_groups,
-            )
+            self._discovery_timer = self._timer("discovery")
         if config.merge_period != old.merge_period:
             self.destroy_timer(self._merge_timer)
-            self._merge_timer = self.create_timer(
-                config.merge_period,
-                self.guard("merge", self.merge_now),
-                callback_group=self._merge_group,
-            )
+            self._merge_timer = self._timer("merge")
         if config.diagnostics_period != old.diagnostics_period:
             self.destroy_timer(self._diagnostics_timer)
-            self._diagnostics_timer = self.create_timer(
-                config.diagnostics_period,
-                self.publish_diagnostics,
-                callback_group=self._input_groups,
-            )
+            self._diagnostics_timer = self._timer("diagnostics")
         if (config.merge, config.grid) != (old.merge, old.grid):
             self._merged_versions = {}  # merge again with the new settings
 

@@ -1,14 +1,18 @@
 """Typed configs as ROS parameters: declared with descriptors, validated on load and on set.
 
-Each parameter's descriptor carries the range declared in its config field (the same table
-``mrm --set`` and ``--config`` are checked against), so ROS tools show it and ROS refuses a
-value outside it; a params-file key the node does not know is refused as the CLI refuses it.
+Only a config's user parameters (the fields with ``tune``, at most 30 per node) are ROS
+parameters; every other field is a fixed constant at its default, or at the value of the config
+a node is built with in Python (tests, experiments). Each parameter's descriptor carries the
+range declared in its config field (the same table ``mrm --set`` and ``--config`` are checked
+against), so ROS tools show it and ROS refuses a value outside it. A params-file key the node
+does not know is refused as the CLI refuses it; one naming a fixed constant is refused saying
+so.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TypeVar
 
 from rcl_interfaces.msg import (
     FloatingPointRange,
@@ -23,8 +27,10 @@ from multi_robot_mapper.core.config import (
     ConfigError,
     FieldSpec,
     config_from_flat,
-    field_specs,
+    config_to_flat,
+    fixed_message,
     unknown_message,
+    user_specs,
 )
 
 C = TypeVar("C")
@@ -37,23 +43,29 @@ _PARAMETER_TYPES = {
 }
 
 
-def declare_config(node: Node, cls: type[C]) -> C:
-    """Declare every field of ``cls`` as a parameter of ``node`` and return the validated config.
+def declare_config(node: Node, cls: type[C], base: C | None = None) -> C:
+    """Declare the user parameters of ``cls`` on ``node`` and return the validated config.
 
     Values from ``--params-file`` or ``parameter_overrides`` apply at declaration; an invalid
-    value or a parameter the node does not know raises :class:`ConfigError` naming it.
+    value, a fixed constant or a parameter the node does not know raises :class:`ConfigError`
+    naming it. ``base`` (default: the dataclass defaults) gives the fixed constants and the
+    defaults of the user parameters.
     """
-    values: dict[str, Any] = {}
-    specs = field_specs(cls)
-    for spec in specs:
+    values = config_to_flat(cls() if base is None else base)
+    for spec in user_specs(cls):
         try:
-            param = node.declare_parameter(spec.name, spec.default, descriptor(spec))
+            param = node.declare_parameter(spec.name, values[spec.name], descriptor(spec))
         except Exception as exc:  # rclpy raises several types for a wrongly typed override
             raise ConfigError(f"parameter '{spec.name}': {_one_line(exc)}") from exc
         values[spec.name] = param.value
-    unknown = unknown_overrides(node)
+    undeclared = unknown_overrides(node)
+    fixed = [name for name in undeclared if name in values]
+    unknown = [name for name in undeclared if name not in values]
+    if fixed:
+        message = fixed_message(fixed, node.get_name())
+        raise ConfigError(f"{node.get_name()}: {message} (from --params-file or -p)")
     if unknown:
-        message = unknown_message(unknown, [spec.name for spec in specs])
+        message = unknown_message(unknown, [spec.name for spec in user_specs(cls)])
         raise ConfigError(f"{node.get_name()}: {message} (from --params-file or -p)")
     return config_from_flat(cls, values)
 
@@ -93,15 +105,18 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
-def on_config_change(node: Node, cls: type[C], apply: Callable[[C], None]) -> None:
-    """Validate ``ros2 param set`` changes as a whole config; apply it or refuse with the reason."""
+def on_config_change(node: Node, current: Callable[[], C], apply: Callable[[C], None]) -> None:
+    """Validate ``ros2 param set`` changes as a whole config (the ``current`` one with the
+    changes); apply it or refuse with the reason. ``apply`` may raise :class:`ConfigError`
+    to refuse a config the fields' ranges allow."""
 
     def callback(params: list[Parameter]) -> SetParametersResult:
-        values = {spec.name: node.get_parameter(spec.name).value for spec in field_specs(cls)}
+        config = current()
+        values = config_to_flat(config)
         values.update({p.name: p.value for p in params})
         try:
-            config = config_from_flat(cls, values)
-            apply(config)
+            new = config_from_flat(type(config), values)
+            apply(new)
         except ConfigError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         except Exception as exc:  # a failed apply must not escape into the executor

@@ -92,15 +92,23 @@ def default_map_frame(namespace: str) -> str:
 
 
 class RobotMapper(Node):
-    """Per-robot mapper node: front end (scans to segments) and local mapper (partial map)."""
+    """Per-robot mapper node: front end (scans to segments) and local mapper (partial map).
 
-    def __init__(self, node_name: str = "robot_mapper", **kwargs: object) -> None:
+    ``config`` (default: the dataclass defaults) gives the fixed constants and the defaults of
+    the ROS parameters: code that builds the node in Python (tests, experiments) changes a fixed
+    constant there."""
+
+    def __init__(
+        self,
+        node_name: str = "robot_mapper",
+        config: RobotMapperConfig | None = None,
+        **kwargs: object,
+    ) -> None:
         super().__init__(node_name, **kwargs)  # type: ignore[arg-type]
-        self.config = declare_config(self, RobotMapperConfig)
+        self.config = declare_config(self, RobotMapperConfig, config)
         self.warnings = ThrottledWarnings(self.get_logger().warning, self.config.warning_period)
         self.robot = self.get_namespace().strip("/") or self.get_name()
-        # Bad input is rejected (counted per reason, throttled warning naming the field); no
-        # exception escapes a callback.
+        # Bad input is rejected (counted per reason, a throttled warning); no callback raises.
         self.rejections = Rejections(self.warnings)
         self.guard = CallbackGuard(self.warnings, running=self.context.ok)
         # Every scan is checked against the robot's own stream (core.scan_stream) before it
@@ -149,7 +157,7 @@ class RobotMapper(Node):
         self._diagnostics_timer = self.create_timer(
             self.config.diagnostics_period, self.guard("diagnostics", self.publish_diagnostics)
         )
-        on_config_change(self, RobotMapperConfig, self._apply_config)
+        on_config_change(self, lambda: self.config, self._apply_config)
 
     @property
     def map_frame(self) -> str:

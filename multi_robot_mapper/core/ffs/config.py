@@ -135,6 +135,7 @@ class FfsConfig:
         doc="the simulation stops after this long (one merge update); 0: no limit",
         minimum=0.0,
         maximum=3600.0,
+        tune="with method 'ffs' on large maps: more lets the simulation finish",
     )
 
     def __post_init__(self) -> None:

@@ -22,6 +22,8 @@ class LocalMapperConfig:
         doc="a scan this far from the last keyframe becomes a keyframe",
         minimum=0.0,
         maximum=100.0,
+        tune="smaller for a denser keyframe graph (small rooms; more CPU), larger for a sparser "
+        "one (open halls, fast robots)",
     )
     keyframe_angle: float = param(
         0.35,
@@ -29,6 +31,7 @@ class LocalMapperConfig:
         doc="a scan turned this much from the last keyframe becomes a keyframe",
         minimum=0.0,
         maximum=3.2,
+        tune="with keyframe_distance: smaller for a robot that turns on the spot",
     )
     revisit_keyframes: bool = param(
         True,
@@ -46,6 +49,7 @@ class LocalMapperConfig:
         "otherwise the robot is lost and maps on in a new piece of map",
         minimum=0.0,
         maximum=1.0,
+        tune="lower places more scans but risks bends; higher starts more pieces",
     )
     loop_confidence: float = param(
         0.9,
@@ -55,6 +59,7 @@ class LocalMapperConfig:
         "evidence model: join_probability)",
         minimum=0.0,
         maximum=1.0,
+        tune="the same trade for loop closures and joins of pieces",
     )
     join_probability: float = param(
         0.99,
@@ -66,6 +71,7 @@ class LocalMapperConfig:
         "and piece_join_model.json; the same threshold as the merger's join_probability)",
         minimum=0.5,
         maximum=0.999999,
+        tune="lower closes more loops and joins more pieces, at more risk of a wrong one",
     )
     recent_keyframes: int = param(
         3,
@@ -96,6 +102,7 @@ class LocalMapperConfig:
         "it) is not where the robot is. Set it above the robot's top speed",
         minimum=0.01,
         maximum=1000.0,
+        tune="a robot faster than 3 m/s",
     )
     local_edges: int = param(
         3,
@@ -120,6 +127,8 @@ class LocalMapperConfig:
         "loop_radius_growth per metre driven since the last closure",
         minimum=0.0,
         maximum=1000.0,
+        tune="larger for a robot that drifts more (long loops through bare corridors): closures "
+        "found further off, at more CPU per keyframe",
     )
     loop_radius_growth: float = param(
         0.1,

@@ -29,6 +29,7 @@ class MergeConfig:
         unit="",
         doc="robot whose map frame is 'map'; empty: the robot with the largest map (total "
         "segment length) among the largest group of linked robots",
+        tune="one robot's map should be 'map' (one that starts at a known place): name it",
     )
     link_min_value: float = param(
         15.0,
@@ -255,6 +256,8 @@ class MergeConfig:
         "saw, never more)",
         minimum=0.01,
         maximum=2.0 * math.pi,
+        tune="a sensor narrower than 180 degrees (a depth camera): its field of view, or merges "
+        "are judged on free space it never saw",
     )
     view_beams: int = param(
         360,
@@ -374,6 +377,8 @@ class MergeConfig:
         "merge sooner at more risk of a wrong map",
         minimum=0.5,
         maximum=0.999999,
+        tune="lower merges sooner and places wrong more often (held out at 0.9: 18 wrong per 1000"
+        " joins accepted)",
     )
     link_set_uniqueness: float = param(
         2.0,
@@ -409,6 +414,7 @@ class MergeConfig:
         "refused (a piece placed at a look-alike of the place it followed)",
         minimum=0.01,
         maximum=100.0,
+        tune="a robot of the team faster than 2 m/s: its top speed",
     )
     link_sigma: float = param(
         0.05,
@@ -480,6 +486,7 @@ class MergeConfig:
         "wait for the next update, new places first; 0: no limit",
         minimum=0.0,
         maximum=3600.0,
+        tune="more with more robots or a slow computer; 0: every place matched each update (slow)",
     )
     integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
     # Force Field Simulation after the joint graph's placement (method 'ffs' only)

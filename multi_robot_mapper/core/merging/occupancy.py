@@ -46,13 +46,19 @@ _VIEW_CHUNK = 16  # viewpoints tested against their cells at once (bounds the me
 class GridConfig:
     """The occupancy grid the merger publishes beside the segment map (``grid.*``)."""
 
-    enabled: bool = param(True, unit="", doc="publish global_grid (nav_msgs/OccupancyGrid)")
+    enabled: bool = param(
+        True,
+        unit="",
+        doc="publish global_grid (nav_msgs/OccupancyGrid)",
+        tune="nothing reads global_grid (it costs a ray cast per view and merge): false",
+    )
     resolution: float = param(
         0.05,
         unit="m",
         doc="cell size of global_grid (coarsened when the map would need more than max_cells)",
         minimum=0.005,
         maximum=10.0,
+        tune="your planner's costmap has another cell size",
     )
     max_cells: int = param(
         4_000_000,
@@ -61,6 +67,7 @@ class GridConfig:
         "fits) rather than an unbounded message",
         minimum=100,
         maximum=100_000_000,
+        tune="a larger site at full resolution: raise it (the message grows with it)",
     )
     view_spacing: float = param(
         0.5,
@@ -84,6 +91,8 @@ class GridConfig:
         "drove there; its laser does not see right beside and behind itself); 0: off",
         minimum=0.0,
         maximum=5.0,
+        tune="a robot whose radius is not about 0.25 m: its radius (the ground it drove over is "
+        "free)",
     )
     view_field: float = param(
         1.5 * math.pi,
@@ -93,6 +102,7 @@ class GridConfig:
         "which would otherwise mark unseen cells behind it free)",
         minimum=0.01,
         maximum=2.0 * math.pi,
+        tune="a laser other than 270 degrees: its field of view (3.14 for 180 degrees)",
     )
 
     def __post_init__(self) -> None:
