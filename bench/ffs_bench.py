@@ -41,7 +41,7 @@ from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.ffs import FfsConfig, facing_sensor, make_bodies, run_ffs  # noqa: E402
-from multi_robot_mapper.core.ffs.merge import (  # noqa: E402
+from multi_robot_mapper.core.merging.ffs import (  # noqa: E402
     body_chunks,
     body_segments,
     moved_with_bodies,

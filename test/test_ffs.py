@@ -233,8 +233,8 @@ def test_ffs_updates_resume_where_the_last_one_stopped(
     # on cooling from there; once settled, an update with nothing new settles at once, and
     # one with something new starts afresh from the joint graph.
     from multi_robot_mapper.core.extraction_config import ExtractionConfig
-    from multi_robot_mapper.core.ffs.merge import FfsState, merge_ffs
     from multi_robot_mapper.core.merging import MergeConfig
+    from multi_robot_mapper.core.merging.ffs import FfsState, merge_ffs
     from multi_robot_mapper.core.merging.joint import merge_joint
     from multi_robot_mapper.core.pipeline import run_offline
 
@@ -267,7 +267,7 @@ def test_ffs_updates_resume_where_the_last_one_stopped(
 
 
 def test_a_warm_start_carries_each_keyframe_as_the_last_simulation_corrected_it() -> None:
-    from multi_robot_mapper.core.ffs.merge import FfsState, warm_started
+    from multi_robot_mapper.core.merging.ffs import FfsState, warm_started
 
     before = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.1], [2.0, 0.5, 0.2]])
     # What FFS did to each held keyframe, in its own frame.

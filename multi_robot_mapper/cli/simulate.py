@@ -69,6 +69,33 @@ def register(subparsers: Any) -> None:
         "default office)",
     )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    _add_laser_options(parser)
+    parser.add_argument(
+        "--duration",
+        type=float,
+        default=DEFAULT_DURATION_S,
+        metavar="SECONDS",
+        help=f"drive time (default {DEFAULT_DURATION_S:g}; robots drive at {SPEED_M_S} m/s)",
+    )
+    parser.add_argument(
+        "--clutter",
+        type=float,
+        default=0.0,
+        metavar="DENSITY",
+        help="objects per square metre of free floor: chair and table legs, pillars and "
+        "walking people, kept off the robots' route (default 0: an empty building; 0.2 is a "
+        "busy office, 0.5 a crowded hall); in a generated building furniture only, per "
+        "square metre of room and hall floor (--people adds people)",
+    )
+    _add_generated_options(parser)
+    parser.add_argument(
+        "--storage", choices=("mcap", "sqlite3"), default="mcap", help="bag format (default mcap)"
+    )
+    parser.set_defaults(func=run)
+
+
+def _add_laser_options(parser: argparse.ArgumentParser) -> None:
+    """The laser's options: a model, and what of it to override."""
     parser.add_argument(
         "--laser",
         choices=tuple(LASERS),
@@ -92,28 +119,6 @@ def register(subparsers: Any) -> None:
         metavar="SIGMA",
         help="range noise standard deviation, m (default: the laser's, 0.01)",
     )
-    parser.add_argument(
-        "--duration",
-        type=float,
-        default=DEFAULT_DURATION_S,
-        metavar="SECONDS",
-        help=f"drive time (default {DEFAULT_DURATION_S:g}; robots drive at {SPEED_M_S} m/s)",
-    )
-    parser.add_argument(
-        "--clutter",
-        type=float,
-        default=0.0,
-        metavar="DENSITY",
-        help="objects per square metre of free floor: chair and table legs, pillars and "
-        "walking people, kept off the robots' route (default 0: an empty building; 0.2 is a "
-        "busy office, 0.5 a crowded hall); in a generated building furniture only, per "
-        "square metre of room and hall floor (--people adds people)",
-    )
-    _add_generated_options(parser)
-    parser.add_argument(
-        "--storage", choices=("mcap", "sqlite3"), default="mcap", help="bag format (default mcap)"
-    )
-    parser.set_defaults(func=run)
 
 
 def _add_generated_options(parser: argparse.ArgumentParser) -> None:

@@ -45,6 +45,7 @@ from multi_robot_mapper.core.se2 import Pose
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 Robots = tuple[str, ...]
+PairErrors = tuple[NDArray[np.bool_], FloatArray, FloatArray]  # both posed, translation, rotation
 
 PAIR_TRANSLATION_M = 0.30
 PAIR_ROTATION_RAD = math.radians(5.0)
@@ -197,7 +198,7 @@ def align_se2(estimate: FloatArray, reference: FloatArray) -> FloatArray:
 # --------------------------------------------------------------------------------------- pairs
 
 
-def pair_errors(track: RobotTrack) -> tuple[NDArray[np.bool_], FloatArray, FloatArray]:
+def pair_errors(track: RobotTrack) -> PairErrors:
     """For the N-1 consecutive scan pairs: both posed, translation error (m), rotation error (rad).
 
     The error of a pair is ``E = rel_ref^-1 rel_est`` with ``rel = T_i^-1 T_i+1``; its
@@ -344,6 +345,132 @@ def _pooled_rmse(squares: Sequence[FloatArray]) -> float:
     return float(np.sqrt(values.mean())) if values.size else math.nan
 
 
+class _Alignments:
+    """The candidate alignments of :func:`evaluate`. A candidate is named by the robots it is
+    fitted to; each is fitted and scored once (evaluate asks for the same ones several times):
+    its squared position errors for every posed robot, the robots it places and their pooled
+    RMSE."""
+
+    def __init__(
+        self,
+        est: Mapping[str, FloatArray],
+        ref: Mapping[str, FloatArray],
+        reported_unmerged: set[str],
+    ) -> None:
+        self.est, self.ref = est, ref
+        self.with_poses = [r for r in est if len(est[r])]
+        self.reported_unmerged = reported_unmerged
+        self._fits: dict[Robots, FloatArray] = {}
+        self._errors: dict[Robots, dict[str, FloatArray]] = {}
+        self._placements: dict[Robots, tuple[list[str], float]] = {}
+
+    def fit(self, robots: Robots) -> FloatArray:
+        """``T_ref_map`` fitted to the posed scans of ``robots`` (the identity for none)."""
+        if robots not in self._fits:
+            self._fits[robots] = (
+                align_se2(
+                    np.vstack([self.est[r] for r in robots]),
+                    np.vstack([self.ref[r] for r in robots]),
+                )
+                if robots
+                else np.eye(3)
+            )
+        return self._fits[robots]
+
+    def squares_under(self, robots: Robots) -> dict[str, FloatArray]:
+        """Every posed robot's squared position errors under the fit to ``robots``."""
+        if robots not in self._errors:
+            T = self.fit(robots)
+            self._errors[robots] = {r: self._squares(T, r) for r in self.with_poses}
+        return self._errors[robots]
+
+    def _squares(self, T: FloatArray, robot: str) -> FloatArray:
+        moved = se2.transform_points(T, self.est[robot][:, :2])
+        return np.asarray(np.sum((moved - self.ref[robot][:, :2]) ** 2, axis=1))
+
+    def rmse(self, robots: Robots, robot: str) -> float:
+        """``robot``'s position RMSE under the fit to ``robots``; NaN when it has no posed scan."""
+        if robot not in self.with_poses:
+            return math.nan
+        return _pooled_rmse([self.squares_under(robots)[robot]])
+
+    def ate(self, robots: Robots) -> float:
+        """The pooled position RMSE of ``robots`` under their own joint fit; NaN for none."""
+        if not robots:
+            return math.nan
+        sq = self.squares_under(robots)
+        return _pooled_rmse([sq[r] for r in robots])
+
+    def placement(self, robots: Robots) -> tuple[list[str], float]:
+        """The robots the fit to ``robots`` places (RMSE below MERGE_RMSE_M, never one the
+        method reported unmerged) and their pooled RMSE (0 when it places none)."""
+        if robots not in self._placements:
+            sq = self.squares_under(robots)
+            placed = [
+                r
+                for r in self.with_poses
+                if r not in self.reported_unmerged and _pooled_rmse([sq[r]]) < MERGE_RMSE_M
+            ]
+            rmse = _pooled_rmse([sq[r] for r in placed]) if placed else 0.0
+            self._placements[robots] = placed, rmse
+        return self._placements[robots]
+
+    def best_of(self, candidates: Sequence[Robots]) -> tuple[Robots, list[str]]:
+        """The candidate placing the most robots, then with the lowest RMSE over them (the
+        earlier on a tie), and the robots it places."""
+        best, best_placed, best_key = candidates[0], [], (-1, 0.0)
+        for candidate in candidates:
+            placed, rmse = self.placement(candidate)
+            key = (len(placed), -rmse)
+            if key > best_key:
+                best, best_placed, best_key = candidate, placed, key
+        return best, best_placed
+
+    def chosen(self) -> tuple[Robots, list[str]]:
+        """The winning candidate of :func:`evaluate` (its docstring says how it is chosen)
+        and the robots it places."""
+        candidates = [tuple(self.with_poses), *((r,) for r in self.with_poses)]
+        winner, merged = self.best_of(candidates)
+        if merged:
+            winner, merged = self.best_of([*candidates, tuple(merged)])
+        return winner, merged
+
+
+def _robot_metrics(
+    robot: str,
+    track: RobotTrack,
+    pairs: PairErrors,
+    alignments: _Alignments,
+    winner: Robots,
+    merged: list[str],
+) -> RobotMetrics:
+    """One robot's figures, scored under the alignment fitted to ``winner``."""
+    both, translation, rotation = pairs
+    success, strict, med_t, med_r = _pair_summary(both, translation, rotation)
+    return RobotMetrics(
+        scans=len(track.stamps),
+        scans_unposed=int(np.count_nonzero(~track.posed)),
+        pairs=len(both),
+        pair_success=success,
+        pair_success_strict=strict,
+        median_translation_error_m=med_t,
+        median_rotation_error_rad=med_r,
+        rmse_m=alignments.rmse(winner, robot),
+        ate_own_frame_m=alignments.rmse((robot,), robot),
+        merged=robot in merged,
+        reported_unmerged=robot in alignments.reported_unmerged,
+    )
+
+
+def _pooled_pair_summary(errors: Sequence[PairErrors]) -> tuple[float, float, float, float]:
+    """:func:`_pair_summary` over the consecutive scan pairs of every robot together."""
+    return _pair_summary(
+        np.concatenate([e[0] for e in errors]) if errors else np.zeros(0, dtype=bool),
+        np.concatenate([e[1] for e in errors]) if errors else np.zeros(0),
+        np.concatenate([e[2] for e in errors]) if errors else np.zeros(0),
+    )
+
+
 def evaluate(
     tracks: Mapping[str, RobotTrack],
     map_segments: FloatArray,
@@ -365,98 +492,18 @@ def evaluate(
     """
     names = list(tracks)
     frames = dict(robot_frames or {})
-    reported_unmerged = {r for r in names if r in frames and frames[r] is None}
-    posed = {r: tracks[r].posed for r in names}
-    est = {r: tracks[r].estimate[posed[r]] for r in names}
-    ref = {r: tracks[r].reference[posed[r]] for r in names}
-    with_poses = [r for r in names if len(est[r])]
-
-    def squares(T: FloatArray, robot: str) -> FloatArray:
-        moved = se2.transform_points(T, est[robot][:, :2])
-        return np.asarray(np.sum((moved - ref[robot][:, :2]) ** 2, axis=1))
-
-    # A candidate alignment is named by the robots it is fitted to; each is fitted and scored
-    # once: its squared position errors for every posed robot, the robots it places and their
-    # pooled RMSE.
-    fits: dict[Robots, FloatArray] = {}
-    errors: dict[Robots, dict[str, FloatArray]] = {}
-    placements: dict[Robots, tuple[list[str], float]] = {}
-
-    def fit(robots: Robots) -> FloatArray:
-        if robots not in fits:
-            fits[robots] = (
-                align_se2(np.vstack([est[r] for r in robots]), np.vstack([ref[r] for r in robots]))
-                if robots
-                else np.eye(3)
-            )
-        return fits[robots]
-
-    def squares_under(robots: Robots) -> dict[str, FloatArray]:
-        if robots not in errors:
-            T = fit(robots)
-            errors[robots] = {r: squares(T, r) for r in with_poses}
-        return errors[robots]
-
-    def placement(robots: Robots) -> tuple[list[str], float]:
-        if robots not in placements:
-            sq = squares_under(robots)
-            placed = [
-                r
-                for r in with_poses
-                if r not in reported_unmerged and _pooled_rmse([sq[r]]) < MERGE_RMSE_M
-            ]
-            placements[robots] = placed, _pooled_rmse([sq[r] for r in placed]) if placed else 0.0
-        return placements[robots]
-
-    def best_of(candidates: Sequence[Robots]) -> tuple[Robots, list[str]]:
-        best, best_placed, best_key = candidates[0], [], (-1, 0.0)
-        for candidate in candidates:
-            placed, rmse = placement(candidate)
-            key = (len(placed), -rmse)
-            if key > best_key:
-                best, best_placed, best_key = candidate, placed, key
-        return best, best_placed
-
-    all_key = tuple(with_poses)
-    own_keys = {r: (r,) for r in with_poses}
-    candidates = [all_key, *own_keys.values()]
-    winner, merged = best_of(candidates)
-    if merged:
-        winner, merged = best_of([*candidates, tuple(merged)])
-    T_ref_map = fit(winner)
-    T_sq = squares_under(winner)
-
-    robot_metrics: dict[str, RobotMetrics] = {}
-    all_both, all_t, all_r = [], [], []
-    for r in names:
-        both, trans, rot = pair_errors(tracks[r])
-        all_both.append(both)
-        all_t.append(trans)
-        all_r.append(rot)
-        success, strict, med_t, med_r = _pair_summary(both, trans, rot)
-        has = r in own_keys
-        robot_metrics[r] = RobotMetrics(
-            scans=len(tracks[r].stamps),
-            scans_unposed=int(np.count_nonzero(~posed[r])),
-            pairs=len(both),
-            pair_success=success,
-            pair_success_strict=strict,
-            median_translation_error_m=med_t,
-            median_rotation_error_rad=med_r,
-            rmse_m=_pooled_rmse([T_sq[r]]) if has else math.nan,
-            ate_own_frame_m=_pooled_rmse([squares_under(own_keys[r])[r]]) if has else math.nan,
-            merged=r in merged,
-            reported_unmerged=r in reported_unmerged,
-        )
-    success, strict, med_t, med_r = _pair_summary(
-        np.concatenate(all_both) if all_both else np.zeros(0, dtype=bool),
-        np.concatenate(all_t) if all_t else np.zeros(0),
-        np.concatenate(all_r) if all_r else np.zeros(0),
+    alignments = _Alignments(
+        est={r: tracks[r].estimate[tracks[r].posed] for r in names},
+        ref={r: tracks[r].reference[tracks[r].posed] for r in names},
+        reported_unmerged={r for r in names if r in frames and frames[r] is None},
     )
-    merged_sq = squares_under(tuple(merged)) if merged else {}
-    ate = _pooled_rmse([merged_sq[r] for r in merged]) if merged else math.nan
-    all_sq = squares_under(all_key)
-    ate_all = _pooled_rmse([all_sq[r] for r in with_poses]) if with_poses else math.nan
+    winner, merged = alignments.chosen()
+    T_ref_map = alignments.fit(winner)
+    pairs = {r: pair_errors(tracks[r]) for r in names}
+    robot_metrics = {
+        r: _robot_metrics(r, tracks[r], pairs[r], alignments, winner, merged) for r in names
+    }
+    success, strict, med_t, med_r = _pooled_pair_summary(list(pairs.values()))
 
     segments = np.asarray(map_segments, dtype=np.float64).reshape(-1, 4)
     points = np.asarray(reference_points, dtype=np.float64).reshape(-1, 2)
@@ -472,8 +519,8 @@ def evaluate(
         pair_success_strict=strict,
         median_translation_error_m=med_t,
         median_rotation_error_rad=med_r,
-        ate_rmse_m=ate,
-        ate_all_rmse_m=ate_all,
+        ate_rmse_m=alignments.ate(tuple(merged)),
+        ate_all_rmse_m=alignments.ate(tuple(alignments.with_poses)),
         map_error_m=error,
         map_coverage=coverage,
         map_precision=precision,

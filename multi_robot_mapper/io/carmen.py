@@ -309,57 +309,57 @@ def _lines(stream: IO[str]) -> Iterator[tuple[str, bool]]:
         yield line, complete
 
 
-def read_carmen(path: str | Path, range_max: float | None = None) -> CarmenLog:
-    """Every usable FLASER scan of a CARMEN log (``.gz`` is decompressed on the fly).
+@dataclasses.dataclass
+class _LogLines:
+    """What :func:`read_carmen` gathers from a log, line by line."""
 
-    ``range_max`` overrides the no-return threshold found in the log (:func:`find_no_return`).
-    Raises :class:`CarmenFormatError` (or ``OSError``) only when the file cannot be read at all.
-    """
-    path = Path(path)
-    scans: list[CarmenScan] = []
-    params: dict[str, str] = {}
-    skipped: Counter[str] = Counter()
-    skipped_lines: list[int] = []
-    other: Counter[str] = Counter()
-    truncated = False
-    number = 0
-    opener = gzip.open if path.suffix == ".gz" else open
-    try:
-        with opener(path, "rt", encoding="ascii", errors="replace") as stream:
-            for number, (line, complete) in enumerate(_lines(stream), start=1):
-                kind = line.split(maxsplit=1)[0] if line.strip() else ""
-                if kind == "FLASER":
-                    try:
-                        scans.append(parse_flaser(line, number))
-                        continue
-                    except CarmenFormatError as exc:
-                        reason = (
-                            "with NaN/inf"
-                            if "non-finite" in str(exc)
-                            else "cut (last line)"
-                            if not complete
-                            else "malformed"
-                        )
-                    skipped[reason] += 1
-                    if len(skipped_lines) < _SHOWN_SKIPPED_LINES:
-                        skipped_lines.append(number)
-                elif kind == "PARAM":
-                    words = line.split()
-                    if len(words) >= 3:
-                        params[words[1]] = words[2]
-                    other[kind] += 1
-                elif not line:
-                    skipped["over-long"] += 1
-                elif kind.startswith("#"):
-                    other["comment"] += 1
-                elif kind:
-                    other[kind if kind.isalnum() and len(kind) <= 20 else "unrecognised"] += 1
-    except EOFError:
-        truncated = True  # a gzip stream cut short: keep the lines read so far
-    except (gzip.BadGzipFile, zlib.error) as exc:
-        raise CarmenFormatError(
-            f"{path}: corrupt compressed data after line {number} ({exc})"
-        ) from exc
+    scans: list[CarmenScan] = dataclasses.field(default_factory=list)
+    params: dict[str, str] = dataclasses.field(default_factory=dict)
+    skipped: Counter[str] = dataclasses.field(default_factory=Counter)  # reason -> lines
+    skipped_lines: list[int] = dataclasses.field(default_factory=list)  # the first few
+    other: Counter[str] = dataclasses.field(default_factory=Counter)  # kind -> lines
+
+    def take(self, line: str, number: int, complete: bool) -> None:
+        """One line (``""``: an over-long one, dropped) numbered ``number``; ``complete``: it
+        ended with a newline (a FLASER line without one was cut, not malformed)."""
+        kind = line.split(maxsplit=1)[0] if line.strip() else ""
+        if kind == "FLASER":
+            self._take_flaser(line, number, complete)
+        elif kind == "PARAM":
+            words = line.split()
+            if len(words) >= 3:
+                self.params[words[1]] = words[2]
+            self.other[kind] += 1
+        elif not line:
+            self.skipped["over-long"] += 1
+        elif kind.startswith("#"):
+            self.other["comment"] += 1
+        elif kind:
+            self.other[kind if kind.isalnum() and len(kind) <= 20 else "unrecognised"] += 1
+
+    def _take_flaser(self, line: str, number: int, complete: bool) -> None:
+        try:
+            self.scans.append(parse_flaser(line, number))
+            return
+        except CarmenFormatError as exc:
+            reason = (
+                "with NaN/inf"
+                if "non-finite" in str(exc)
+                else "cut (last line)"
+                if not complete
+                else "malformed"
+            )
+        self.skipped[reason] += 1
+        if len(self.skipped_lines) < _SHOWN_SKIPPED_LINES:
+            self.skipped_lines.append(number)
+
+
+def _log_no_return(
+    scans: Sequence[CarmenScan], params: dict[str, str], range_max: float | None
+) -> NoReturn:
+    """The no-return threshold: ``range_max`` when given, else the one the log shows."""
+    if range_max is not None:
+        return NoReturn(range_max=range_max, source="--range-max")
     ranges = [s.ranges for s in scans]
     readings = np.concatenate(ranges) if ranges else np.zeros(0)
     owner = (
@@ -367,18 +367,39 @@ def read_carmen(path: str | Path, range_max: float | None = None) -> CarmenLog:
         if ranges
         else np.zeros(0, np.int64)
     )
-    if range_max is None:
-        no_return = find_no_return(readings, owner, params)
-    else:
-        no_return = NoReturn(range_max=range_max, source="--range-max")
+    return find_no_return(readings, owner, params)
+
+
+def read_carmen(path: str | Path, range_max: float | None = None) -> CarmenLog:
+    """Every usable FLASER scan of a CARMEN log (``.gz`` is decompressed on the fly).
+
+    ``range_max`` overrides the no-return threshold found in the log (:func:`find_no_return`).
+    Raises :class:`CarmenFormatError` (or ``OSError``) only when the file cannot be read at all.
+    """
+    path = Path(path)
+    log = _LogLines()
+    truncated = False
+    number = 0
+    opener = gzip.open if path.suffix == ".gz" else open
+    try:
+        with opener(path, "rt", encoding="ascii", errors="replace") as stream:
+            for number, (line, complete) in enumerate(_lines(stream), start=1):
+                log.take(line, number, complete)
+    except EOFError:
+        truncated = True  # a gzip stream cut short: keep the lines read so far
+    except (gzip.BadGzipFile, zlib.error) as exc:
+        raise CarmenFormatError(
+            f"{path}: corrupt compressed data after line {number} ({exc})"
+        ) from exc
+    no_return = _log_no_return(log.scans, log.params, range_max)
     return CarmenLog(
         path=path,
-        scans=tuple(dataclasses.replace(s, range_max=no_return.range_max) for s in scans),
+        scans=tuple(dataclasses.replace(s, range_max=no_return.range_max) for s in log.scans),
         no_return=no_return,
-        params=params,
-        skipped=dict(skipped),
-        skipped_lines=tuple(skipped_lines),
-        other_lines=dict(other),
+        params=log.params,
+        skipped=dict(log.skipped),
+        skipped_lines=tuple(log.skipped_lines),
+        other_lines=dict(log.other),
         truncated=truncated,
     )
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -62,7 +63,27 @@ class PartialMap:
 def partial_map_from_msg(msg: MarkerArray, limits: MapLimits) -> PartialMap:
     """A ``partial_map`` MarkerArray (one LINE_LIST per keyframe, see ``io/messages.py``) checked
     and converted; raises :class:`InputError`."""
-    markers = msg.markers
+    keyframes = _keyframe_markers(msg.markers, limits)
+    counts = _point_counts(keyframes, limits)
+    poses = np.array([_planar_pose(m.pose, f"markers[{i}].pose") for i, m in enumerate(keyframes)])
+    segments = _segments_in_map_frame(keyframes, counts, poses)
+    extent = max(
+        float(np.abs(segments).max(initial=0.0)), float(np.abs(poses[:, :2]).max(initial=0.0))
+    )
+    if not extent <= limits.max_extent:
+        raise InputError(
+            "map_too_large",
+            "markers[].pose/points",
+            f"the map reaches {extent:.3g} m from its origin, more than max_map_extent "
+            f"({limits.max_extent:g} m)",
+        )
+    stamp = max((m.header.stamp for m in keyframes), key=lambda t: (t.sec, t.nanosec))
+    return PartialMap(segments, poses, stamp, keyframes[0].header.frame_id)
+
+
+def _keyframe_markers(markers: Sequence[Marker], limits: MapLimits) -> list[Marker]:
+    """The keyframe markers of a partial map: at least one, each id once, and no more markers
+    in all than ``max_keyframes``."""
     if len(markers) > limits.max_keyframes:
         raise InputError(
             "too_many_keyframes",
@@ -86,6 +107,12 @@ def partial_map_from_msg(msg: MarkerArray, limits: MapLimits) -> PartialMap:
             "markers[].id",
             f"{len(ids) - len(set(ids))} keyframe markers repeat an id (a map holds each once)",
         )
+    return keyframes
+
+
+def _point_counts(keyframes: list[Marker], limits: MapLimits) -> list[int]:
+    """Each keyframe marker's number of points: even (segment ends come in pairs), and no
+    more than ``max_segments`` segments in all."""
     counts = [len(m.points) for m in keyframes]
     if sum(counts) > 2 * limits.max_segments:
         raise InputError(
@@ -100,7 +127,13 @@ def partial_map_from_msg(msg: MarkerArray, limits: MapLimits) -> PartialMap:
             f"markers[{odd}].points",
             f"a LINE_LIST of {counts[odd]} points (segments need pairs)",
         )
-    poses = np.array([_planar_pose(m.pose, f"markers[{i}].pose") for i, m in enumerate(keyframes)])
+    return counts
+
+
+def _segments_in_map_frame(
+    keyframes: list[Marker], counts: list[int], poses: FloatArray
+) -> FloatArray:
+    """Every keyframe's segments (its points, finite, in pairs) in the robot's map frame."""
     ends = np.array([(p.x, p.y) for m in keyframes for p in m.points], dtype=np.float64).reshape(
         -1, 2
     )
@@ -115,19 +148,7 @@ def partial_map_from_msg(msg: MarkerArray, limits: MapLimits) -> PartialMap:
         for pose, start, stop in zip(poses, bounds[:-1], bounds[1:], strict=True)
         if stop > start
     ]
-    segments = np.vstack(pieces) if pieces else np.zeros((0, 4))
-    extent = max(
-        float(np.abs(segments).max(initial=0.0)), float(np.abs(poses[:, :2]).max(initial=0.0))
-    )
-    if not extent <= limits.max_extent:
-        raise InputError(
-            "map_too_large",
-            "markers[].pose/points",
-            f"the map reaches {extent:.3g} m from its origin, more than max_map_extent "
-            f"({limits.max_extent:g} m)",
-        )
-    stamp = max((m.header.stamp for m in keyframes), key=lambda t: (t.sec, t.nanosec))
-    return PartialMap(segments, poses, stamp, keyframes[0].header.frame_id)
+    return np.vstack(pieces) if pieces else np.zeros((0, 4))
 
 
 def _planar_pose(pose: Pose, field: str) -> tuple[float, float, float]:

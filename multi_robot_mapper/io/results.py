@@ -151,7 +151,29 @@ def read_results(directory: Path) -> ReplayResult:
     directory = Path(directory)
     if not directory.is_dir():
         raise ResultsError(f"{directory}: no such result folder")
-    map_path = directory / MAP_FILE
+    method, robots, segments, owners = _read_map(directory / MAP_FILE)
+    trajectories = {robot: read_tum(trajectory_path(directory, robot)) for robot in robots}
+    frames, probabilities, reasons = _read_robot_frames(directory / ROBOTS_FILE, robots)
+    stats_path = directory / STATS_FILE
+    stats = _read_json(stats_path)
+    if not isinstance(stats, dict):
+        raise ResultsError(f"{stats_path}: expected a JSON object")
+    return ReplayResult(
+        method=method,
+        robots=list(robots),
+        map_segments=segments.astype(np.float64),
+        segment_robot=owners.astype(np.int64),
+        trajectories=trajectories,
+        robot_frames=frames,
+        stats=stats,
+        probabilities=probabilities,
+        unmerged_reasons=reasons,
+    )
+
+
+def _read_map(map_path: Path) -> tuple[str, list[str], FloatArray, FloatArray]:
+    """``map.json``: the method, the robots, the segments and each segment's robot index
+    (still as read: numbers, checked to be whole)."""
     data = _read_json(map_path)
     if not isinstance(data, dict):
         raise ResultsError(f"{map_path}: expected a JSON object")
@@ -183,10 +205,14 @@ def read_results(directory: Path) -> ReplayResult:
         raise ResultsError(
             f"{map_path}: 'segment_robot' holds an index outside 0..{len(robots) - 1}"
         )
+    return method, robots, segments, owners
 
-    trajectories = {robot: read_tum(trajectory_path(directory, robot)) for robot in robots}
 
-    frames_path = directory / ROBOTS_FILE
+def _read_robot_frames(
+    frames_path: Path, robots: list[str]
+) -> tuple[dict[str, Pose | None], dict[str, float], dict[str, str]]:
+    """``robots.json``: each robot's frame in ``map`` (None: unmerged), the probabilities of
+    the merged robots that have one, and why each unmerged robot with a reason is."""
     frames_data = _read_json(frames_path)
     if not isinstance(frames_data, dict):
         raise ResultsError(f"{frames_path}: expected a JSON object robot -> pose or 'unmerged'")
@@ -202,22 +228,7 @@ def read_results(directory: Path) -> ReplayResult:
             probabilities[robot] = float(entry["probability"])
         if isinstance(entry, str) and entry.startswith(f"{UNMERGED}: "):
             reasons[robot] = entry[len(UNMERGED) + 2 :]
-
-    stats_path = directory / STATS_FILE
-    stats = _read_json(stats_path)
-    if not isinstance(stats, dict):
-        raise ResultsError(f"{stats_path}: expected a JSON object")
-    return ReplayResult(
-        method=method,
-        robots=list(robots),
-        map_segments=segments.astype(np.float64),
-        segment_robot=owners.astype(np.int64),
-        trajectories=trajectories,
-        robot_frames=frames,
-        stats=stats,
-        probabilities=probabilities,
-        unmerged_reasons=reasons,
-    )
+    return frames, probabilities, reasons
 
 
 def read_tum(path: Path) -> tuple[FloatArray, FloatArray]:

@@ -117,6 +117,17 @@ def global_map_markers(
     segments did not change is not rebuilt, only moved."""
     shown = placed_poses(result, poses, pieces)
     header = Header(frame_id=frame, stamp=newest([map_stamp, *(s for _, s in shown.values())]))
+    markers = _map_markers(result, header, width, cache) + _robot_markers(result, shown, header)
+    current = {(m.ns, m.id) for m in markers}
+    for namespace, marker_id in sorted(set(earlier) - current):
+        markers.append(Marker(header=header, ns=namespace, id=marker_id, action=Marker.DELETE))
+    return MarkerArray(markers=markers)
+
+
+def _map_markers(
+    result: MergeResult, header: Header, width: float, cache: MarkerCache | None
+) -> list[Marker]:
+    """The global map's markers of :func:`global_map_markers`, robot by robot."""
     markers: list[Marker] = []
     for index, robot in enumerate(result.robots):
         color = robot_color(index)
@@ -133,6 +144,16 @@ def global_map_markers(
         own = result.segments[result.segment_robot == index]
         if len(own) and result.placements.get(robot) is not None:
             markers.append(segments_marker(own, header, namespace, width, color, WHOLE_MAP_ID))
+    return markers
+
+
+def _robot_markers(
+    result: MergeResult, shown: Mapping[str, tuple[FloatArray, Time]], header: Header
+) -> list[Marker]:
+    """Each robot's arrow at its newest pose in ``map`` (those in ``shown``) and its name, at
+    that pose or, without one, at its map frame's origin (robots neither merged nor shown:
+    nothing)."""
+    markers: list[Marker] = []
     for index, robot in enumerate(result.robots):
         T_map_robot = result.matrix(robot)
         if T_map_robot is None and robot not in shown:
@@ -156,10 +177,7 @@ def global_map_markers(
         text.color = color
         text.text = robot
         markers.append(text)
-    current = {(m.ns, m.id) for m in markers}
-    for namespace, marker_id in sorted(set(earlier) - current):
-        markers.append(Marker(header=header, ns=namespace, id=marker_id, action=Marker.DELETE))
-    return MarkerArray(markers=markers)
+    return markers
 
 
 def _keyframe_marker(

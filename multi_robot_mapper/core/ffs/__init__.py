@@ -2,8 +2,9 @@
 robots aligned at once as rigid bodies in a Gaussian force field.
 
 Modules: ``config`` (FfsConfig, units), ``bodies`` (resampling, regions of interest),
-``simulation`` (the force field and Algorithm 1), ``merge`` (FFS after the joint merger's
-placement: the ``ffs`` merging method)."""
+``simulation`` (the force field and Algorithm 1). The ``ffs`` merging method (FFS after the
+joint merger's placement) is :mod:`multi_robot_mapper.core.merging.ffs`: merging imports this
+package, never the other way round."""
 
 from multi_robot_mapper.core.ffs.bodies import Bodies, facing_sensor, make_bodies, resample
 from multi_robot_mapper.core.ffs.config import FfsConfig

@@ -33,7 +33,9 @@ theta)`` triples (metres, radians), matrices ``T_a_b`` map frame-b coordinates i
 Modules: ``config`` (MergeConfig), ``correlation`` (every placement of one map on another),
 ``free_space`` (what a robot saw), ``pairwise`` (one pair of maps), ``link_graph`` (every
 pair, the spanning tree, placement: :func:`merge`), ``compose`` (the fused global map),
-``ordered`` (the paper's three methods on a known order).
+``ordered`` (the paper's three methods on a known order), ``joint`` (method ``pivot``), ``ffs``
+(method ``ffs``: Force Field Simulation of :mod:`multi_robot_mapper.core.ffs` after ``joint``),
+``methods`` (the registry of both).
 """
 
 from multi_robot_mapper.core.merging.config import MergeConfig

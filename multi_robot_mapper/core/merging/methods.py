@@ -5,9 +5,9 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Protocol
 
-from multi_robot_mapper.core.ffs.merge import merge_ffs
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.ffs import merge_ffs
 from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 
