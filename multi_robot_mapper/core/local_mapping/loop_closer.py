@@ -49,6 +49,7 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.placement import Reach
 from multi_robot_mapper.core.local_mapping.attempts import close_to, hypotheses_of, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.evidence import without_approach
 from multi_robot_mapper.core.local_mapping.joins import LostFrom, PieceJoins
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap, KeyframeScan
 from multi_robot_mapper.core.local_mapping.windows import (
@@ -246,13 +247,15 @@ class LoopCloser(PieceJoins):
                 self._refuse("far from the graph's prediction")
                 continue
             # The recent stretch of map near the new keyframe, placed by the closure on the
-            # piece's older map: believed only when no rival placement there explains about
+            # piece's older map (without the robot's own approach to the place, mapped with the
+            # drift the closure corrects): believed only when no rival placement explains about
             # as much (the evidence model, as for a link between robots). A rival lies within
             # the region the closure was searched in: the drift since the last closure cannot
             # have carried the robot farther.
             members = self.keyframes.members(piece)
             recent = members[(members > index - config.loop_window) & (members <= index)]
             older = members[members <= index - config.loop_window]
+            older = without_approach(self.keyframes, older, first + config.loop_window, index)
             here = self.keyframes.pose(index)
             reach = Reach(here, radius, here)
             if not self._believed("loop", recent, older, first, index, found, reach):
