@@ -52,8 +52,9 @@ FloatArray = NDArray[np.float64]
 
 # How every decision's walls and free space are drawn and scored, whoever makes it (the
 # merger's place matches, the local mapper's closures and joins): one scale of evidence for
-# one fitted model. The merger's correlation defaults (MergeConfig correlation_cell,
-# free_space_weight).
+# one fitted model: the merger's correlation cell (MergeConfig correlation_cell), and free
+# space weighed 5, not the merger's search's 2 (a wall where the other robot saw through is no
+# drift: 82ec02f).
 EVIDENCE_CORRELATION = CorrelationConfig(cell=0.3, blur=1.0, free_space_weight=5.0)
 # Placements farther apart than this (or turned more) are different answers: rivals. The
 # same as a place's rivals (place_links).
