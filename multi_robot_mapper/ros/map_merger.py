@@ -338,9 +338,14 @@ class MapMerger(SavedMapServices, Node):
             self.last_merge_s = time.perf_counter() - began
             self.merges += 1
             merged = True
-        result = self.result
-        if result is None:
-            return merged
+        if self.result is not None:
+            self._publish_result(self.result, inputs, merged)
+        return merged
+
+    def _publish_result(self, result: MergeResult, inputs: MergeInputs, merged: bool) -> None:
+        """Publish the global map when what it shows changed, the grid and the robots' frames
+        after a merge, and a warning per unmerged robot."""
+        config = self.config
         map_stamp = newest([inputs.stamps[r] for r in result.robots if r in inputs.stamps])
         pose_key = tuple(
             sorted((n, tuple(p.tolist()), stamp_key(t)) for n, (p, t) in inputs.poses.items())
@@ -359,7 +364,6 @@ class MapMerger(SavedMapServices, Node):
                 f"unmerged:{robot}",
                 f"robot '{robot}' is unmerged: {why} (nothing published for it)",
             )
-        return merged
 
     def _publish_global_map(
         self,
