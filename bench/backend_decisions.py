@@ -36,6 +36,8 @@ from contextlib import contextmanager, nullcontext  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
+import numpy as np  # noqa: E402
+
 from bench.decisions import scenario_of, snapshots_of  # noqa: E402
 from bench.harness import OUTPUT  # noqa: E402
 from multi_robot_mapper.core.local_mapping.windows import WindowMatcher  # noqa: E402
@@ -127,6 +129,50 @@ def table(work: str) -> str:
     return "\n".join(lines)
 
 
+def _weighed_loops(work: str) -> dict[str, list[dict[str, Any]]]:
+    """The loop closures weighed in each scenario of ``work``, in the order weighed."""
+    loops: dict[str, list[dict[str, Any]]] = {}
+    for path in sorted((Path(work) / "records").glob("*.json")):
+        case = json.loads(path.read_text())
+        loops[case["scenario"]] = [
+            r for r in case["closures"] if r["kind"] == "weighed" and r["weighed_kind"] == "loop"
+        ]
+    return loops
+
+
+def compare(before: str, after: str) -> str:
+    """The same decisions weighed two ways (two ``--gate all`` runs whose maps are the same: the
+    evidence changed, not the decisions), per scenario: right and wrong closures' median score
+    and conflict, and how many have no margin (score <= 0 or a rival at least as good)."""
+
+    def summary(rows: list[dict[str, Any]]) -> str:
+        if not rows:
+            return "—"
+        score = float(np.median([r["score"] for r in rows]))
+        conflict = float(np.median([r["conflict"] for r in rows]))
+        none = sum(r["score"] <= 0.0 or r["rival"] >= r["score"] for r in rows)
+        return f"{len(rows)}: {score:.1f} / {conflict:.2f} / {none}"
+
+    lines = [
+        "| scenario | right closures: n: median score / conflict (m) / no margin, before "
+        "| after | wrong closures, before | after |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    old, new = _weighed_loops(before), _weighed_loops(after)
+    for name in sorted(set(old) & set(new)):
+        pairs = list(zip(old[name], new[name], strict=False))
+        if any(a["right"] != b["right"] or a["error_m"] != b["error_m"] for a, b in pairs):
+            lines.append(f"| {name} | not the same decisions (maps differ) | | | |")
+            continue
+        cells = [
+            summary([pair[side] for pair in pairs if pair[0]["right"] == right])
+            for right in (True, False)
+            for side in (0, 1)
+        ]
+        lines.append(f"| {name} | {' | '.join(cells)} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--scenarios", nargs="*", default=[])
@@ -141,9 +187,18 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--work", default=str(OUTPUT / "backend"))
     parser.add_argument("--table", action="store_true", help="print WORK's records as a table")
+    parser.add_argument(
+        "--compare",
+        nargs=2,
+        metavar=("BEFORE", "AFTER"),
+        help="two --gate all work folders of the same maps: the closures' evidence side by side",
+    )
     args = parser.parse_args()
     if args.table:
         print(table(args.work))
+        return
+    if args.compare:
+        print(compare(*args.compare))
         return
     names = list(args.scenarios)
     if args.generated:
