@@ -126,12 +126,12 @@ def patch_around(keyframes: KeyframeMap, candidates: IntArray, centre: int) -> I
 
 
 def without_approach(
-    keyframes: KeyframeMap, older: IntArray, first_stretch_end: int, mine: int
+    poses: FloatArray, older: IntArray, first_stretch_end: int, mine: int
 ) -> IntArray:
-    """The loop closure's target: keyframes ``older`` without the robot's own approach to the
-    place, the run of keyframes just before the recent stretch (the newest of ``older`` back
-    to the first one more than APPROACH_RADIUS from keyframe ``mine``; never a keyframe up to
-    ``first_stretch_end``, the end of the stretch the closure returns to).
+    """The loop closure's target: keyframes ``older`` (rows of ``poses``) without the robot's
+    own approach to the place, the run of keyframes just before the recent stretch (the newest
+    of ``older`` back to the first one more than APPROACH_RADIUS from keyframe ``mine``; never
+    a keyframe up to ``first_stretch_end``, the end of the stretch the closure returns to).
 
     The approach was mapped with the drift the closure corrects: its walls and free space sit
     where the uncorrected recent stretch sits. In the target, the right placement meets them
@@ -139,7 +139,7 @@ def without_approach(
     robots, 238 of 482 right closures (gate open) had no margin over their rival, 129 to 155
     without the approach (issue 46; docs/decisions.md)."""
     newest_first = np.sort(np.asarray(older, dtype=np.int64))[::-1]
-    distance = np.hypot(*(keyframes.poses[newest_first, :2] - keyframes.poses[mine, :2]).T)
+    distance = np.hypot(*(poses[newest_first, :2] - poses[mine, :2]).T)
     outside = (distance > APPROACH_RADIUS) | (newest_first <= first_stretch_end)
     length = int(np.argmax(outside)) if outside.any() else len(newest_first)
     return np.sort(newest_first[length:])

@@ -255,7 +255,7 @@ class LoopCloser(PieceJoins):
             members = self.keyframes.members(piece)
             recent = members[(members > index - config.loop_window) & (members <= index)]
             older = members[members <= index - config.loop_window]
-            older = without_approach(self.keyframes, older, first + config.loop_window, index)
+            older = without_approach(self.keyframes.poses, older, first + config.loop_window, index)
             here = self.keyframes.pose(index)
             reach = Reach(here, radius, here)
             if not self._believed("loop", recent, older, first, index, found, reach):
