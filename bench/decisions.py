@@ -296,7 +296,6 @@ def snapshots_of(
                     "wall": round(ev.wall, 3),
                     "conflict": round(ev.conflict, 3),
                     "matched": round(ev.matched, 3),
-                    "refined_shift": round(item.refined_shift, 3),
                     "error_m": round(error[0], 3),
                     "right": not _wrong(error),
                 }

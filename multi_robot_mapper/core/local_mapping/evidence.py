@@ -47,20 +47,6 @@ class Weighed:
     found: Pose
     probability: float
     evidence: PlacementEvidence
-    # m: how far the evidence's locally refined placement moves keyframe ``mine`` from where
-    # the decision puts it (a closure slid along a corridor by less than a rival's distance
-    # shows here, not in the margin); recorded for the benches, not (yet) a model feature.
-    refined_shift: float = 0.0
-
-
-def refined_shift(evidence: PlacementEvidence, T_target_patch: FloatArray, point: Pose) -> float:
-    """How far (m) the evidence's refined placement moves ``point`` (x, y in the patch's frame)
-    from where ``T_target_patch`` (3x3) puts it."""
-    theta, tx, ty = (float(v) for v in evidence.placement)
-    refined = se2.matrix_from_pose(tx, ty, theta)
-    here = np.array([[point[0], point[1]]])
-    moved = se2.transform_points(refined, here) - se2.transform_points(T_target_patch, here)
-    return float(np.hypot(*moved[0]))
 
 
 # A decision's patch: the keyframes it moves within this distance of the keyframe it was

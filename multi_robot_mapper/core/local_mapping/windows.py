@@ -30,7 +30,6 @@ from multi_robot_mapper.core.local_mapping.evidence import (
     moved_to,
     patch_around,
     probability_of,
-    refined_shift,
 )
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
@@ -224,8 +223,7 @@ class WindowMatcher:
         near = patch_around(keyframes, patch, mine)
         evidence = decision_evidence(keyframes, near, target, moved, reach)
         probability = probability_of(evidence, self.models[kind])
-        shift = refined_shift(evidence, moved, keyframes.pose(mine))
-        self.weighed.append(Weighed(kind, first, mine, found, probability, evidence, shift))
+        self.weighed.append(Weighed(kind, first, mine, found, probability, evidence))
         return probability >= self.config.join_probability
 
     def _refuse(self, reason: str) -> None:
