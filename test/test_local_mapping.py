@@ -603,3 +603,44 @@ def test_two_matches_corroborate_each_other_by_their_own_evidence(
 
     pair = [attempt(0, (1.0, 0.0, 0.0)), attempt(2, (1.05, 0.02, 0.01))]
     assert (attempts.corroborated(pair) is not None) == corroborated
+
+
+def _placed_at(pose: tuple[float, float, float], elapsed: float, piece: int = 0) -> bool:
+    """Whether the front end finds ``pose`` reachable for a scan ``elapsed`` seconds after the
+    last placed one, which lies at the origin of piece 0."""
+    from multi_robot_mapper.core.local_mapping import attempts
+
+    references = attempts.References(
+        here=(0.0, 0.0, 0.0),
+        last=None,  # type: ignore[arg-type]
+        keyframe=0,
+        older=[],
+        poses={},
+        pieces={0: 0},
+        scans={},
+        elapsed=elapsed,
+    )
+    matching = attempts._ScanMatching(
+        LocalMapperConfig(),
+        references,
+        np.zeros((0, 4)),
+        None,
+        lambda *_: None,
+        None,
+        [],  # type: ignore[arg-type]
+    )
+    attempt = attempts.Attempt(None, None, None, pose, piece, "search", "search", 0.99, 0.0)  # type: ignore[arg-type]
+    return matching.reachable(attempt)
+
+
+def test_a_placement_turned_faster_than_a_robot_turns_is_not_reachable() -> None:
+    # Generated building 111: in a U-turn at 18 deg a scan (10 Hz), a search placed a scan
+    # -72 deg from the last, a right-angle look-alike; the next scan was then tracked turned
+    # 180 deg and the robot's map with it. A full turn a second, plus the tolerance, bounds it.
+    assert _placed_at((0.1, 0.0, np.radians(18.0)), 0.1)
+    assert _placed_at((0.1, 0.0, np.radians(-40.0)), 0.1)  # 36 + 5 deg
+    assert not _placed_at((0.1, 0.0, np.radians(-72.0)), 0.1)
+    assert not _placed_at((0.0, 0.0, np.pi), 0.1)
+    assert _placed_at((0.0, 0.0, np.pi), 0.6)  # a half turn in 0.6 s can be real
+    # Where it was lost in another piece, the robot may have turned any way since.
+    assert _placed_at((0.0, 0.0, np.pi), 0.1, piece=1)

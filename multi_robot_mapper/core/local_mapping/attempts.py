@@ -54,6 +54,13 @@ NEAR_ANGLE = RIGHT_ANGLE / 3.0
 # and for none of the 844 at 0.999 or more; it costs tens of milliseconds a scan. A
 # prediction refined alone this sure needs no rivals within the whole tolerance either.
 SURE = 0.999
+# No robot turns faster than a full turn a second (ground robots that carry a laser turn at
+# 1-5 rad/s): a placement in the robot's own piece turned more than this allows, plus the
+# correctness tolerance, since the last placed scan is a look-alike. Generated building 111:
+# in a U-turn at 18 deg a scan, a search placed a scan -72 deg from the last (0.987 in
+# context, a right-angle look-alike); the constant-velocity prediction carried it on and the
+# next scan was tracked at 0.999 turned 180 deg, and the robot's map with it.
+PLAUSIBLE_TURN_RATE = 2.0 * np.pi  # rad/s
 
 
 def reach_in(top_speed: float, seconds: float) -> float:
@@ -409,7 +416,8 @@ class _ScanMatching:
 
     def reachable(self, a: Attempt) -> bool:
         """Can the robot have driven to the placement of ``a`` since it was last placed (in
-        its own piece, or in another where it was last placed there)?"""
+        its own piece, or in another where it was last placed there), and in its own piece
+        turned to it (PLAUSIBLE_TURN_RATE)?"""
         # In its own piece, the robot is no farther from its last placed scan than it drives
         # at ``plausible_speed`` (or its own top speed, when faster) in the time since, plus
         # the correctness tolerance: a scan of another place or of another building can match
@@ -431,7 +439,12 @@ class _ScanMatching:
         else:
             return True
         reach = reach_in(top_speed, elapsed)
-        return bool(np.hypot(a.pose[0] - pose[0], a.pose[1] - pose[1]) <= reach)
+        if np.hypot(a.pose[0] - pose[0], a.pose[1] - pose[1]) > reach:
+            return False
+        if a.piece != self.current:
+            return True  # back where it was lost: it may have turned any way since
+        turn = abs(float(se2.wrap_angle(a.pose[2] - pose[2])))
+        return turn <= PLAUSIBLE_TURN_RATE * elapsed + RIGHT_ANGLE
 
     def settled(self) -> Attempt | None:
         """The attempt that settles the placement, if one does yet."""
