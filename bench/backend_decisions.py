@@ -112,13 +112,14 @@ def table(work: str) -> str:
             column = f"{kind} {'weighed' if weighed else 'accepted'}"
             done, bad = row.get(column, (0, 0))
             row[column] = (done + 1, bad + int(wrong))
-            if not weighed and wrong:
+            if not weighed and wrong and kind != "heading":  # a heading's error is an angle
                 row["worst"] = max(row["worst"], float(record["error_m"]))
-    columns = ("loop weighed", "loop accepted", "join weighed", "join accepted")
+    columns = ("loop weighed", "loop accepted", "join weighed", "join accepted", "heading accepted")
     lines = [
         "| scenario | runs | closures weighed (wrong) | closures accepted (wrong) "
-        "| joins weighed (wrong) | joins accepted (wrong) | worst accepted wrong (m) |",
-        "| --- |" + " --- |" * 6,
+        "| joins weighed (wrong) | joins accepted (wrong) | headings bridged (wrong) "
+        "| worst accepted wrong (m) |",
+        "| --- |" + " --- |" * 7,
     ]
     order = sorted(rows, key=lambda key: (key == "generated buildings", key))
     for key in order:

@@ -318,7 +318,7 @@ def snapshots_of(
                     "confidence": round(closure.confidence, 4),
                     "error_m": round(error[0], 3),
                     "error_deg": round(math.degrees(error[1]), 2),
-                    "wrong": _wrong(error),
+                    "wrong": error[1] > RIGHT_ANGLE if closure.kind == "heading" else _wrong(error),
                 }
             )
     return snapshots, closures + [

@@ -373,7 +373,11 @@ def own_snapshots(
     snapshots += [mapper.keyframes() for _ in pending]
     stamps = np.array([kf.stamp for kf in sorted(mapper.keyframes(), key=lambda k: k.index)])
     weighed = list(mapper.backend.closer.weighed)  # type: ignore[attr-defined]
-    return OwnMap(snapshots, list(mapper.closures), stamps, len(drive.stamps), weighed)
+    # The headings bridged across losses are edges too (kind "heading": judged on the heading
+    # alone, the only thing they constrain).
+    headings = list(mapper.backend.closer.headings)  # type: ignore[attr-defined]
+    closures = list(mapper.closures) + headings
+    return OwnMap(snapshots, closures, stamps, len(drive.stamps), weighed)
 
 
 def update_times(scenario: Scenario, updates: int) -> list[float]:
