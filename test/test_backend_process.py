@@ -66,7 +66,10 @@ def test_the_graph_in_a_worker_process_is_the_graph_in_line(drive, inline) -> No
         _map(hosted, stamps, scans)
         assert hosted.backend_errors == 0
         assert len(hosted.keyframes()) == len(inline.keyframes()) > 10
-        np.testing.assert_allclose(_poses(hosted), _poses(inline), atol=1e-9)
+        # The same map: the replacement rebuilds the graph from every keyframe, and where the
+        # kill falls decides how ISAM2's updates are batched, which moves poses by float
+        # rounding (3.9e-8 m measured once under load); a micrometre is far below any error.
+        np.testing.assert_allclose(_poses(hosted), _poses(inline), atol=1e-6)
         assert len(hosted.closures) == len(inline.closures) > 0
         np.testing.assert_allclose(hosted.map_segments, inline.map_segments, atol=1e-9)
     finally:
