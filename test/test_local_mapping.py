@@ -605,7 +605,9 @@ def test_two_matches_corroborate_each_other_by_their_own_evidence(
     assert (attempts.corroborated(pair) is not None) == corroborated
 
 
-def _placed_at(pose: tuple[float, float, float], elapsed: float, piece: int = 0) -> bool:
+def _placed_at(
+    pose: tuple[float, float, float], elapsed: float, piece: int = 0, period: float | None = None
+) -> bool:
     """Whether the front end finds ``pose`` reachable for a scan ``elapsed`` seconds after the
     last placed one, which lies at the origin of piece 0."""
     from multi_robot_mapper.core.local_mapping import attempts
@@ -619,6 +621,7 @@ def _placed_at(pose: tuple[float, float, float], elapsed: float, piece: int = 0)
         pieces={0: 0},
         scans={},
         elapsed=elapsed,
+        period=period,
     )
     matching = attempts._ScanMatching(
         LocalMapperConfig(),
@@ -644,3 +647,7 @@ def test_a_placement_turned_faster_than_a_robot_turns_is_not_reachable() -> None
     assert _placed_at((0.0, 0.0, np.pi), 0.6)  # a half turn in 0.6 s can be real
     # Where it was lost in another piece, the robot may have turned any way since.
     assert _placed_at((0.0, 0.0, np.pi), 0.1, piece=1)
+    # Stamps 1 ms apart (a clock that repeated, moved on import) bound nothing less than the
+    # robot's usual scan period: intel's corrected log, scans about 3 s apart.
+    assert not _placed_at((0.1, 0.0, np.radians(30.0)), 0.001)
+    assert _placed_at((0.1, 0.0, np.radians(30.0)), 0.001, period=3.0)

@@ -56,7 +56,8 @@ NEAR_ANGLE = RIGHT_ANGLE / 3.0
 SURE = 0.999
 # No robot turns faster than a full turn a second (ground robots that carry a laser turn at
 # 1-5 rad/s): a placement in the robot's own piece turned more than this allows, plus the
-# correctness tolerance, since the last placed scan is a look-alike. Generated building 111:
+# correctness tolerance, since the last placed scan (or in the robot's usual scan period when
+# the stamps say less: a clock can lie) is a look-alike. Generated building 111:
 # in a U-turn at 18 deg a scan, a search placed a scan -72 deg from the last (0.987 in
 # context, a right-angle look-alike); the constant-velocity prediction carried it on and the
 # next scan was tracked at 0.999 turned 180 deg, and the robot's map with it.
@@ -237,6 +238,10 @@ class References:
     # how fast the robot drives at most (m/s; the 95th percentile of its placed motions)
     top_speed: float | None = None
     elapsed: float | None = None  # seconds from the last placed scan to the new one
+    # the robot's usual seconds between placed scans (their median): how long a turn between
+    # two scans may have taken when their stamps say less (a log's clock can repeat or step
+    # back: intel's corrected log has 13 such steps, set 1 ms apart on import)
+    period: float | None = None
     # the scans since the last placed one are held, not placed (core.local_mapping.held): in
     # its own piece too the robot is found only where its own top speed takes it
     own_speed_only: bool = False
@@ -444,7 +449,8 @@ class _ScanMatching:
         if a.piece != self.current:
             return True  # back where it was lost: it may have turned any way since
         turn = abs(float(se2.wrap_angle(a.pose[2] - pose[2])))
-        return turn <= PLAUSIBLE_TURN_RATE * elapsed + RIGHT_ANGLE
+        turning = max(elapsed, references.period or 0.0)
+        return turn <= PLAUSIBLE_TURN_RATE * turning + RIGHT_ANGLE
 
     def settled(self) -> Attempt | None:
         """The attempt that settles the placement, if one does yet."""

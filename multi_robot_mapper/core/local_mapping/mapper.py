@@ -154,6 +154,8 @@ class LocalMapper(BackendLink):
         self._velocity: FloatArray | None = None  # (x, y, theta) per second, last scan frame
         # the speeds (m/s) of the latest placed motions, for how far a lost robot can drive
         self._speeds: deque[float] = deque(maxlen=_SPEEDS_KEPT)
+        # and the seconds between them: the robot's usual scan period (its median)
+        self._periods: deque[float] = deque(maxlen=_SPEEDS_KEPT)
         # piece when placed -> (stamp, anchor) of the robot's last scan placed in it
         self._last_in_piece: dict[int, tuple[float, Anchor]] = {}
         self._piece_of_last = 0
@@ -247,6 +249,7 @@ class LocalMapper(BackendLink):
         if dt > 0.0:
             self._velocity = np.asarray(motion) / dt
             self._speeds.append(float(np.hypot(motion[0], motion[1])) / dt)
+            self._periods.append(dt)
         placed = Anchor(anchor.keyframe, T_keyframe_new)
         keyframe_added = False
         known = self._known_view(pose, chosen.piece) if self.config.revisit_keyframes else None
@@ -369,6 +372,7 @@ class LocalMapper(BackendLink):
                 left=left,
                 top_speed=self._top_speed(),
                 elapsed=dt,
+                period=float(np.median(self._periods)) if self._periods else None,
                 own_speed_only=after_held,
             )
         self.last_attempts = []  # this scan's (a lost robot's held scans are matched in turn)
