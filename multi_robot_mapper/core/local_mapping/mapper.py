@@ -152,10 +152,9 @@ class LocalMapper(BackendLink):
         self.optimise_seconds: deque[float] = deque(maxlen=_TIMES_KEPT)  # per keyframe
         self._last: _Last | None = None
         self._velocity: FloatArray | None = None  # (x, y, theta) per second, last scan frame
-        # the speeds (m/s) of the latest placed motions, for how far a lost robot can drive
+        # the speeds (m/s) of the latest placed motions (how far a lost robot can drive), and
         self._speeds: deque[float] = deque(maxlen=_SPEEDS_KEPT)
-        # and the seconds between them: the robot's usual scan period (its median)
-        self._periods: deque[float] = deque(maxlen=_SPEEDS_KEPT)
+        self._periods: deque[float] = deque(maxlen=_SPEEDS_KEPT)  # their seconds (the median)
         # piece when placed -> (stamp, anchor) of the robot's last scan placed in it
         self._last_in_piece: dict[int, tuple[float, Anchor]] = {}
         self._piece_of_last = 0
