@@ -300,6 +300,8 @@ def snapshots_of(
                     "right": not _wrong(error),
                 }
             )
+            if item.prior is not None:
+                weighed[-1]["graph_prior"] = round(item.prior, 3)
         for closure in own.closures:
             first, second = own.keyframe_stamps[[closure.first, closure.second]]
             world = scenario.truth().truth_of(robot, np.array([first, second]))

@@ -45,6 +45,7 @@ from multi_robot_mapper.core.evidence.model import (
     FEATURES,
     MODEL_FILE,
     PIECE_JOIN_MODEL_FILE,
+    PRIOR_FEATURE,
     join_features,
 )
 from multi_robot_mapper.core.evidence.placement import (
@@ -118,6 +119,8 @@ def load(
                 keys = ("score", "rival", "conflict", "wall", "matched")
                 way = {k: item[k] for k in keys if k in item}
                 values = _features([way, way], 0.0)
+                if PRIOR_FEATURE in item:  # a loop closure's graph prior
+                    values.append(float(item[PRIOR_FEATURE]))
                 rows.append(values)
                 labels.append(bool(item["right"]))
                 groups.append(case["scenario"])
@@ -137,6 +140,11 @@ def load(
                     labels.append(bool(record["right"]))
                     groups.append(case["scenario"])
                     sources.append(source)
+    if len({len(row) for row in rows}) > 1:
+        raise SystemExit(
+            f"the {decisions} decisions of {works} are recorded with and without "
+            f"{PRIOR_FEATURE}: collect them again with one version of the back end"
+        )
     return np.array(rows, dtype=np.float64), np.array(labels), groups, sources
 
 
@@ -158,6 +166,8 @@ SIGNS = {
 # (score 0, 12.8 m of it in free space) was given 0.99 (csail 2). More wall explained never
 # makes a decision less likely.
 BACKEND_SIGNS = {**SIGNS, "log_score": 1}
+# A loop closure the robot's graph predicts better than a look-alike is never less likely.
+CLOSURE_SIGNS = {**BACKEND_SIGNS, PRIOR_FEATURE: 1}
 
 
 def fit(x: np.ndarray, y: np.ndarray, l2: float, signs: dict[str, int] = SIGNS) -> LogisticModel:
@@ -264,14 +274,14 @@ def main() -> None:
     )
     args = parser.parse_args()
     x, y, groups, sources = load(args.work, args.decisions)
-    names = FEATURES
     if len(y) == 0:
         raise SystemExit("no recorded sets: run bench/decisions.py collect first")
     print(
         f"{len(y)} sets ({int(y.sum())} right, {int((~y).sum())} wrong) from "
         f"{len(set(groups))} scenarios"
     )
-    signs = SIGNS if args.decisions == "merger" else BACKEND_SIGNS
+    signs = {"merger": SIGNS, "closure": CLOSURE_SIGNS}.get(args.decisions, BACKEND_SIGNS)
+    names = tuple(signs)[: x.shape[1]]
     losses = {l2: log_loss(held_out(x, y, groups, l2, signs), y) for l2 in L2_GRID}
     l2 = min(losses, key=losses.__getitem__)
     print(

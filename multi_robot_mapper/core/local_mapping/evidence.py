@@ -47,6 +47,7 @@ class Weighed:
     found: Pose
     probability: float
     evidence: PlacementEvidence
+    prior: float | None = None  # a loop closure's graph prior (nats; core.evidence.model)
 
 
 # A decision's patch: the keyframes it moves within this distance of the keyframe it was
@@ -156,9 +157,12 @@ def moved_to(
     )
 
 
-def probability_of(evidence: PlacementEvidence, model: LogisticModel) -> float:
-    """P(right) of a decision with this evidence, by the model of its kind."""
-    return model.probability(join_features([evidence]))
+def probability_of(
+    evidence: PlacementEvidence, model: LogisticModel, prior: float | None = None
+) -> float:
+    """P(right) of a decision with this evidence (and a loop closure's graph ``prior``), by
+    the model of its kind."""
+    return model.probability(join_features([evidence], prior=prior))
 
 
 def _thinned(poses: FloatArray, spacing: float, most: int) -> IntArray:

@@ -46,6 +46,7 @@ from typing import TypeVar
 import numpy as np
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.evidence.model import graph_prior
 from multi_robot_mapper.core.evidence.placement import Reach
 from multi_robot_mapper.core.local_mapping.attempts import close_to, hypotheses_of, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
@@ -243,7 +244,8 @@ class LoopCloser(PieceJoins):
             if result.confidence < config.loop_confidence:
                 self._refuse("confidence")
                 continue
-            if not self._agrees_with_graph(first, index, found):
+            correction, gate = self._graph_gate(first, index, found)
+            if float(correction @ np.linalg.solve(gate, correction)) > _CHI2_3DOF_999:
                 self._refuse("far from the graph's prediction")
                 continue
             # The recent stretch of map near the new keyframe, placed by the closure on the
@@ -258,7 +260,8 @@ class LoopCloser(PieceJoins):
             older = without_approach(self.keyframes.poses, older, first + config.loop_window, index)
             here = self.keyframes.pose(index)
             reach = Reach(here, radius, here)
-            if not self._believed("loop", recent, older, first, index, found, reach):
+            prior = graph_prior(correction, gate, radius)
+            if not self._believed("loop", recent, older, first, index, found, reach, prior):
                 self._refuse("evidence")
                 continue
             edge = self._scan_edge(first, index, found)
@@ -307,18 +310,20 @@ class LoopCloser(PieceJoins):
         self._path_since_closure[piece] = 0.0
         return [c.closure for c in (*partners, candidate)]
 
-    def _agrees_with_graph(self, first: int, second: int, T_first_second: Pose) -> bool:
+    def _graph_gate(
+        self, first: int, second: int, T_first_second: Pose
+    ) -> tuple[FloatArray, FloatArray]:
         """The Mahalanobis gate of a loop closure: the closure's relative pose of the two
-        keyframes against the graph's, with the covariance of the graph's relative pose (from
-        the two keyframes' joint marginal: what the path between them leaves uncertain, not
-        what both inherit from far back), inflated ``_GATE_INFLATION`` times against drift
-        the graph does not model, plus the correctness tolerance; chi-square 3 dof, 99.9 %."""
+        keyframes in the graph's (dx, dy, dtheta), and the covariance it is gated with
+        (chi-square 3 dof, 99.9 %): the graph's relative pose's (from the two keyframes' joint
+        marginal: what the path between them leaves uncertain, not what both inherit from far
+        back), inflated ``_GATE_INFLATION`` times against drift the graph does not model, plus
+        the correctness tolerance."""
         predicted = se2.between(self.keyframes.pose(first), self.keyframes.pose(second))
-        dx, dy, dtheta = se2.between(predicted, T_first_second)
-        delta = np.array([dx, dy, dtheta])
+        correction = np.array(se2.between(predicted, T_first_second), dtype=np.float64)
         sigma = _GATE_INFLATION * self.graph.relative_covariance(first, second)
         sigma += np.diag([RIGHT_DISTANCE**2, RIGHT_DISTANCE**2, RIGHT_ANGLE**2])
-        return float(delta @ np.linalg.solve(sigma, delta)) <= _CHI2_3DOF_999
+        return correction, sigma
 
     def _bridge_headings(self) -> list[Closure]:
         """The heading across each loss whose two sides are one piece now, from the front

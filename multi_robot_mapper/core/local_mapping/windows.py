@@ -212,18 +212,20 @@ class WindowMatcher:
         mine: int,
         found: Pose,
         reach: Reach | None = None,
+        prior: float | None = None,
     ) -> bool:
         """Does the evidence model believe placing keyframes ``patch`` so that keyframe
         ``mine`` lies at ``found`` in keyframe ``first``'s frame, on keyframes ``target``
-        (:mod:`~core.local_mapping.evidence`), its rivals where ``reach`` allows? Each
-        decision weighed is kept in ``weighed``."""
+        (:mod:`~core.local_mapping.evidence`), its rivals where ``reach`` allows, with a loop
+        closure's ``prior`` (:func:`~core.evidence.model.graph_prior`)? Each decision weighed
+        is kept in ``weighed``."""
         keyframes = self.keyframes
         here = se2.compose(keyframes.pose(first), found)
         moved = moved_to(keyframes, mine, here)
         near = patch_around(keyframes, patch, mine)
         evidence = decision_evidence(keyframes, near, target, moved, reach)
-        probability = probability_of(evidence, self.models[kind])
-        self.weighed.append(Weighed(kind, first, mine, found, probability, evidence))
+        probability = probability_of(evidence, self.models[kind], prior)
+        self.weighed.append(Weighed(kind, first, mine, found, probability, evidence, prior))
         return probability >= self.config.join_probability
 
     def _refuse(self, reason: str) -> None:
