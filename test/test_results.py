@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from multi_robot_mapper.io.results import (
+    REPLAYED_FILE,
+    ReplayedBags,
     ReplayResult,
     ResultsError,
     read_results,
@@ -37,6 +39,13 @@ def _result() -> ReplayResult:
         },
         robot_frames={"robot1": (0.0, 0.0, 0.0), "robot2": (1.5, -2.0, 0.7), "robot3": None},
         stats={"scans_total": 60, "total_s": 1.25, "scans_rejected": {"no_beams": 1}},
+        replayed=ReplayedBags(
+            bags=(Path("/data/run one.bag"), Path("/data/run2")),
+            names=("robot1", "robot2"),
+            scan_topics="/scan",
+            beam_geometry="-90,1",
+            truth_files=(Path("/data/a.truth.csv"), Path("/data/b.truth.csv")),
+        ),
     )
 
 
@@ -60,6 +69,7 @@ def test_round_trip_is_exact(tmp_path: Path) -> None:
         np.testing.assert_allclose(dtheta, 0.0, atol=1e-12)
     assert back.robot_frames == original.robot_frames
     assert back.stats == original.stats
+    assert back.replayed == original.replayed
     assert json.loads((tmp_path / "out" / "robots.json").read_text())["robot3"] == "unmerged"
 
 
@@ -155,6 +165,31 @@ BREAKAGES = {
     ),
     "stats.json missing": (lambda d: (d / "stats.json").unlink(), "stats.json"),
     "stats.json a number": (lambda d: (d / "stats.json").write_text("3"), "stats.json"),
+    "replay.json a list": (lambda d: (d / REPLAYED_FILE).write_text("[]"), "replay.json"),
+    "replay.json no bag": (
+        lambda d: _edit_json(d / REPLAYED_FILE, "bags", []),
+        "replay.json: 'bags' must name",
+    ),
+    "replay.json relative bag": (
+        lambda d: _edit_json(d / REPLAYED_FILE, "bags", ["run.bag"]),
+        "replay.json: 'bags' must be a list of absolute paths",
+    ),
+    "replay.json names a string": (
+        lambda d: _edit_json(d / REPLAYED_FILE, "names", "robot1,robot2"),
+        "replay.json: 'names'",
+    ),
+    "replay.json no scan topics": (
+        lambda d: _edit_json(d / REPLAYED_FILE, "scan_topics", None),
+        "replay.json: 'scan_topics'",
+    ),
+    "replay.json geometry a number": (
+        lambda d: _edit_json(d / REPLAYED_FILE, "beam_geometry", 1),
+        "replay.json: 'beam_geometry'",
+    ),
+    "replay.json truth relative": (
+        lambda d: _edit_json(d / REPLAYED_FILE, "truth", ["a.truth.csv"]),
+        "replay.json: 'truth'",
+    ),
 }
 
 
@@ -169,6 +204,21 @@ def test_malformed_files_raise_one_line_naming_the_file(tmp_path: Path, case: st
     message = str(info.value)
     assert file_name in message
     assert "\n" not in message
+
+
+def test_a_folder_without_the_replay_record_reads_as_before(tmp_path: Path) -> None:
+    """Results from before replay.json, or not made from bags: read, with no record; writing
+    such a result over a folder drops the record of bags it was not made from."""
+    write_results(tmp_path, _result())
+    assert (tmp_path / REPLAYED_FILE).is_file()
+    (tmp_path / REPLAYED_FILE).unlink()
+    assert read_results(tmp_path).replayed is None
+    write_results(tmp_path, _result())
+    unrecorded = _result()
+    unrecorded.replayed = None
+    write_results(tmp_path, unrecorded)
+    assert not (tmp_path / REPLAYED_FILE).exists()
+    assert read_results(tmp_path).replayed is None
 
 
 def test_missing_folder_raises(tmp_path: Path) -> None:

@@ -1,6 +1,11 @@
 """``mrm evaluate DIR [--bag BAG ...] [--truth CSV] [--relations FILE [--relation-stamps LOG]]
 [--json]``: score a replay result against the bag's reference poses and against relations.
 
+Without ``--bag`` (and without ``--relations``) the bags are the ones ``mrm replay`` read to
+make DIR, read with the options it read them with (``--names``, ``--scan-topics``,
+``--beam-geometry``, ``--truth``; each one given here replaces its record): DIR/replay.json
+records them.
+
 Reference poses: each scan of the bag gets the reference pose stamped nearest it (within
 GROUND_TRUTH_MATCH_S, the rule ``mrm replay`` uses) and the estimated pose whose trajectory stamp
 equals its stamp (within STAMP_MATCH_S); scans without a reference pose are left out and
@@ -24,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +39,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.cli.common import CliError, check_limits, check_output, missing_input
-from multi_robot_mapper.cli.recordings import add_recording_options, load_recordings
+from multi_robot_mapper.cli.recordings import (
+    add_recording_options,
+    load_recordings,
+    reading_options,
+    recorded_options,
+)
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.scan import ScanError, scan_points
 from multi_robot_mapper.evaluation import metrics as rules
@@ -41,7 +52,7 @@ from multi_robot_mapper.evaluation.metrics import Metrics, RobotTrack, evaluate
 from multi_robot_mapper.evaluation.relations import RelationErrors
 from multi_robot_mapper.io.bags import GROUND_TRUTH_MATCH_S, nearest_stamps, reference_poses
 from multi_robot_mapper.io.outputs import atomic_write_text
-from multi_robot_mapper.io.results import ReplayResult
+from multi_robot_mapper.io.results import REPLAYED_FILE, ReplayResult
 
 FloatArray = NDArray[np.float64]
 
@@ -82,9 +93,14 @@ def register(subparsers: Any) -> None:
         type=Path,
         metavar="BAG",
         help="the bag that was replayed, with reference poses (repeat for one bag per robot, "
-        "in the replay's order; default: none, then --relations is needed)",
+        "in the replay's order; default: without --relations, the bags mrm replay read, as "
+        "DIR/replay.json records them, with the options it read them with unless given here; "
+        "a folder without that record needs --bag or --relations)",
     )
     add_recording_options(parser)
+    # None: not given, so that the record of the replay can decide (reading_options fills in
+    # the record, or the usual default the help states).
+    parser.set_defaults(scan_topics=None, beam_geometry=None)
     parser.add_argument(
         "--relations",
         type=Path,
@@ -308,13 +324,45 @@ def format_relations(summary: Mapping[str, Any]) -> str:
 
 def _check_arguments(args: argparse.Namespace) -> None:
     check_limits(args, "max_points")
-    if not args.bags and args.relations is None:
-        raise CliError("nothing to score against: give --bag (reference poses) or --relations")
     if args.relation_stamps is not None and (args.relations is None or len(args.bags) != 1):
         raise CliError("--relation-stamps needs --relations and the one bag that was replayed")
     for path in (args.relations, args.relation_stamps):
         if path is not None and not Path(path).is_file():
             raise missing_input(path, "file")
+
+
+def bags_to_read(
+    args: argparse.Namespace, result: ReplayResult, directory: Path
+) -> tuple[list[Path], argparse.Namespace]:
+    """The bags to score against and the options to read them with: ``--bag`` as given; else,
+    without ``--relations``, the bags ``mrm replay`` recorded in ``directory``, each option as
+    recorded unless given; else none (relations need no bag)."""
+    if args.bags or args.relations is not None:
+        return list(args.bags), reading_options(args)
+    replayed = result.replayed
+    if replayed is None:
+        raise CliError(
+            "nothing to score against: give --bag (reference poses) or --relations (no "
+            f"{directory / REPLAYED_FILE}: the replay that made the folder did not record the "
+            "bags it read)"
+        )
+    options = recorded_options(replayed)
+    for bag in replayed.bags:
+        if not bag.exists():
+            many = ", one --bag per bag in the replay's order" if len(replayed.bags) > 1 else ""
+            read_with = f", and the options it was read with: {options}" if options else ""
+            raise CliError(
+                f"no such bag: {bag} (the bag mrm replay read for {directory}; if it moved, give "
+                f"--bag with where it is now{many}{read_with})"
+            )
+    if not args.truth:
+        for truth in replayed.truth_files:
+            if not truth.exists():
+                raise CliError(
+                    f"no such truth file: {truth} (the truth file mrm replay read for {directory}; "
+                    "if it moved, give --truth with where it is now, one per robot)"
+                )
+    return list(replayed.bags), reading_options(args, replayed)
 
 
 def check_result_folder(directory: Path) -> None:
@@ -340,7 +388,7 @@ def check_result_folder(directory: Path) -> None:
     if bag:
         raise CliError(
             f"{directory} is a bag, not a replay result: {expected}; run mrm replay "
-            f"{directory} --out DIR, then mrm evaluate DIR --bag {directory}"
+            f"{directory} --out DIR, then mrm evaluate DIR"
         )
     kind = "a file" if directory.is_file() else f"a folder without {MAP_FILE}"
     raise CliError(f"{directory} is {kind}: {expected}")
@@ -353,8 +401,15 @@ def run(args: argparse.Namespace) -> int:
     check_result_folder(directory)
     result = read_results(directory)
     _check_arguments(args)
+    bags, options = bags_to_read(args, result, directory)
     check_output(directory / METRICS_FILE, kind="file")  # before the work
-    recordings = load_recordings(args, args.bags)[0] if args.bags else {}
+    if bags and not args.bags:
+        # The table's stdout stays pure JSON with --json: the line goes to stderr then.
+        print(
+            f"scoring against the bag(s) mrm replay read: {', '.join(map(str, bags))}",
+            file=sys.stderr if args.json else sys.stdout,
+        )
+    recordings = load_recordings(options, bags)[0] if bags else {}
     has_truth = any(r.ground_truth for r in recordings.values())
     report: dict[str, Any] = {"method": result.method}
     metrics, inputs = None, None
@@ -363,7 +418,7 @@ def run(args: argparse.Namespace) -> int:
             inputs = build_inputs(result, recordings, args.max_points)
             if not inputs.tracks:
                 raise CliError(
-                    f"{', '.join(map(str, args.bags))} has no scan with a ground-truth pose to "
+                    f"{', '.join(map(str, bags))} has no scan with a ground-truth pose to "
                     "evaluate against (--truth gives a truth file)"
                 )
             metrics = evaluate(
@@ -376,23 +431,28 @@ def run(args: argparse.Namespace) -> int:
             scores = relation_scores(result, recordings, args.relations, args.relation_stamps)
             report["relations"] = {"file": str(args.relations), **scores.summary()}
     except AssociationError as exc:
-        where = ", ".join(map(str, args.bags or [args.relations]))
+        where = ", ".join(map(str, bags or [args.relations]))
         raise CliError(f"{directory} and {where}: {exc}") from exc
-    if args.bags:
-        report["bag"] = ", ".join(map(str, args.bags))
+    if bags:
+        report["bag"] = ", ".join(map(str, bags))
     atomic_write_text(directory / METRICS_FILE, json.dumps(report, indent=1) + "\n")
     if args.json:
         print(json.dumps(report, indent=1))
         return 0
     if metrics is not None and inputs is not None:
-        print(format_table(metrics, result.method))
-        skipped = sum(inputs.scans_without_reference.values())
-        if skipped:
-            print(
-                f"({skipped} scans without a reference pose within "
-                f"{GROUND_TRUTH_MATCH_S * 1e3:g} ms were left out)"
-            )
+        print_table(metrics, inputs, result.method)
     if "relations" in report:
         print(("" if metrics is None else "\n") + format_relations(report["relations"]))
     print(f"-> {directory / METRICS_FILE}")
     return 0
+
+
+def print_table(metrics: Metrics, inputs: EvaluationInputs, method: str) -> None:
+    """The table, and how many scans it left out for want of a reference pose."""
+    print(format_table(metrics, method))
+    skipped = sum(inputs.scans_without_reference.values())
+    if skipped:
+        print(
+            f"({skipped} scans without a reference pose within "
+            f"{GROUND_TRUTH_MATCH_S * 1e3:g} ms were left out)"
+        )

@@ -1,15 +1,21 @@
 """The options that say how to read the recordings a user brings, shared by ``mrm replay``,
 ``mrm evaluate`` and ``mrm import-bag``: robot names per bag, scan topics, beam geometry and
-truth files (:mod:`multi_robot_mapper.io.recordings` does the work)."""
+truth files (:mod:`multi_robot_mapper.io.recordings` does the work); and their record in a
+replay's result folder, from which ``mrm evaluate`` reads the bags again alike."""
 
 from __future__ import annotations
 
 import argparse
+import os
+import shlex
 from collections.abc import Sequence
 from pathlib import Path
 
 from multi_robot_mapper.cli.common import CliError, missing_input
 from multi_robot_mapper.io.bags import DEFAULT_SCAN_TOPICS, ReadReport, RobotRecording
+from multi_robot_mapper.io.results import ReplayedBags
+
+DEFAULT_BEAM_GEOMETRY = "bag"
 
 GEOMETRY_HELP = (
     "the beams' angles: 'bag' (default: as each scan states them), 'carmen' (CARMEN's "
@@ -34,7 +40,9 @@ def add_recording_options(parser: argparse.ArgumentParser, *, truth: bool = True
         help="comma-separated fnmatch patterns of the scan topics, one robot each (default "
         f"{DEFAULT_SCAN_TOPICS})",
     )
-    parser.add_argument("--beam-geometry", default="bag", metavar="SPEC", help=GEOMETRY_HELP)
+    parser.add_argument(
+        "--beam-geometry", default=DEFAULT_BEAM_GEOMETRY, metavar="SPEC", help=GEOMETRY_HELP
+    )
     if truth:
         parser.add_argument(
             "--truth",
@@ -64,7 +72,7 @@ def load_recordings(
         geometry = BeamGeometry.parse(args.beam_geometry)
     except ValueError as exc:
         raise CliError(f"--beam-geometry {exc}") from exc
-    names = None if args.names is None else [n.strip() for n in args.names.split(",")]
+    names = _robot_names(args.names)
     for path in bags:
         if not Path(path).exists():
             raise missing_input(path, "bag")
@@ -81,3 +89,63 @@ def load_recordings(
         for name, path in zip(list(recordings), truth_files, strict=True):
             recordings[name] = attach_truth(recordings[name], read_truth_csv(path))
     return recordings, report
+
+
+def _robot_names(text: str | None) -> list[str] | None:
+    """``--names``' comma-separated robot names (None when not given)."""
+    return None if text is None else [n.strip() for n in text.split(",")]
+
+
+def _absolute(path: Path) -> Path:
+    # abspath, not resolve: the path as the user named it (symlinks kept), anchored at the
+    # folder mrm replay ran in, so that mrm evaluate finds it from anywhere.
+    return Path(os.path.abspath(path))
+
+
+def replayed_bags(args: argparse.Namespace, bags: Sequence[Path]) -> ReplayedBags:
+    """The record of what ``mrm replay`` read: ``bags`` and the options above, as ``args`` has
+    them."""
+    names = _robot_names(args.names)
+    return ReplayedBags(
+        bags=tuple(_absolute(Path(b)) for b in bags),
+        names=None if names is None else tuple(names),
+        scan_topics=args.scan_topics,
+        beam_geometry=args.beam_geometry,
+        truth_files=tuple(_absolute(Path(t)) for t in getattr(args, "truth", [])),
+    )
+
+
+def reading_options(
+    args: argparse.Namespace, replayed: ReplayedBags | None = None
+) -> argparse.Namespace:
+    """The options above for :func:`load_recordings`: each one given in ``args`` as given; one
+    not given (None, or no ``--truth``) as ``replayed`` recorded it, else its usual default."""
+    if replayed is None:
+        replayed = ReplayedBags((), None, DEFAULT_SCAN_TOPICS, DEFAULT_BEAM_GEOMETRY)
+    recorded_names = None if replayed.names is None else ",".join(replayed.names)
+    given_truth: list[Path] = getattr(args, "truth", [])
+
+    def given_or(value: str | None, recorded: str | None) -> str | None:
+        return recorded if value is None else value
+
+    return argparse.Namespace(
+        names=given_or(args.names, recorded_names),
+        scan_topics=given_or(args.scan_topics, replayed.scan_topics),
+        beam_geometry=given_or(args.beam_geometry, replayed.beam_geometry),
+        truth=list(given_truth or replayed.truth_files),
+    )
+
+
+def recorded_options(replayed: ReplayedBags) -> str:
+    """The options above that ``replayed`` differs from the defaults in, as a command line
+    would give them (empty when none)."""
+    words: list[str] = []
+    if replayed.names is not None:
+        words += ["--names", ",".join(replayed.names)]
+    if replayed.scan_topics != DEFAULT_SCAN_TOPICS:
+        words += ["--scan-topics", replayed.scan_topics]
+    if replayed.beam_geometry != DEFAULT_BEAM_GEOMETRY:
+        words.append(f"--beam-geometry={replayed.beam_geometry}")  # '=': a SPEC may start with -
+    for path in replayed.truth_files:
+        words += ["--truth", str(path)]
+    return shlex.join(words)

@@ -1,15 +1,16 @@
 """``mrm replay BAG [BAG ...] --out DIR [--record FILE.mcap] [--method pivot|ffs|local|reference]``:
 the pipeline offline on bags, as fast as the CPU allows, through the same core the nodes use.
 
-Writes DIR/map.json, map.svg, map.png (the merged map; a robot that could not be merged is
-drawn in a panel of its own, in its own frame), trajectories/<robot>.tum, robots.json (each
-robot's placement and its probability, or why it is unmerged) and stats.json. With --record,
+Writes DIR/map.json, map.svg, map.png (the merged map; a robot that could not be merged is drawn
+in a panel of its own, in its own frame), trajectories/<robot>.tum, robots.json (each robot's
+placement and its probability, or why it is unmerged), stats.json and replay.json (the bags read
+and the options they were read with, so that mrm evaluate DIR needs no --bag). With --record,
 also an MCAP file of the merger's outputs as they evolved (the global map, the occupancy grid,
-the robot frames as TF, the trajectories and the diagnostics, every --record-period seconds
-of bag time), which Foxglove opens and ros2 bag play replays (config/foxglove_layout.json,
-config/multi_robot_mapper.rviz). A bag is a rosbag2 folder (mcap or sqlite3), a .mcap file or
-a ROS 1 .bag; one bag may hold every robot (/<robot>/scan) or each robot bring its own (one
-bag per robot). The last line printed says how many robots were merged, and why any was not.
+the robot frames as TF, the trajectories and the diagnostics, every --record-period seconds of
+bag time), which Foxglove opens and ros2 bag play replays (config/foxglove_layout.json,
+config/multi_robot_mapper.rviz). A bag is a rosbag2 folder (mcap or sqlite3), a .mcap file or a
+ROS 1 .bag; one bag may hold every robot (/<robot>/scan) or each robot bring its own (one bag
+per robot). The last line printed says how many robots were merged, and why any was not.
 """
 
 from __future__ import annotations
@@ -32,7 +33,11 @@ from multi_robot_mapper.cli.common import (
     load_mapper_config,
     load_merger_config,
 )
-from multi_robot_mapper.cli.recordings import add_recording_options, load_recordings
+from multi_robot_mapper.cli.recordings import (
+    add_recording_options,
+    load_recordings,
+    replayed_bags,
+)
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.pipeline import METHODS, OfflineMap, TimedLaserScan
@@ -219,6 +224,7 @@ def _write_outputs(args: argparse.Namespace, folder: Path, offline: OfflineMap) 
             stats=offline.stats,
             probabilities=offline.probabilities,
             unmerged_reasons=offline.unmerged_reasons,
+            replayed=replayed_bags(args, args.bags),  # so mrm evaluate DIR needs no --bag
         ),
     )
     paths = {robot: poses for robot, (_, poses) in offline.trajectories.items()}

@@ -11,7 +11,12 @@ Layout of ``DIR``:
 - ``robots.json``: ``{robot: {"x", "y", "theta", "probability"}}`` (the pose of ``<robot>/map``
   in ``map``, and the probability that it is right when the method says) or
   ``{robot: "unmerged: <why>"}`` (``"unmerged"`` alone where no reason is known);
-- ``stats.json``: a JSON object of timings and counts.
+- ``stats.json``: a JSON object of timings and counts;
+- ``replay.json`` (written by ``mrm replay`` since issue 48; absent from older folders and from
+  results not made from bags): what was read and how, so ``mrm evaluate DIR`` can read it again
+  alike: ``{"bags": [absolute path, ...], "names": [name, ...] or null, "scan_topics":
+  "PATTERNS", "beam_geometry": "SPEC", "truth": [absolute path, ...]}`` (the options of
+  ``multi_robot_mapper.cli.recordings``; ``truth`` empty: the bags' ground_truth topics).
 
 Pictures (``map.png``, ``map.svg``) live in the same folder but are not this module's business.
 Every problem reading the folder raises :class:`ResultsError` with one line naming the file.
@@ -38,12 +43,24 @@ IntArray = NDArray[np.int64]
 MAP_FILE = "map.json"
 ROBOTS_FILE = "robots.json"
 STATS_FILE = "stats.json"
+REPLAYED_FILE = "replay.json"
 TRAJECTORY_DIR = "trajectories"
 UNMERGED = "unmerged"
 
 
 class ResultsError(Exception):
     """A result folder that is missing a file or holds a malformed one (message names the file)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ReplayedBags:
+    """The bags ``mrm replay`` read and the options it read them with (``replay.json``)."""
+
+    bags: tuple[Path, ...]  # absolute, in the order given
+    names: tuple[str, ...] | None  # --names, one per bag; None: from the topics or files
+    scan_topics: str  # --scan-topics
+    beam_geometry: str  # --beam-geometry
+    truth_files: tuple[Path, ...] = ()  # --truth, absolute; empty: the ground_truth topics
 
 
 @dataclasses.dataclass
@@ -62,6 +79,8 @@ class ReplayResult:
     # it is not placed (unmerged robots)
     probabilities: dict[str, float] = dataclasses.field(default_factory=dict)
     unmerged_reasons: dict[str, str] = dataclasses.field(default_factory=dict)
+    # None: not made from bags, or by an mrm replay from before replay.json
+    replayed: ReplayedBags | None = None
 
 
 def trajectory_path(directory: Path, robot: str) -> Path:
@@ -108,6 +127,22 @@ def write_results(directory: Path, result: ReplayResult) -> None:
             frames[robot]["probability"] = float(result.probabilities[robot])
     _write_json(directory / ROBOTS_FILE, frames)
     _write_json(directory / STATS_FILE, result.stats)
+    replayed_path = directory / REPLAYED_FILE
+    if result.replayed is None:
+        # A record left by an earlier write would name bags this result was not made from.
+        replayed_path.unlink(missing_ok=True)
+    else:
+        _write_json(replayed_path, _replayed_json(result.replayed))
+
+
+def _replayed_json(replayed: ReplayedBags) -> dict[str, Any]:
+    return {
+        "bags": [str(path) for path in replayed.bags],
+        "names": None if replayed.names is None else list(replayed.names),
+        "scan_topics": replayed.scan_topics,
+        "beam_geometry": replayed.beam_geometry,
+        "truth": [str(path) for path in replayed.truth_files],
+    }
 
 
 def write_tum(path: Path, stamps: FloatArray, poses: FloatArray) -> None:
@@ -168,6 +203,7 @@ def read_results(directory: Path) -> ReplayResult:
         stats=stats,
         probabilities=probabilities,
         unmerged_reasons=reasons,
+        replayed=read_replayed(directory / REPLAYED_FILE),
     )
 
 
@@ -229,6 +265,44 @@ def _read_robot_frames(
         if isinstance(entry, str) and entry.startswith(f"{UNMERGED}: "):
             reasons[robot] = entry[len(UNMERGED) + 2 :]
     return frames, probabilities, reasons
+
+
+def read_replayed(path: Path) -> ReplayedBags | None:
+    """``replay.json``: the bags and options ``mrm replay`` read (None when the file is absent:
+    a folder from before the record, or a result not made from bags)."""
+    if not path.exists():
+        return None
+    data = _read_json(path)
+    if not isinstance(data, dict):
+        raise ResultsError(f"{path}: expected a JSON object with 'bags' and the reading options")
+    bags = _absolute_paths(data.get("bags"), path, "bags")
+    if not bags:
+        raise ResultsError(f"{path}: 'bags' must name at least one bag")
+    names = data.get("names")
+    if names is not None and not (
+        isinstance(names, list) and all(isinstance(n, str) and n for n in names)
+    ):
+        raise ResultsError(f"{path}: 'names' must be null or a list of robot names")
+    texts = {key: data.get(key) for key in ("scan_topics", "beam_geometry")}
+    for key, value in texts.items():
+        if not isinstance(value, str) or not value:
+            raise ResultsError(f"{path}: '{key}' must be a non-empty string")
+    return ReplayedBags(
+        bags=bags,
+        names=None if names is None else tuple(names),
+        scan_topics=str(texts["scan_topics"]),
+        beam_geometry=str(texts["beam_geometry"]),
+        truth_files=_absolute_paths(data.get("truth"), path, "truth"),
+    )
+
+
+def _absolute_paths(value: Any, path: Path, key: str) -> tuple[Path, ...]:
+    # Relative paths would be read from wherever mrm evaluate happens to run: refused.
+    if not isinstance(value, list) or not all(
+        isinstance(v, str) and Path(v).is_absolute() for v in value
+    ):
+        raise ResultsError(f"{path}: '{key}' must be a list of absolute paths")
+    return tuple(Path(v) for v in value)
 
 
 def read_tum(path: Path) -> tuple[FloatArray, FloatArray]:
