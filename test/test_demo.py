@@ -37,6 +37,8 @@ def test_the_demo_places_robots_right_live_and_writes_its_files(tmp_path: Path) 
     assert (tmp_path / "bag" / "metadata.yaml").exists()
     back = read_results(tmp_path / "result")
     assert [r for r in back.robots if back.robot_frames[r] is not None] == result.merged
+    # It records its bag where it lies now: mrm evaluate DIR/result needs no --bag.
+    assert back.replayed is not None and back.replayed.bags == ((tmp_path / "bag").resolve(),)
     metrics = json.loads((tmp_path / "result" / "metrics.json").read_text())
     assert metrics["robots_merged"] == len(result.merged)
     saved = read_saved_map(tmp_path / "saved_map.json")
