@@ -192,15 +192,16 @@ def figure(path: Path, sets: list[np.ndarray], r0, first, distortion: str) -> No
     import matplotlib.pyplot as plt
 
     start, result = first
-    fig, axes = plt.subplots(1, 3, figsize=(15, 5))
+    fig, axes = plt.subplots(1, 4, figsize=(20, 5))
     axes[0].plot(r0.potentials, label="R0 (from the reference poses)")
     axes[0].plot(result.potentials, label=f"seed 0 (perturbed {distortion})")
     axes[0].set_xlabel("iteration")
     axes[0].set_ylabel("potential P (at the iteration's sigma)")
     axes[0].legend()
     panels = (
-        (axes[1], start, f"seed 0 perturbed {distortion}"),
-        (axes[2], result.poses, "after FFS"),
+        (axes[1], r0.poses, "R0"),
+        (axes[2], start, f"seed 0 perturbed {distortion}"),
+        (axes[3], result.poses, "after FFS"),
     )
     for axis, poses, title in panels:
         for segments, pose in zip(sets, poses, strict=True):
