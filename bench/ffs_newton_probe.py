@@ -3,7 +3,7 @@
 the paper's potential, to tell apart what the optimiser misses from what the field itself allows.
 
     .venv/bin/python -m bench.ffs_newton_probe [--log intel] [--seeds 3] [--distortion 0.02,1]
-        [--start-sigma 0] [--steps 44] [--iterations 150]
+        [--start-sigma 0] [--steps 44] [--iterations 150] [--body-length 0]
 
 The potential is the paper's (Eq. 2-5): ``P = -sum m_p m_q max(cos, 0) exp(-|p - q|^2 / 2 sigma^2)``
 over point pairs of different bodies, cut at 4 sigma, segments resampled every 0.05 m (at most
@@ -14,7 +14,9 @@ are summed per pair of bodies; the step solves the 3n x 3n system (Levenberg-Mar
 only where P falls) until no body moves more than 0.02 mm. ``--start-sigma S`` first cools sigma
 linearly from S to 0.04 m in ``--steps`` iterations, one damped Newton step each, no body moving
 more than sigma / 2 per iteration (at its RMS radius). R0 is the same optimiser from the reference
-poses at sigma = 0.04 m; the first body holds the frame. Prints Markdown, one row per seed.
+poses at sigma = 0.04 m; the first body holds the frame. ``--body-length M`` groups consecutive
+keyframes into bodies of M metres of wall, as ``ffs_bench --grouped``. Prints Markdown, one row
+per seed.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from bench.ffs_bench import keyframe_scans  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.ffs import Bodies, make_bodies  # noqa: E402
 from multi_robot_mapper.core.ffs.bodies import placed  # noqa: E402
+from multi_robot_mapper.core.merging.ffs import body_chunks, body_segments  # noqa: E402
 
 FloatArray = NDArray[np.float64]
 SIGMA_END = 0.04
@@ -181,9 +184,14 @@ def main() -> None:
     parser.add_argument("--start-sigma", type=float, default=0.0, help="m; 0: settle only")
     parser.add_argument("--steps", type=int, default=44)
     parser.add_argument("--iterations", type=int, default=150)
+    parser.add_argument("--body-length", type=float, default=0.0, help="m of wall per body")
     args = parser.parse_args()
     shift, turn = (float(v) for v in args.distortion.split(","))
     sets, reference, _ = keyframe_scans(args.log, 60)
+    if args.body_length > 0.0:  # consecutive keyframes grouped as ffs_bench --grouped does
+        views = {args.log: [(k, reference[k], segments) for k, segments in enumerate(sets)]}
+        chunks = body_chunks(views, [(args.log, k) for k in range(len(sets))], args.body_length)
+        reference, sets = body_segments(chunks, reference, sets)
     levels = {s: make_bodies(sets, s, 0.05, 3.0) for s in SPACINGS}
     fine = levels[SPACINGS[0]]
     count = len(sets)
