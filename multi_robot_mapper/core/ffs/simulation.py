@@ -72,9 +72,6 @@ class FieldStep:
     torque: FloatArray  # (K,) sum of (p - c) x F(p) about the body's rotation centre
     potential: float
     pairs: int  # point pairs within the cut-off, of different bodies
-    # (K,) moment of inertia about the rotation centre of the points the field reaches: each
-    # point's mass times the share of a wall's pull it feels (at most 1); see force_field.
-    reach_inertia: FloatArray
 
 
 def force_field(
@@ -84,25 +81,20 @@ def force_field(
     centres: FloatArray,
     sigma: float,
     cutoff: float,
-    spacing: float = 0.0,
 ) -> FieldStep:
     """Eq. 2 and 3 summed per body, and the torques (``points``, ``directions`` in ``map``;
-    ``centres`` (K, 2) the rotation centres). With the resampling ``spacing`` (m), also each
-    body's moment of inertia of the points in reach: a point counts with its mass times its
-    kernel sum over a wall's (``sqrt(2 pi) sigma / spacing`` for a point lying on a wall of unit
-    masses), at most its mass; 0 without."""
+    ``centres`` (K, 2) the rotation centres)."""
     count = bodies.count
     force = np.zeros((count, 2))
     torque = np.zeros(count)
-    reach_inertia = np.zeros(count)
     if len(points) < 2:
-        return FieldStep(force, torque, 0.0, 0, reach_inertia)
+        return FieldStep(force, torque, 0.0, 0)
     pairs = cKDTree(points).query_pairs(cutoff * sigma, output_type="ndarray")
     i, j = pairs[:, 0], pairs[:, 1]
     other = bodies.body[i] != bodies.body[j]
     i, j = i[other], j[other]
     if len(i) == 0:
-        return FieldStep(force, torque, 0.0, 0, reach_inertia)
+        return FieldStep(force, torque, 0.0, 0)
     gap = points[j] - points[i]  # from p_i to p_j
     # Eq. 2's cosine, of faces: walls seen from opposite sides (the two faces of one wall)
     # pull no more than orthogonal ones (bodies module doc).
@@ -117,26 +109,7 @@ def force_field(
     force[:, 1] = np.bincount(owner, pulls[:, 1], count)
     arm = points[ends] - centres[owner]
     torque[:] = np.bincount(owner, arm[:, 0] * pulls[:, 1] - arm[:, 1] * pulls[:, 0], count)
-    if spacing > 0.0:
-        reach_inertia[:] = _reach_inertia(points, bodies, centres, ends, w, sigma / spacing)
-    return FieldStep(force, torque, float(-w.sum()), len(i), reach_inertia)
-
-
-def _reach_inertia(
-    points: FloatArray,
-    bodies: Bodies,
-    centres: FloatArray,
-    ends: IntArray,
-    w: FloatArray,
-    sigma_per_spacing: float,
-) -> FloatArray:
-    """(K,) sum over each body's points of min(m, W / W_wall) |p - c|^2, W a point's kernel sum
-    (``w`` over the pairs whose ``ends`` it is, both halves), W_wall = m sqrt(2 pi) sigma /
-    spacing the sum of a point lying on a wall of unit masses."""
-    kernel = np.bincount(ends, np.concatenate([w, w]), len(points))
-    share = np.minimum(bodies.masses, kernel / (np.sqrt(2.0 * np.pi) * sigma_per_spacing))
-    arm = points - centres[bodies.body]
-    return np.bincount(bodies.body, share * np.sum(arm**2, axis=1), bodies.count)
+    return FieldStep(force, torque, float(-w.sum()), len(i))
 
 
 def run_ffs(
@@ -171,9 +144,7 @@ def run_ffs(
         # Rotation centre: centre of mass -> sensor origin as sigma cools (FFS 3.5).
         cooled = (config.sigma_start - sigma) / span
         centres = _rotation_centres(poses, moments.com_local, cooled)
-        field = force_field(
-            points, directions, bodies, centres, sigma, config.cutoff, config.spacing
-        )
+        field = force_field(points, directions, bodies, centres, sigma, config.cutoff)
         spring = springs.acceleration(poses)
         potentials.append(field.potential)
         relocation = _step(poses, field, spring, centres, moments, free, cooled, sigma, dt, config)
@@ -239,7 +210,7 @@ def _step(
     """One step of the free bodies (``poses`` moved in place) by the field and the springs'
     accelerations: ½·a·Δt², turning about the rotation centres; the mean relocation of the
     free bodies (m)."""
-    mass, radius = moments.mass, moments.radius
+    mass, com_local, radius = moments.mass, moments.com_local, moments.radius
     # Accelerations (Eq. 6-7): force over mass, torque over moment of inertia, both in
     # units of a body lying fully on another's walls (a point there has the kernel's sum
     # sqrt(2 pi) sigma / spacing of neighbours on a line): then 1/2 a dt^2 with dt = 1 is
@@ -248,17 +219,13 @@ def _step(
     contact = np.sqrt(2.0 * np.pi) * sigma / config.spacing / sigma**2
     # Moment of inertia about the centre a * com (a = 1 - cooled), from the body's second
     # moment: sum m |p - a com|^2 = M (r^2 - (2a - a^2) |com|^2), no pass over the points.
-    # Torque over the moment of inertia of the points the field reaches (issue 51): a body
-    # turned so far that its distant walls left the field turns back on its near ones, not at
-    # the pace that its out-of-reach points would set; no point at the body's RMS radius turns
-    # by more than sigma per iteration.
-    inertia = field.reach_inertia
+    a = 1.0 - cooled
+    inertia = mass * (radius**2 - (2.0 * a - a * a) * np.sum(com_local**2, axis=1))
     translation = field.force / (mass[:, None] * contact)
     rotation = np.where(inertia > 1e-12, field.torque / (np.maximum(inertia, 1e-12) * contact), 0.0)
     step = 0.5 * dt**2
     shift = step * translation * free[:, None]
-    bound = sigma / np.maximum(radius, 1e-12)
-    turn = np.clip(step * rotation, -bound, bound) * free
+    turn = step * rotation * free
     # Turning about the centre moves the body's origin too.
     arm = poses[:, :2] - centres
     ct, st = np.cos(turn), np.sin(turn)
