@@ -35,8 +35,9 @@ def feature_rows(count: int, width: int) -> np.ndarray:
 def test_a_decision_model_weighs_as_the_join_model_did(name: str) -> None:
     data = json.loads(shipped_text(EVIDENCE, name))
     model = evidence_model.installed_model(name)
-    for row in feature_rows(50, len(evidence_model.FEATURES)):
-        values = dict(zip(evidence_model.FEATURES, row.tolist(), strict=True))
+    names = (*evidence_model.FEATURES, evidence_model.PRIOR_FEATURE)
+    for row in feature_rows(50, len(names)):
+        values = dict(zip(names, row.tolist(), strict=True))
         # the join model's probability before core/logistic.py, on the file's own numbers.
         z = float(data["intercept"]) + sum(
             float(w) * values[f] for f, w in zip(data["features"], data["weights"], strict=True)
