@@ -31,21 +31,16 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from multi_robot_mapper.cli.recordings import DEFAULT_BEAM_GEOMETRY
+from multi_robot_mapper.cli.recordings import read_as_usual
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, simulate_robots
 from multi_robot_mapper.core.worlds import WORLDS
 from multi_robot_mapper.evaluation.metrics import Metrics, evaluate
 from multi_robot_mapper.io import pictures
-from multi_robot_mapper.io.bags import (
-    DEFAULT_SCAN_TOPICS,
-    RobotRecording,
-    recording_of,
-    write_recordings,
-)
+from multi_robot_mapper.io.bags import RobotRecording, recording_of, write_recordings
 from multi_robot_mapper.io.output_bag import OutputBag
 from multi_robot_mapper.io.outputs import atomic_write_text, staged_entries
-from multi_robot_mapper.io.results import ReplayedBags, ReplayResult, write_results
+from multi_robot_mapper.io.results import ReplayResult, write_results
 from multi_robot_mapper.ros.live import GlobalMapView, Observer, PlayStats, ScanPlayer, timeline
 from multi_robot_mapper.ros.map_merger import MapMerger
 from multi_robot_mapper.ros.markers import grid_from_msg
@@ -267,9 +262,7 @@ def run_demo(out_dir: Path, scenario: DemoScenario | None = None) -> DemoResult:
         # ``mrm evaluate OUT/result`` scores against it without --bag.
         result = dataclasses.replace(
             live_results(live.observer),
-            replayed=ReplayedBags(
-                (out_dir.resolve() / "bag",), None, DEFAULT_SCAN_TOPICS, DEFAULT_BEAM_GEOMETRY
-            ),
+            replayed=read_as_usual([out_dir.resolve() / "bag"]),
         )
         made["result"] = staging / "result"
         write_results(made["result"], result)

@@ -115,13 +115,18 @@ def replayed_bags(args: argparse.Namespace, bags: Sequence[Path]) -> ReplayedBag
     )
 
 
+def read_as_usual(bags: Sequence[Path] = ()) -> ReplayedBags:
+    """The record of ``bags`` read with every option at its usual default."""
+    return ReplayedBags(tuple(bags), None, DEFAULT_SCAN_TOPICS, DEFAULT_BEAM_GEOMETRY)
+
+
 def reading_options(
     args: argparse.Namespace, replayed: ReplayedBags | None = None
 ) -> argparse.Namespace:
     """The options above for :func:`load_recordings`: each one given in ``args`` as given; one
     not given (None, or no ``--truth``) as ``replayed`` recorded it, else its usual default."""
     if replayed is None:
-        replayed = ReplayedBags((), None, DEFAULT_SCAN_TOPICS, DEFAULT_BEAM_GEOMETRY)
+        replayed = read_as_usual()
     recorded_names = None if replayed.names is None else ",".join(replayed.names)
     given_truth: list[Path] = getattr(args, "truth", [])
 
