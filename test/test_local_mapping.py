@@ -475,9 +475,9 @@ def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
 @pytest.mark.usefixtures("as_matched")
 @pytest.mark.parametrize(
     ("own_turn", "own_confidence", "integrated"),
-    [(0.0, 0.2, True), (81.0, 0.99, False), (-7.0, 0.7, False)],
+    [(0.0, 0.2, True), (81.0, 0.99, False), (-7.0, 0.7, True)],
 )
-def test_a_scan_its_own_piece_matches_likely_is_not_put_in_another(
+def test_a_scan_its_own_piece_matches_where_the_robot_cannot_be_is_not_put_in_another(
     monkeypatch,  # type: ignore[no-untyped-def]
     own_turn: float,
     own_confidence: float,
@@ -488,12 +488,12 @@ def test_a_scan_its_own_piece_matches_likely_is_not_put_in_another(
     # keyframes matched it at 0.96-0.998 turned 81 deg in 0.1 s (a right-angle look-alike the
     # turn bound refuses); two keyframes of the piece it had left 20 s before (piece 0) then
     # agreed at 0.998 and 0.997 on a placement 11.4 m and 90 deg from the truth, within the
-    # 0.8 m/s x 20 s it can have driven since, and its map went on there turned 90 deg.
-    # Robot3 scan 1019 alike, its own piece's match right but not sure (0.98 against an older
-    # keyframe, which settles nothing alone). A scan its own piece matches likely, where the
-    # robot can be or not, is not put in another piece: it is not integrated (held). The
-    # same matches in another piece, when its own piece does not know the scan (0.2), put
-    # it back there as before.
+    # 0.8 m/s x 20 s it can have driven since, and its map went on there turned 90 deg. A
+    # scan that matched its own piece likely where the robot cannot be is not put in another
+    # piece: it is not integrated (held). The same matches in another piece, when its own
+    # piece does not know the scan (0.2) or matches it where the robot can be but not surely
+    # (0.7: building 110's robot2 went back to the piece it had left, right, so), put it
+    # back there as before.
     scan = stranger_scan()
     segments, _ = extract_scan(scan, EXTRACTION)
     own, first, second = (segments.segments.copy() for _ in range(3))

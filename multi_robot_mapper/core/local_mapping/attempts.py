@@ -423,28 +423,29 @@ class _ScanMatching:
         """Can the robot have driven to the placement of ``a`` since it was last placed (in
         its own piece, or in another where it was last placed there), and in its own piece
         turned to it (PLAUSIBLE_TURN_RATE)? In another piece, not once the scan has matched
-        its own piece likely (:meth:`_known_here`)."""
-        if a.piece != self.current and self._known_here():
+        its own piece likely where the robot cannot be (:meth:`_fooled`)."""
+        if a.piece != self.current and self._fooled():
             return False
         return self._driven_to(a)
 
-    def _known_here(self) -> bool:
-        """Has the scan matched the robot's own piece likely (by the match's own evidence)?"""
-        # Then the robot's own piece explains the scan (where it can have driven: it is most
-        # likely still there, only not sure enough to integrate) or the scan fools matching
-        # (a look-alike of where the robot is, placed where it cannot be). Either way a move
-        # to another piece, which no motion bounds in heading (nor in position but by the
-        # reach of the seconds since it left there), has only such matches to vouch for it:
-        # the scan is held, and the back end joins the pieces on the evidence of their
-        # windows. Generated building 119 (a hall of pillars, 90 deg look-alikes): the front
-        # end moved its robots between pieces 7 times, all wrong (8-16 m or 90-180 deg off;
-        # two maps turned 90 deg, 8 wrong loop closures on them), each time with a likely
-        # match in the robot's own piece: robot1 scan 655, tracked at 0.999 the scan before,
-        # matched its own keyframes at 0.96-0.998 turned 81 deg in 0.1 s, and two keyframes
-        # of the piece it had left 20 s before at 0.998 and 0.997, 11.4 m and 90 deg off;
-        # robot3 scan 1019 its own keyframe at 0.98, right, and two of another piece at 0.93,
-        # 8.3 m and 90 deg off.
-        return any(a.piece == self.current and a.result.confidence >= LIKELY for a in self.attempts)
+    def _fooled(self) -> bool:
+        """Has the scan matched the robot's own piece likely where the robot cannot be?"""
+        # Then the scan fools matching (a look-alike of where the robot is), and a move to
+        # another piece, which no motion bounds in heading (nor in position but by the reach
+        # of the seconds since it left there), has only such matches to vouch for it: the
+        # scan is held, and the back end joins the pieces on the evidence of their windows.
+        # Generated building 119 (a hall of pillars, 90 deg look-alikes): the front end moved
+        # its robots between pieces 7 times, all wrong (8-16 m or 90-180 deg off; two maps
+        # turned 90 deg, 8 wrong loop closures on them), 6 of them with such a match: robot1
+        # scan 655, tracked at 0.999 the scan before, matched its own keyframes at
+        # 0.96-0.998 turned 81 deg in 0.1 s, and two keyframes of the piece it had left 20 s
+        # before at 0.998 and 0.997, 11.4 m and 90 deg off. A likely match where the robot
+        # can be does not stop the move: building 110's robot2 went back to the piece it had
+        # left 12.6 s before, right, its own piece's match 0.74.
+        return any(
+            a.piece == self.current and a.result.confidence >= LIKELY and not self._driven_to(a)
+            for a in self.attempts
+        )
 
     def _driven_to(self, a: Attempt) -> bool:
         """:meth:`reachable`, by the robot's motion alone."""
