@@ -473,6 +473,68 @@ def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
 
 
 @pytest.mark.usefixtures("as_matched")
+@pytest.mark.parametrize(
+    ("own_turn", "own_confidence", "integrated"),
+    [(0.0, 0.2, True), (81.0, 0.99, False), (-7.0, 0.7, True)],
+)
+def test_a_scan_its_own_piece_matches_where_the_robot_cannot_be_is_not_put_in_another(
+    monkeypatch,  # type: ignore[no-untyped-def]
+    own_turn: float,
+    own_confidence: float,
+    integrated: bool,
+) -> None:
+    # Generated building 119 (a hall of pillars), robot1 scan 655: tracked at 0.999 the scan
+    # before in its piece (here piece 1, at its origin), the robot's own last scan and
+    # keyframes matched it at 0.96-0.998 turned 81 deg in 0.1 s (a right-angle look-alike the
+    # turn bound refuses); two keyframes of the piece it had left 20 s before (piece 0) then
+    # agreed at 0.998 and 0.997 on a placement 11.4 m and 90 deg from the truth, within the
+    # 0.8 m/s x 20 s it can have driven since, and its map went on there turned 90 deg. A
+    # scan that matched its own piece likely where the robot cannot be is not put in another
+    # piece: it is not integrated (held). The same matches in another piece, when its own
+    # piece does not know the scan (0.2) or matches it where the robot can be but not surely
+    # (0.7: building 110's robot2 went back to the piece it had left, right, so), put it
+    # back there as before.
+    scan = stranger_scan()
+    segments, _ = extract_scan(scan, EXTRACTION)
+    own, first, second = (segments.segments.copy() for _ in range(3))
+    look_alike = (0.1, 0.0, float(np.radians(own_turn)))
+
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
+        if reference is first:
+            pose, confidence = (1.5, 0.0, np.pi / 2), 0.998  # keyframe 0 at the origin
+        elif reference is second:
+            pose, confidence = (0.5, 0.0, np.pi / 2), 0.997  # keyframe 2, 1 m along x
+        else:
+            pose, confidence = look_alike, own_confidence  # the robot's own last scan
+        return fake_match(pose, confidence, judged)
+
+    monkeypatch.setattr(attempts, "integrate", fake)
+    references = attempts.References(
+        here=(0.0, 0.0, 0.0),
+        last=attempts.Reference(own, scan, attempts.Anchor(1, (0.0, 0.0, 0.0)), 0.0),
+        keyframe=1,
+        older=[0, 2],
+        poses={0: (0.0, 0.0, 0.0), 1: (0.0, 0.0, 0.0), 2: (1.0, 0.0, 0.0)},
+        pieces={0: 0, 1: 1, 2: 0},
+        scans={
+            k: keyframe_map.KeyframeScan(k, 0.0, s, scan)
+            for k, s in ((0, first), (1, own), (2, second))
+        },
+        left={0: ((0.0, 0.0, 0.0), 20.0)},
+        top_speed=0.8,
+        elapsed=0.1,
+        period=0.1,
+    )
+    chosen, placed, _ = attempts.match_scan(
+        LocalMapperConfig(), references, own, scan, [(0.08, 0.0, -0.16)], False, lambda *_: None
+    )
+    assert placed == integrated
+    if integrated:
+        assert chosen.piece == 0
+        np.testing.assert_allclose(chosen.pose, (1.5, 0.0, np.pi / 2))
+
+
+@pytest.mark.usefixtures("as_matched")
 @pytest.mark.parametrize(("second_confidence", "kept"), [(0.9, "second"), (0.1, "first")])
 def test_a_search_that_is_not_confident_is_searched_again_with_the_shapes(
     monkeypatch,  # type: ignore[no-untyped-def]

@@ -422,7 +422,33 @@ class _ScanMatching:
     def reachable(self, a: Attempt) -> bool:
         """Can the robot have driven to the placement of ``a`` since it was last placed (in
         its own piece, or in another where it was last placed there), and in its own piece
-        turned to it (PLAUSIBLE_TURN_RATE)?"""
+        turned to it (PLAUSIBLE_TURN_RATE)? In another piece, not once the scan has matched
+        its own piece likely where the robot cannot be (:meth:`_fooled`)."""
+        if a.piece != self.current and self._fooled():
+            return False
+        return self._driven_to(a)
+
+    def _fooled(self) -> bool:
+        """Has the scan matched the robot's own piece likely where the robot cannot be?"""
+        # Then the scan fools matching (a look-alike of where the robot is), and a move to
+        # another piece, which no motion bounds in heading (nor in position but by the reach
+        # of the seconds since it left there), has only such matches to vouch for it: the
+        # scan is held, and the back end joins the pieces on the evidence of their windows.
+        # Generated building 119 (a hall of pillars, 90 deg look-alikes): the front end moved
+        # its robots between pieces 7 times, all wrong (8-16 m or 90-180 deg off; two maps
+        # turned 90 deg, 8 wrong loop closures on them), 6 of them with such a match: robot1
+        # scan 655, tracked at 0.999 the scan before, matched its own keyframes at
+        # 0.96-0.998 turned 81 deg in 0.1 s, and two keyframes of the piece it had left 20 s
+        # before at 0.998 and 0.997, 11.4 m and 90 deg off. A likely match where the robot
+        # can be does not stop the move: building 110's robot2 went back to the piece it had
+        # left 12.6 s before, right, its own piece's match 0.74.
+        return any(
+            a.piece == self.current and a.result.confidence >= LIKELY and not self._driven_to(a)
+            for a in self.attempts
+        )
+
+    def _driven_to(self, a: Attempt) -> bool:
+        """:meth:`reachable`, by the robot's motion alone."""
         # In its own piece, the robot is no farther from its last placed scan than it drives
         # at ``plausible_speed`` (or its own top speed, when faster) in the time since, plus
         # the correctness tolerance: a scan of another place or of another building can match
