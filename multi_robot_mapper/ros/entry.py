@@ -5,10 +5,12 @@ from __future__ import annotations
 import faulthandler
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 
 import rclpy
+from rclpy import signals
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
@@ -44,6 +46,7 @@ def run_nodes(
         # launcher stopping them early), is a normal shutdown.
         if not _shutdown_requested(exc):
             raise
+        _await_signal_shutdown()
     finally:
         spinner.shutdown()
         _finish_callbacks(spinner)
@@ -75,6 +78,21 @@ def _shutdown_requested(exc: BaseException) -> bool:
     if isinstance(exc, (KeyboardInterrupt, ExternalShutdownException)):
         return True
     return isinstance(exc, Exception) and not rclpy.ok()
+
+
+def _await_signal_shutdown(timeout: float = 2.0) -> None:
+    """After Ctrl-C, wait (bounded) for rclpy's signal thread to finish shutting the context down
+    before anything is torn down. On SIGINT Python raises KeyboardInterrupt in the main thread at
+    once, while rclpy's own handler thread is still shutting the context down and waking the
+    executors; tearing the executor and the nodes down under it crashed map_merger once (a
+    segfault in a native thread; test_bad_scans_node, SIGINT after a merge, a loaded machine).
+    Context.ok() takes the lock its shutdown holds, so once it is False that shutdown is over.
+    Without rclpy's handlers (SignalHandlerOptions.NO) nobody shuts the context down: no wait."""
+    if signals.get_current_signal_handlers_options() == signals.SignalHandlerOptions.NO:
+        return
+    deadline = time.monotonic() + timeout
+    while rclpy.ok() and time.monotonic() < deadline:
+        time.sleep(0.01)
 
 
 def _finish_callbacks(spinner: Executor, timeout: float = 10.0) -> None:
