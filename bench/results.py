@@ -104,14 +104,22 @@ BLOCKS = (
         hours=0.5,
     ),
     Block(
-        "decisions_own",
-        "Placements published wrong, robots merged, closures and joins, on the robots' own maps",
+        "decisions_bags_own",
+        "Placements published wrong, robots merged, closures and joins: dense bags, own maps",
         (
             (
                 *("bench.decisions", "collect", "--source", "bag"),
                 *("--bags", "mit-csail", "fr079", "aces", "--robots", "2", "4"),
                 *("--maps", "own", "--updates", "8", "--jobs", "2", "--work", "{work}"),
             ),
+        ),
+        ("bench.decisions", "table", "--work", "{work}"),
+        hours=1.0,
+    ),
+    Block(
+        "decisions_generated_own",
+        "The same on generated buildings 244-273, each robot mapped by its own back end",
+        (
             (
                 *("bench.decisions", "collect", "--source", "generated"),
                 *("--first", "244", "--count", "30", "--maps", "own", "--updates", "3"),
