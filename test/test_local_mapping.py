@@ -539,6 +539,60 @@ def test_a_scan_its_own_piece_matches_where_the_robot_cannot_be_is_not_put_in_an
 
 
 @pytest.mark.usefixtures("as_matched")
+@pytest.mark.parametrize(("home_confidence", "moved"), [(0.98, False), (0.7, True)])
+def test_a_scan_its_own_piece_matches_more_surely_where_the_robot_can_be_stays_home(
+    monkeypatch,  # type: ignore[no-untyped-def]
+    home_confidence: float,
+    moved: bool,
+) -> None:
+    # Generated building 119, robot3 scan 1019: an older keyframe of its own piece matched it
+    # at 0.98 where the robot can be (right, but an older keyframe settles nothing alone); two
+    # keyframes of another piece agreed at 0.93, 8.3 m and 90 deg off, and the robot moved
+    # there. The piece that matches the scan less surely than the robot's own does not take
+    # it; when its own matches less surely (building 110's robot2, 0.74, going back right to
+    # the piece it had left), the move is made as before.
+    scan = stranger_scan()
+    segments, _ = extract_scan(scan, EXTRACTION)
+    own, older, first, second = (segments.segments.copy() for _ in range(4))
+
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
+        if reference is first:
+            pose, confidence = (1.5, 0.0, np.pi / 2), 0.93  # keyframe 0 at the origin
+        elif reference is second:
+            pose, confidence = (0.5, 0.0, np.pi / 2), 0.92  # keyframe 2, 1 m along x
+        elif reference is older:
+            pose, confidence = (0.08, 0.0, -0.1), home_confidence  # keyframe 3, own piece
+        else:
+            pose, confidence = (0.3, 2.0, 1.0), 0.2  # the robot's own last scan: no match
+        return fake_match(pose, confidence, judged)
+
+    monkeypatch.setattr(attempts, "integrate", fake)
+    references = attempts.References(
+        here=(0.0, 0.0, 0.0),
+        last=attempts.Reference(own, scan, attempts.Anchor(1, (0.0, 0.0, 0.0)), 0.0),
+        keyframe=1,
+        older=[3, 0, 2],
+        poses={0: (0.0, 0.0, 0.0), 1: (0.0, 0.0, 0.0), 2: (1.0, 0.0, 0.0), 3: (0.0, 0.0, 0.0)},
+        pieces={0: 0, 1: 1, 2: 0, 3: 1},
+        scans={
+            k: keyframe_map.KeyframeScan(k, 0.0, s, scan)
+            for k, s in ((0, first), (1, own), (2, second), (3, older))
+        },
+        left={0: ((0.0, 0.0, 0.0), 20.0)},
+        top_speed=0.8,
+        elapsed=0.1,
+        period=0.1,
+    )
+    chosen, placed, _ = attempts.match_scan(
+        LocalMapperConfig(), references, own, scan, [(0.08, 0.0, -0.1)], False, lambda *_: None
+    )
+    assert placed == moved
+    assert chosen.piece == (0 if moved else 1)
+    if moved:
+        np.testing.assert_allclose(chosen.pose, (1.5, 0.0, np.pi / 2))
+
+
+@pytest.mark.usefixtures("as_matched")
 @pytest.mark.parametrize(("second_confidence", "kept"), [(0.9, "second"), (0.1, "first")])
 def test_a_search_that_is_not_confident_is_searched_again_with_the_shapes(
     monkeypatch,  # type: ignore[no-untyped-def]
