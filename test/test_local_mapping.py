@@ -424,6 +424,46 @@ def test_degenerate_scans_let_through_are_never_placed_in_the_map() -> None:
     assert ate(times, poses, truth_at) < 0.02
 
 
+def _match_in_two_pieces(
+    monkeypatch,  # type: ignore[no-untyped-def]
+    matches: dict[int, tuple[tuple[float, float, float], float]],
+    older: list[int],
+    motion: tuple[float, float, float],
+    left_seconds: float,
+    top_speed: float,
+    **timing: float,
+) -> tuple[attempts.Attempt, bool, bool]:
+    """:func:`attempts.match_scan` of a scan of a robot in piece 1 (keyframe 1, its last scan,
+    and keyframe 3, both at the origin), beside piece 0 (keyframe 0 at the origin, keyframe 2
+    1 m along x), which it left ``left_seconds`` ago at its origin; ``matches`` gives each
+    keyframe's (placement, confidence) from a fake INTEGRATE."""
+    scan = stranger_scan()
+    segments, _ = extract_scan(scan, EXTRACTION)
+    keyframes = {k: segments.segments.copy() for k in (0, 1, 2, 3)}
+
+    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
+        pose, confidence = matches[next(k for k, s in keyframes.items() if s is reference)]
+        return fake_match(pose, confidence, judged)
+
+    monkeypatch.setattr(attempts, "integrate", fake)
+    origin = (0.0, 0.0, 0.0)
+    references = attempts.References(
+        here=origin,
+        last=attempts.Reference(keyframes[1], scan, attempts.Anchor(1, origin), 0.0),
+        keyframe=1,
+        older=older,
+        poses={0: origin, 1: origin, 2: (1.0, 0.0, 0.0), 3: origin},
+        pieces={0: 0, 1: 1, 2: 0, 3: 1},
+        scans={k: keyframe_map.KeyframeScan(k, 0.0, s, scan) for k, s in keyframes.items()},
+        left={0: (origin, left_seconds)},
+        top_speed=top_speed,
+        **timing,
+    )
+    return attempts.match_scan(
+        LocalMapperConfig(), references, keyframes[1], scan, [motion], False, lambda *_: None
+    )
+
+
 @pytest.mark.usefixtures("as_matched")
 @pytest.mark.parametrize(("placed_at", "integrated"), [(1.5, True), (6.0, False)])
 def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
@@ -436,36 +476,13 @@ def test_a_lost_robot_is_put_back_only_where_it_can_have_driven(
     # two keyframes of piece 0 agree on one placement: 1.5 m away they put it back; 6 m away
     # they are a look-alike place (agreeing as well as two right ones) and the robot stays
     # lost in its own piece, its guess the best placement it can have driven to.
-    scan = stranger_scan()
-    segments, _ = extract_scan(scan, EXTRACTION)
-    own, first, second = (segments.segments.copy() for _ in range(3))
-
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
-        if reference is first:
-            pose, confidence = (placed_at, 0.0, 0.0), 0.7  # keyframe 0 at the origin
-        elif reference is second:
-            pose, confidence = (placed_at - 1.0, 0.0, 0.0), 0.6  # keyframe 2, 1 m along x
-        else:
-            pose, confidence = (0.0, 0.0, 0.0), 0.2  # the last scan: no idea
-        return fake_match(pose, confidence, judged)
-
-    monkeypatch.setattr(attempts, "integrate", fake)
-    references = attempts.References(
-        here=(0.0, 0.0, 0.0),
-        last=attempts.Reference(own, scan, attempts.Anchor(1, (0.0, 0.0, 0.0)), 0.0),
-        keyframe=1,
-        older=[2, 0],
-        poses={0: (0.0, 0.0, 0.0), 1: (0.0, 0.0, 0.0), 2: (1.0, 0.0, 0.0)},
-        pieces={0: 0, 1: 1, 2: 0},
-        scans={
-            k: keyframe_map.KeyframeScan(k, 0.0, s, scan)
-            for k, s in ((0, first), (1, own), (2, second))
-        },
-        left={0: ((0.0, 0.0, 0.0), 7.0)},
-        top_speed=0.3,
-    )
-    chosen, placed, _ = attempts.match_scan(
-        LocalMapperConfig(), references, own, scan, [(0.0, 0.0, 0.0)], False, lambda *_: None
+    matches = {
+        0: ((placed_at, 0.0, 0.0), 0.7),  # keyframe 0 at the origin
+        2: ((placed_at - 1.0, 0.0, 0.0), 0.6),  # keyframe 2, 1 m along x
+        1: ((0.0, 0.0, 0.0), 0.2),  # the last scan: no idea
+    }
+    chosen, placed, _ = _match_in_two_pieces(
+        monkeypatch, matches, [2, 0], (0.0, 0.0, 0.0), 7.0, 0.3
     )
     assert placed == integrated
     if integrated:
@@ -498,39 +515,13 @@ def test_a_scan_its_own_piece_matches_where_the_robot_cannot_be_is_not_put_in_an
     # piece does not know the scan (0.2) or matches it where the robot can be but not surely
     # (0.7: building 110's robot2 went back to the piece it had left, right, so), put it
     # back there as before.
-    scan = stranger_scan()
-    segments, _ = extract_scan(scan, EXTRACTION)
-    own, first, second = (segments.segments.copy() for _ in range(3))
-    look_alike = (0.1, 0.0, float(np.radians(own_turn)))
-
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
-        if reference is first:
-            pose, confidence = (1.5, 0.0, np.pi / 2), 0.998  # keyframe 0 at the origin
-        elif reference is second:
-            pose, confidence = (0.5, 0.0, np.pi / 2), 0.997  # keyframe 2, 1 m along x
-        else:
-            pose, confidence = look_alike, own_confidence  # the robot's own last scan
-        return fake_match(pose, confidence, judged)
-
-    monkeypatch.setattr(attempts, "integrate", fake)
-    references = attempts.References(
-        here=(0.0, 0.0, 0.0),
-        last=attempts.Reference(own, scan, attempts.Anchor(1, (0.0, 0.0, 0.0)), 0.0),
-        keyframe=1,
-        older=[0, 2],
-        poses={0: (0.0, 0.0, 0.0), 1: (0.0, 0.0, 0.0), 2: (1.0, 0.0, 0.0)},
-        pieces={0: 0, 1: 1, 2: 0},
-        scans={
-            k: keyframe_map.KeyframeScan(k, 0.0, s, scan)
-            for k, s in ((0, first), (1, own), (2, second))
-        },
-        left={0: ((0.0, 0.0, 0.0), 20.0)},
-        top_speed=0.8,
-        elapsed=0.1,
-        period=0.1,
-    )
-    chosen, placed, _ = attempts.match_scan(
-        LocalMapperConfig(), references, own, scan, [(0.08, 0.0, -0.16)], False, lambda *_: None
+    matches = {
+        0: ((1.5, 0.0, np.pi / 2), 0.998),  # keyframe 0 at the origin
+        2: ((0.5, 0.0, np.pi / 2), 0.997),  # keyframe 2, 1 m along x
+        1: ((0.1, 0.0, float(np.radians(own_turn))), own_confidence),  # its own last scan
+    }
+    chosen, placed, _ = _match_in_two_pieces(
+        monkeypatch, matches, [0, 2], (0.08, 0.0, -0.16), 20.0, 0.8, elapsed=0.1, period=0.1
     )
     assert placed == integrated
     if integrated:
@@ -551,40 +542,14 @@ def test_a_scan_its_own_piece_matches_more_surely_where_the_robot_can_be_stays_h
     # there. The piece that matches the scan less surely than the robot's own does not take
     # it; when its own matches less surely (building 110's robot2, 0.74, going back right to
     # the piece it had left), the move is made as before.
-    scan = stranger_scan()
-    segments, _ = extract_scan(scan, EXTRACTION)
-    own, older, first, second = (segments.segments.copy() for _ in range(4))
-
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
-        if reference is first:
-            pose, confidence = (1.5, 0.0, np.pi / 2), 0.93  # keyframe 0 at the origin
-        elif reference is second:
-            pose, confidence = (0.5, 0.0, np.pi / 2), 0.92  # keyframe 2, 1 m along x
-        elif reference is older:
-            pose, confidence = (0.08, 0.0, -0.1), home_confidence  # keyframe 3, own piece
-        else:
-            pose, confidence = (0.3, 2.0, 1.0), 0.2  # the robot's own last scan: no match
-        return fake_match(pose, confidence, judged)
-
-    monkeypatch.setattr(attempts, "integrate", fake)
-    references = attempts.References(
-        here=(0.0, 0.0, 0.0),
-        last=attempts.Reference(own, scan, attempts.Anchor(1, (0.0, 0.0, 0.0)), 0.0),
-        keyframe=1,
-        older=[3, 0, 2],
-        poses={0: (0.0, 0.0, 0.0), 1: (0.0, 0.0, 0.0), 2: (1.0, 0.0, 0.0), 3: (0.0, 0.0, 0.0)},
-        pieces={0: 0, 1: 1, 2: 0, 3: 1},
-        scans={
-            k: keyframe_map.KeyframeScan(k, 0.0, s, scan)
-            for k, s in ((0, first), (1, own), (2, second), (3, older))
-        },
-        left={0: ((0.0, 0.0, 0.0), 20.0)},
-        top_speed=0.8,
-        elapsed=0.1,
-        period=0.1,
-    )
-    chosen, placed, _ = attempts.match_scan(
-        LocalMapperConfig(), references, own, scan, [(0.08, 0.0, -0.1)], False, lambda *_: None
+    matches = {
+        0: ((1.5, 0.0, np.pi / 2), 0.93),  # keyframe 0 at the origin
+        2: ((0.5, 0.0, np.pi / 2), 0.92),  # keyframe 2, 1 m along x
+        3: ((0.08, 0.0, -0.1), home_confidence),  # keyframe 3, its own piece
+        1: ((0.3, 2.0, 1.0), 0.2),  # its own last scan: no match
+    }
+    chosen, placed, _ = _match_in_two_pieces(
+        monkeypatch, matches, [3, 0, 2], (0.08, 0.0, -0.1), 20.0, 0.8, elapsed=0.1, period=0.1
     )
     assert placed == moved
     assert chosen.piece == (0 if moved else 1)
