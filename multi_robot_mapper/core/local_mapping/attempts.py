@@ -470,8 +470,8 @@ class _ScanMatching:
         # scan 655, tracked at 0.999 the scan before, matched its own keyframes at
         # 0.96-0.998 turned 81 deg in 0.1 s, and two keyframes of the piece it had left 20 s
         # before at 0.998 and 0.997, 11.4 m and 90 deg off. A likely match where the robot
-        # can be does not stop the move: building 110's robot2 went back to the piece it had
-        # left 12.6 s before, right, its own piece's match 0.74.
+        # can be stops the move only when surer (:meth:`_outmatched_at_home`): building 110's
+        # robot2 went back to the piece it had left 12.6 s before, right, its own piece's 0.74.
         return any(
             a.piece == self.current and a.result.confidence >= LIKELY and not self._driven_to(a)
             for a in self.attempts
