@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -122,6 +123,19 @@ def test_dash_p_goes_to_the_nodes_that_have_the_parameter() -> None:
     }
 
 
+def _communicate_or_dump(process: subprocess.Popen[bytes], timeout: float) -> tuple[bytes, bytes]:
+    """The process's output once it exits; if it does not within ``timeout``, its threads'
+    stacks (SIGUSR1, faulthandler: run_nodes registers it) in the failure message."""
+    try:
+        return process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        process.send_signal(signal.SIGUSR1)
+        time.sleep(2.0)
+        process.kill()
+        _, err = process.communicate()
+        raise AssertionError(f"no exit {timeout} s after the signal:\n{err.decode()}") from None
+
+
 @pytest.mark.ros
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
 def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) -> None:
@@ -176,7 +190,7 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) ->
                 observer.destroy_node()
                 driver.destroy_node()
         process.send_signal(stop)
-        out, err = process.communicate(timeout=20.0)
+        out, err = _communicate_or_dump(process, timeout=20.0)
     finally:
         if process.poll() is None:
             process.kill()

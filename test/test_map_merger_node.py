@@ -458,3 +458,32 @@ def test_a_merge_in_the_worker_process_is_the_merge_in_the_node(ros_context, met
     want = se2.pose_from_matrix(T_ref_other)
     assert math.hypot(got[0] - want[0], got[1] - want[1]) < 0.05
     assert abs(math.remainder(got[2] - want[2], math.tau)) < math.radians(0.5)
+
+
+def test_a_merge_cut_short_by_destroy_node_ends_quietly_without_a_new_worker(ros_context) -> None:
+    # Ctrl-C while a merge runs in the worker process: destroy_node stops the worker under
+    # it. The merge ends there: not counted as a failed merge, no fallback merges (each would
+    # start a new interpreter while Python waits for the executor's threads: `mrm run` once
+    # took over 20 s to exit), no process left behind.
+    from test_merging import in_own_frames, poses_in_own_frames, random_frames, world_runs
+
+    runs = world_runs("office", 2)
+    names = ["alpha", "bravo"]
+    frames = random_frames(2, seed=5)
+    maps = in_own_frames(tuple(m for m, _ in runs), frames, names)
+    views = poses_in_own_frames(tuple(p for _, p in runs), frames, names)
+    node = MapMerger(
+        context=ros_context,
+        parameter_overrides=[Parameter("robots", value="alpha,bravo")],
+    )
+    for name in names:
+        node._on_partial_map(name, _partial_map_message(maps[name], views[name], name))
+    outcome: list[bool] = []
+    merging = threading.Thread(target=lambda: outcome.append(node.merge_now()))
+    merging.start()
+    time.sleep(0.3)  # the worker is still starting (a new interpreter) or merging
+    node.destroy_node()
+    merging.join(30.0)
+    assert not merging.is_alive() and outcome == [False]
+    assert node.merge_errors == 0 and node.result is None
+    assert node._worker._process is None

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from multi_robot_mapper.ros.worker_process import WorkerDiedError, WorkerProcess
+from multi_robot_mapper.ros.worker_process import WorkerClosedError, WorkerProcess
 
 
 def test_the_worker_answers_raises_and_outlives_a_kill() -> None:
@@ -47,4 +47,10 @@ def test_a_shutdown_abandons_the_job_and_the_caller_hears_it() -> None:
     worker.shutdown()
     waiter.join(10.0)
     assert not waiter.is_alive() and time.monotonic() - started < 10.0
-    assert len(outcome) == 1 and isinstance(outcome[0], WorkerDiedError)
+    assert len(outcome) == 1 and isinstance(outcome[0], WorkerClosedError)
+    # For good: a later job (a merge falling back to another try as its node is destroyed)
+    # is refused at once, without starting a new interpreter.
+    started = time.monotonic()
+    with pytest.raises(WorkerClosedError):
+        worker.run(os.getpid)
+    assert time.monotonic() - started < 0.5 and worker._process is None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import faulthandler
+import signal
 import sys
 import threading
 import time
@@ -27,6 +28,10 @@ def run_nodes(
     exit code 2 on invalid parameters. Nodes are destroyed in reverse order of creation."""
     if not faulthandler.is_enabled():
         faulthandler.enable()  # a crash in native code names the Python threads it met
+    if hasattr(signal, "SIGUSR1"):
+        # `kill -USR1 <pid>` prints every thread's stack to stderr: where a node that does not
+        # answer (or does not stop) is stuck, without stopping it.
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     rclpy.init(args=args)
     # Made before the nodes, as soon as the context is: a signal shuts the context down, and an
     # executor made after that fails half-built (and its __del__ prints a traceback).

@@ -113,7 +113,7 @@ from multi_robot_mapper.ros.merger_state import (
 from multi_robot_mapper.ros.parameters import declare_config, on_config_change
 from multi_robot_mapper.ros.saved_map_services import SavedMapServices
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
-from multi_robot_mapper.ros.worker_process import WorkerProcess
+from multi_robot_mapper.ros.worker_process import WorkerClosedError, WorkerProcess
 
 try:  # PyPI has no tf2_ros; with an apt-installed ROS 2 the frames go to TF as well.
     from tf2_ros import StaticTransformBroadcaster
@@ -318,6 +318,8 @@ class MapMerger(SavedMapServices, Node):
                     n: (inputs.maps[n], inputs.viewpoints[n], inputs.keyframes[n])
                     for n in inputs.maps
                 }
+            except WorkerClosedError:
+                return False  # the node is being destroyed: no fallback merges, nothing new
             except Exception:
                 self.merge_errors += 1
                 self.warnings.warn(
@@ -422,6 +424,8 @@ class MapMerger(SavedMapServices, Node):
                 continue
             try:
                 merged = self._merge({n: k for n, (_, _, k) in kept.items()}, config)
+            except WorkerClosedError:
+                return None
             except Exception:
                 continue
             self._culprits = set(set_back)

@@ -17,6 +17,11 @@ class WorkerDiedError(RuntimeError):
     """The worker process ended (killed, out of memory) before it answered."""
 
 
+class WorkerClosedError(WorkerDiedError):
+    """The worker was shut down (its node is being destroyed): no job runs any more. A caller
+    that would try again, or fall back to other jobs, stops instead."""
+
+
 def _serve(jobs: Connection) -> None:
     """The worker's loop: a job ``(function, args, with_state)`` in, ``(True, result)`` or
     ``(False, exception)`` out, until the pipe closes. ``with_state``: the function gets the
@@ -41,7 +46,9 @@ def _serve(jobs: Connection) -> None:
 
 class WorkerProcess:
     """Runs module-level functions in one spawned process, started on first use; a worker that
-    died is replaced on the next call. :meth:`shutdown` terminates it at once.
+    died is replaced on the next call. :meth:`shutdown` terminates it at once, for good: later
+    calls raise :class:`WorkerClosedError` without starting a process (a node shutting down
+    must not start a new interpreter and a new merge while Python waits for its threads).
 
     A plain process and pipe rather than ``concurrent.futures.ProcessPoolExecutor``: that pool
     cannot be stopped without waiting for the job it runs, and one shut down without waiting
@@ -53,6 +60,10 @@ class WorkerProcess:
         self._process: BaseProcess | None = None
         self._pipe: Connection | None = None
         self._lock = threading.Lock()  # one job at a time
+        # Guards the process, the pipe and closed: a shutdown while a job starts the process
+        # either comes first (the job is refused) or stops the process it started.
+        self._state_lock = threading.Lock()
+        self._closed = False
 
     def run(self, function: Callable[..., R], *args: object) -> R:
         """``function(*args)`` in the worker; this thread waits without holding the lock.
@@ -72,32 +83,43 @@ class WorkerProcess:
                 ok, value = pipe.recv()
             except (EOFError, OSError) as exc:
                 self._stop()  # a new one next time
+                if self._closed:
+                    raise WorkerClosedError(f"the {self.name} was shut down mid-job") from exc
                 raise WorkerDiedError(f"the {self.name} process ended before it answered") from exc
         if not ok:
             raise cast(BaseException, value)
         return cast(R, value)
 
     def _started(self) -> Connection:
-        if self._process is not None and self._pipe is not None and self._process.is_alive():
-            return self._pipe
+        with self._state_lock:
+            if self._closed:
+                raise WorkerClosedError(f"the {self.name} is shut down")
+            if self._process is not None and self._pipe is not None and self._process.is_alive():
+                return self._pipe
         self._stop()
-        # spawn, not fork: forking a process that runs DDS threads is unsafe.
-        context = multiprocessing.get_context("spawn")
-        ours, theirs = context.Pipe()
-        process = context.Process(target=_serve, args=(theirs,), name=self.name, daemon=True)
-        process.start()
-        theirs.close()  # the worker's end lives in the worker: its death closes the pipe here
-        self._process, self._pipe = process, ours
-        return ours
+        with self._state_lock:
+            if self._closed:
+                raise WorkerClosedError(f"the {self.name} is shut down")
+            # spawn, not fork: forking a process that runs DDS threads is unsafe.
+            context = multiprocessing.get_context("spawn")
+            ours, theirs = context.Pipe()
+            process = context.Process(target=_serve, args=(theirs,), name=self.name, daemon=True)
+            process.start()
+            theirs.close()  # the worker's end lives in the worker: its death closes ours
+            self._process, self._pipe = process, ours
+            return ours
 
     def shutdown(self) -> None:
-        """Stop the worker at once (a job it runs is abandoned; its caller gets
-        :class:`WorkerDiedError`)."""
+        """Stop the worker at once and for good (a job it runs is abandoned; its caller, and
+        every later one, gets :class:`WorkerClosedError`)."""
+        with self._state_lock:
+            self._closed = True
         self._stop()
 
     def _stop(self) -> None:
-        process, pipe = self._process, self._pipe
-        self._process = self._pipe = None
+        with self._state_lock:
+            process, pipe = self._process, self._pipe
+            self._process = self._pipe = None
         if process is not None:
             if process.is_alive():
                 process.terminate()
