@@ -4,7 +4,7 @@ A driver publishes pre-built ``sensor_msgs/LaserScan`` messages (1081 beams, the
 default laser) on ``/robot1/scan`` with sensor-data QoS, one every 25 ms by the wall clock, from
 the main thread. The ``robot_mapper`` node runs in the same process on ONE thread (its own
 SingleThreadedExecutor): the scans reach it over real DDS topics, and whatever it cannot keep up
-with is lost in the best-effort queue (depth 5) as it would be on a robot.
+with is lost in the best-effort queue (``SCAN_QUEUE_DEPTH``) as it would be on a robot.
 
 Measured (and only this):
   published   scans the driver published

@@ -75,9 +75,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     )
     if received < sent:
         print(
-            f"  {sent - received} scans dropped in transit (sensor-data QoS keeps the newest 5 "
-            "while a mapper is busy: the machine could not keep up; they count as unposed "
-            "below; --speed 0.5 plays at half the pace)"
+            f"  {sent - received} scans dropped in transit (a mapper keeps the newest 50 while "
+            "it is busy: the machine could not keep up; they count as unposed below; --speed "
+            "0.5 plays at half the pace)"
         )
     print()
     print(result.table)

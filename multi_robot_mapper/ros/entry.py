@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import faulthandler
+import io
 import signal
 import sys
 import threading
@@ -30,8 +32,10 @@ def run_nodes(
         faulthandler.enable()  # a crash in native code names the Python threads it met
     if hasattr(signal, "SIGUSR1"):
         # `kill -USR1 <pid>` prints every thread's stack to stderr: where a node that does not
-        # answer (or does not stop) is stuck, without stopping it.
-        faulthandler.register(signal.SIGUSR1, all_threads=True)
+        # answer (or does not stop) is stuck, without stopping it. Not where stderr is no file
+        # (called in-process under a test runner's capture).
+        with contextlib.suppress(io.UnsupportedOperation, ValueError, AttributeError):
+            faulthandler.register(signal.SIGUSR1, all_threads=True)
     rclpy.init(args=args)
     # Made before the nodes, as soon as the context is: a signal shuts the context down, and an
     # executor made after that fails half-built (and its __del__ prints a traceback).
