@@ -60,12 +60,27 @@ class Block:
         return self.work or self.name
 
 
-def _backend_block(name: str, question: str, scenarios: tuple[str, ...], hours: float) -> Block:
+def _backend_block(
+    name: str, question: str, scenarios: tuple[str, ...], hours: float, jobs: int = 2
+) -> Block:
     """A block of ``bench.backend_decisions`` on ``scenarios`` (its arguments), the back end as
     shipped, and its table."""
-    run = ("bench.backend_decisions", *scenarios, "--gate", "model", "--jobs", "2")
+    run = ("bench.backend_decisions", *scenarios, "--gate", "model", "--jobs", str(jobs))
     table = ("bench.backend_decisions", "--table", "--work", "{work}")
     return Block(name, question, ((*run, "--work", "{work}"),), table, hours=hours)
+
+
+def _decisions_block(
+    name: str, question: str, collects: tuple[tuple[str, ...], ...], hours: float, judge: bool
+) -> Block:
+    """A block of ``bench.decisions``: each of ``collects`` (``collect``'s arguments) into the
+    block's folder, then (``judge``) every kept decision judged again with the code of the run,
+    and its table."""
+    runs = tuple(("bench.decisions", "collect", *c, "--work", "{work}") for c in collects)
+    if judge:
+        runs += (("bench.decisions", "judge", "--work", "{work}", "--jobs", "2"),)
+    table = ("bench.decisions", "table", "--work", "{work}")
+    return Block(name, question, runs, table, hours=hours)
 
 
 BLOCKS = (
@@ -103,31 +118,83 @@ BLOCKS = (
         ("--generated", "100", "20"),
         hours=0.5,
     ),
-    Block(
+    _backend_block(
+        "backend_generated120",
+        "The same on buildings 120-139, never traced (the run at 25aa847 stopped before 139)",
+        ("--generated", "120", "20"),
+        hours=0.5,
+    ),
+    _backend_block(
+        "backend_generated139",
+        "The same on building 139, a cluttered pillar hall, alone",
+        ("--generated", "139", "1"),
+        hours=0.15,
+        jobs=1,
+    ),
+    _decisions_block(
+        "decisions_truth",
+        "Placements published wrong and robots merged on maps built at the truth: shared-log "
+        "cuts and generated buildings 0-183, judged again with the code of the run",
+        (
+            (
+                *("--source", "generated", "--first", "0", "--count", "184"),
+                *("--maps", "truth", "--updates", "3", "--jobs", "2"),
+            ),
+            (
+                *("--source", "carmen", "--logs", "intel", "aces", "fhw", "csail"),
+                *("freiburg-079", "--robots", "2", "4", "8", "--maps", "truth"),
+            ),
+        ),
+        hours=5.2,
+        judge=True,
+    ),
+    _decisions_block(
+        "decisions_truth_heldout",
+        "The same on generated buildings 184-243, held out from every fit and rule",
+        (
+            (
+                *("--source", "generated", "--first", "184", "--count", "60"),
+                *("--maps", "truth", "--updates", "3", "--jobs", "1"),
+            ),
+        ),
+        hours=1.3,
+        judge=True,
+    ),
+    _decisions_block(
         "decisions_bags_own",
         "Placements published wrong, robots merged, closures and joins: dense bags, own maps",
         (
             (
-                *("bench.decisions", "collect", "--source", "bag"),
-                *("--bags", "mit-csail", "fr079", "aces", "--robots", "2", "4"),
-                *("--maps", "own", "--updates", "8", "--jobs", "2", "--work", "{work}"),
+                *("--source", "bag", "--bags", "mit-csail", "fr079", "aces"),
+                *("--robots", "2", "4", "--maps", "own", "--updates", "8", "--jobs", "2"),
             ),
         ),
-        ("bench.decisions", "table", "--work", "{work}"),
         hours=1.0,
+        judge=False,
     ),
-    Block(
+    _decisions_block(
         "decisions_generated_own",
         "The same on generated buildings 244-273, each robot mapped by its own back end",
         (
             (
-                *("bench.decisions", "collect", "--source", "generated"),
-                *("--first", "244", "--count", "30", "--maps", "own", "--updates", "3"),
-                *("--jobs", "2", "--work", "{work}"),
+                *("--source", "generated", "--first", "244", "--count", "30"),
+                *("--maps", "own", "--updates", "3", "--jobs", "2"),
             ),
         ),
-        ("bench.decisions", "table", "--work", "{work}"),
         hours=2.0,
+        judge=False,
+    ),
+    _decisions_block(
+        "decisions_generated_own_250",
+        "The same on generated buildings 250-273, own maps: a later run than 244-273's",
+        (
+            (
+                *("--source", "generated", "--first", "250", "--count", "24"),
+                *("--maps", "own", "--updates", "3", "--jobs", "2"),
+            ),
+        ),
+        hours=0.7,
+        judge=False,
     ),
 )
 
@@ -253,9 +320,10 @@ def main() -> None:
     sub.add_parser("list")
     args = parser.parse_args()
     if args.command == "list":
+        width = max(len(block.name) for block in BLOCKS)
         for block in BLOCKS:
             took = f"{block.hours} h" if block.hours else f"with {block.folder}"
-            print(f"{block.name:18s} {took:12s} {block.question}")
+            print(f"{block.name:{width}s} {took:17s} {block.question}")
     elif args.command == "adopt":
         adopt(blocks_named([args.name])[0], args.folder, args.commit, args.date)
     elif args.command == "run":
