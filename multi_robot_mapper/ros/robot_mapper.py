@@ -83,8 +83,8 @@ class _Extracted:
 # matches, the partial map), during which a 40 Hz laser sends 10-20 scans: with 5 kept, the
 # rest were lost although the mapper keeps up on average (make demo on two cores under load:
 # 520 of 2400 dropped; with 50 kept, 2). Without odometry every lost scan is a longer step for
-# tracking. 50 scans are 1.25 s at 40 Hz, 5 s at 10 Hz: a mapper slower than its laser on
-# average still drops, the oldest first, after that much delay.
+# tracking. Age, not count, now decides what is set aside: a scan that waited longer than
+# scan_max_queue_delay is rejected (stale_in_queue); 50 scans are 1.25 s at 40 Hz.
 SCAN_QUEUE_DEPTH = 50
 SCAN_QOS = QoSProfile(
     depth=SCAN_QUEUE_DEPTH,
