@@ -9,7 +9,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 
 import rclpy
@@ -36,7 +36,15 @@ def run_nodes(
         # (called in-process under a test runner's capture).
         with contextlib.suppress(io.UnsupportedOperation, ValueError, AttributeError):
             faulthandler.register(signal.SIGUSR1, all_threads=True)
-    rclpy.init(args=args)
+    with _sigint_as_shutdown() as sigint:
+        rclpy.init(args=args)
+        sigint.armed = True
+        return _spin(program, make_nodes, make_executor)
+
+
+def _spin(
+    program: str, make_nodes: Callable[[], Sequence[Node]], make_executor: Callable[[], Executor]
+) -> int:
     # Made before the nodes, as soon as the context is: a signal shuts the context down, and an
     # executor made after that fails half-built (and its __del__ prints a traceback).
     spinner = make_executor()
@@ -63,6 +71,41 @@ def run_nodes(
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+class _SigintAsShutdown:
+    """A Python SIGINT handler under rclpy's. rclpy's own handler (installed over it by
+    ``rclpy.init``, and calling it after) shuts the context down, which ends the spin as
+    SIGTERM does. Python's default handler would also raise KeyboardInterrupt wherever the main
+    thread is, even inside a ``__del__`` that the garbage collector runs, where it is printed as
+    "Exception ignored ... KeyboardInterrupt" with a traceback (a robot_mapper on SIGINT, a
+    fresh-clone test). So once rclpy is up (``armed``) the first Ctrl-C raises nothing; before
+    that, and at a second Ctrl-C (a shutdown that hangs), it raises as Python's does."""
+
+    def __init__(self) -> None:
+        self.armed = False
+        self.received = 0
+
+    def __call__(self, signum: int, frame: object) -> None:
+        self.received += 1
+        if not self.armed or self.received > 1:
+            raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _sigint_as_shutdown() -> Iterator[_SigintAsShutdown]:
+    """:class:`_SigintAsShutdown` as the SIGINT handler while the nodes run (the main thread
+    only: signals are set there), the handler before it restored after."""
+    handler = _SigintAsShutdown()
+    if threading.current_thread() is not threading.main_thread():
+        yield handler
+        return
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield handler
+    finally:
+        # None: the handler before was not set from Python; Python's default stands for it.
+        signal.signal(signal.SIGINT, signal.default_int_handler if previous is None else previous)
 
 
 def run_node(
