@@ -42,6 +42,16 @@ def run_nodes(
         return _spin(program, make_nodes, make_executor)
 
 
+def run_node(
+    program: str,
+    make_node: Callable[[], Node],
+    args: list[str] | None = None,
+    make_executor: Callable[[], Executor] = SingleThreadedExecutor,
+) -> int:
+    """:func:`run_nodes` for one node (``ros2 run multi_robot_mapper <node>``)."""
+    return run_nodes(program, lambda: [make_node()], args, make_executor)
+
+
 def _spin(
     program: str, make_nodes: Callable[[], Sequence[Node]], make_executor: Callable[[], Executor]
 ) -> int:
@@ -79,8 +89,10 @@ class _SigintAsShutdown:
     SIGTERM does. Python's default handler would also raise KeyboardInterrupt wherever the main
     thread is, even inside a ``__del__`` that the garbage collector runs, where it is printed as
     "Exception ignored ... KeyboardInterrupt" with a traceback (a robot_mapper on SIGINT, a
-    fresh-clone test). So once rclpy is up (``armed``) the first Ctrl-C raises nothing; before
-    that, and at a second Ctrl-C (a shutdown that hangs), it raises as Python's does."""
+    fresh-clone test). So once rclpy is up (``armed``) the first Ctrl-C raises nothing and asks
+    for the same shutdown rclpy's handler does (from a thread, as rclpy does: the main thread
+    may be inside rclpy); before that, and at a second Ctrl-C (a shutdown that hangs), it
+    raises as Python's does."""
 
     def __init__(self) -> None:
         self.armed = False
@@ -90,32 +102,31 @@ class _SigintAsShutdown:
         self.received += 1
         if not self.armed or self.received > 1:
             raise KeyboardInterrupt
+        threading.Thread(target=rclpy.try_shutdown, name="sigint-shutdown", daemon=True).start()
 
 
 @contextlib.contextmanager
 def _sigint_as_shutdown() -> Iterator[_SigintAsShutdown]:
     """:class:`_SigintAsShutdown` as the SIGINT handler while the nodes run (the main thread
-    only: signals are set there), the handler before it restored after."""
+    only: signals are set there), the handler before it restored after.
+
+    rclpy's handlers are taken out first and after: ``rclpy.try_shutdown`` leaves them
+    installed, and a later ``rclpy.init`` then does not install them again, so a handler set
+    from Python in between would replace rclpy's at the OS level, and nothing would wake the
+    executor's wait (an earlier ``run_nodes`` in the same process: a test's). Taken out, the
+    ``rclpy.init`` inside installs them over this one."""
     handler = _SigintAsShutdown()
     if threading.current_thread() is not threading.main_thread():
         yield handler
         return
+    signals.uninstall_signal_handlers()
     previous = signal.signal(signal.SIGINT, handler)
     try:
         yield handler
     finally:
+        signals.uninstall_signal_handlers()
         # None: the handler before was not set from Python; Python's default stands for it.
         signal.signal(signal.SIGINT, signal.default_int_handler if previous is None else previous)
-
-
-def run_node(
-    program: str,
-    make_node: Callable[[], Node],
-    args: list[str] | None = None,
-    make_executor: Callable[[], Executor] = SingleThreadedExecutor,
-) -> int:
-    """:func:`run_nodes` for one node (``ros2 run multi_robot_mapper <node>``)."""
-    return run_nodes(program, lambda: [make_node()], args, make_executor)
 
 
 def _shutdown_requested(exc: BaseException) -> bool:
