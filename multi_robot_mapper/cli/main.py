@@ -48,6 +48,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     from multi_robot_mapper.cli.common import check_limits, check_output
     from multi_robot_mapper.cli.demo import DemoScenario, run_demo
+    from multi_robot_mapper.ros.robot_mapper import SCAN_QUEUE_DEPTH
 
     check_limits(args, "seed", "speed")
     # Checked before the run, not after it; a folder from an earlier demo is written over
@@ -75,9 +76,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     )
     if received < sent:
         print(
-            f"  {sent - received} scans dropped in transit (a mapper keeps the newest 50 while "
-            "it is busy: the machine could not keep up; they count as unposed below; --speed "
-            "0.5 plays at half the pace)"
+            f"  {sent - received} scans dropped in transit (a mapper keeps the newest "
+            f"{SCAN_QUEUE_DEPTH} while it is busy: the machine could not keep up; they count as "
+            "unposed below; --speed 0.5 plays at half the pace)"
         )
     print()
     print(result.table)

@@ -96,10 +96,7 @@ class WorkerProcess:
                 raise WorkerClosedError(f"the {self.name} is shut down")
             if self._process is not None and self._pipe is not None and self._process.is_alive():
                 return self._pipe
-        self._stop()
-        with self._state_lock:
-            if self._closed:
-                raise WorkerClosedError(f"the {self.name} is shut down")
+            dead = self._process, self._pipe
             # spawn, not fork: forking a process that runs DDS threads is unsafe.
             context = multiprocessing.get_context("spawn")
             ours, theirs = context.Pipe()
@@ -107,7 +104,8 @@ class WorkerProcess:
             process.start()
             theirs.close()  # the worker's end lives in the worker: its death closes ours
             self._process, self._pipe = process, ours
-            return ours
+        _retire(*dead)
+        return ours
 
     def shutdown(self) -> None:
         """Stop the worker at once and for good (a job it runs is abandoned; its caller, and
@@ -120,12 +118,18 @@ class WorkerProcess:
         with self._state_lock:
             process, pipe = self._process, self._pipe
             self._process = self._pipe = None
-        if process is not None:
-            if process.is_alive():
-                process.terminate()
-            process.join(5.0)
-            if process.is_alive():
-                process.kill()
-                process.join()
-        if pipe is not None:
-            pipe.close()
+        _retire(process, pipe)
+
+
+def _retire(process: BaseProcess | None, pipe: Connection | None) -> None:
+    """End a worker process that is no longer used (terminated, killed if it lingers) and
+    close its pipe."""
+    if process is not None:
+        if process.is_alive():
+            process.terminate()
+        process.join(5.0)
+        if process.is_alive():
+            process.kill()
+            process.join()
+    if pipe is not None:
+        pipe.close()
