@@ -292,11 +292,5 @@ MEASURED = (
         table="printed",
         hours=0.6,
     ),
-    _printed(
-        "join_model",
-        "The join model held out by building, on the truth-map decisions (nothing written)",
-        (),
-        work="decisions_truth",
-    ),
 )
 BLOCKS = (*BLOCKS, *MEASURED)

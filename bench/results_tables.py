@@ -12,8 +12,6 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import subprocess
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -201,18 +199,6 @@ def confidence(work: Path, judged: bool = False) -> list[str]:
     return rows
 
 
-def join_model(work: Path) -> list[str]:
-    """The join model's held-out reliability (``bench.fit_join --work W``, nothing written)."""
-    text = subprocess.run(
-        [sys.executable, "-m", "bench.fit_join", "--work", str(work)],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
-    start = text.index("| predicted |")
-    return text[start:].split("\n\n")[0].strip().splitlines()
-
-
 TABLES: dict[str, Callable[[Path], list[str]]] = {
     "frontend": frontend,
     "throughput": throughput,
@@ -222,7 +208,6 @@ TABLES: dict[str, Callable[[Path], list[str]]] = {
     "printed": printed,
     "confidence": confidence,
     "confidence_judged": lambda work: confidence(work, judged=True),
-    "join_model": join_model,
 }
 
 
