@@ -289,7 +289,6 @@ MEASURED = (
             ),
             ("bench.merge_speed", "--joint", "--split", "2", "--logs", "freiburg-079", "edmonton"),
         ),
-        table="printed",
         hours=0.6,
     ),
 )

@@ -167,6 +167,17 @@ def printed(work: Path) -> list[str]:
     return rows
 
 
+def merge_alone(work: Path) -> list[str]:
+    """``bench.merge_speed --joint --split``'s rows (it prints no header: its ``--joint`` help
+    names the columns)."""
+    header = (
+        "| log | robots | placed | worst placement | worst keyframe | links | wrong | merge (s) "
+        "| update, nothing new (s) | update, a keyframe per robot (s) | update, one robot's "
+        "keyframe, budget (s) (of which not matching) | keyframes |"
+    )
+    return [header, "|" + " --- |" * (header.count("|") - 1), *printed(work)]
+
+
 def confidence(work: Path, judged: bool = False) -> list[str]:
     """``bench.fit_confidence fit``'s held-out checks at confidence ≥ 0.8."""
     report = json.loads((work / "cross_validation.json").read_text())
@@ -206,6 +217,7 @@ TABLES: dict[str, Callable[[Path], list[str]]] = {
     "ffs_seeds": ffs_seeds,
     "ffs_distortions": ffs_distortions,
     "printed": printed,
+    "merge_alone": merge_alone,
     "confidence": confidence,
     "confidence_judged": lambda work: confidence(work, judged=True),
 }

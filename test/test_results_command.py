@@ -107,3 +107,20 @@ def test_the_summary_row_of_a_log_takes_each_cut_from_its_own_run() -> None:
     assert cells[4] == "0.20"  # the worst own-frame ATE of the 2- and 4-robot cuts
     assert cells[5] == "2/2, 1/4, —"  # the 8-robot run failed
     assert cells[6] == "0.100, —, —"  # one robot merged is no merged ATE
+
+
+def test_a_table_of_a_bench_that_only_prints_is_read_from_its_kept_output(tmp_path: Path) -> None:
+    from bench import results_tables
+
+    (tmp_path / "provenance.json").write_text(
+        json.dumps({"commands": ["bench.frontend_throughput --repeat 3"]})
+    )
+    (tmp_path / "run-0.txt").write_text(
+        "front-end throughput, one core (scans/s; best / median of passes)\n"
+        "    180 beams:    2080 best,    1971 median  (target >= 2000: MISSES)  [real]\n"
+        "   1081 beams:     910 best,     845 median  (target >= 500: meets)  [simulated]\n"
+    )
+    rows = results_tables.throughput(tmp_path)
+    assert rows[0].startswith("| scans | target | measured (median of 3 passes)")
+    assert rows[2] == "| 180 beams (real, intel) | ≥ 2000 scans/s | 1971 scans/s | 2080 scans/s |"
+    assert rows[3].split(" | ")[2] == "845 scans/s"
