@@ -1,12 +1,20 @@
 """How long one whole merge of K robots takes (issue 46: "the whole-merge time for 8 robots does
 not grow"): each shared log cut into K runs as the issue-13 benches cut it
-(``merge_speed.joint_cut``, keyframes at the reference poses), merged from nothing by
+(``harness.joint_cut``, keyframes at the reference poses), merged from nothing by
 ``merge_joint`` with every place matched, timed in this process.
 
     .venv/bin/python -m bench.whole_merge [--logs intel aces fhw csail] [--robots 8]
 
-Prints ``log robots seconds placed`` per case, and the median. Run it from two checkouts in
-turn to compare them on this noisy machine (the README of bench/ says how).
+Prints ``label log robots seconds placed`` per case, and the median. To compare with an older
+commit whose package lacks today's ``bench.harness``, run this file by path with the older
+checkout first on the path: its own ``bench.merge_speed.joint_cut`` (the same cut) is used
+then, and the data is this file's checkout's ``../shared/data``::
+
+    git clone -q . /tmp/before && git -C /tmp/before checkout -q 6e62280
+    cd /tmp/before && PYTHONPATH=/tmp/before $OLDPWD/.venv/bin/python -P \\
+        $OLDPWD/bench/whole_merge.py --label before --logs fhw
+
+Alternate the two checkouts log by log on this noisy machine (bench/README.md).
 """
 
 from __future__ import annotations
@@ -18,29 +26,41 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from bench.harness import LOGS, carmen_log, joint_cut, present_logs  # noqa: E402
+try:
+    from bench.harness import joint_cut
+except ImportError:  # an older checkout first on the path: its own cut (the same one)
+    from bench.merge_speed import joint_cut  # type: ignore[no-redef]
 from multi_robot_mapper.core.merging import MergeConfig  # noqa: E402
 from multi_robot_mapper.core.merging.joint import merge_joint  # noqa: E402
 from multi_robot_mapper.io.carmen import read_carmen  # noqa: E402
+
+CARMEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
+LOGS = ("intel", "aces", "fhw", "csail")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--logs", nargs="*", default=list(LOGS))
     parser.add_argument("--robots", type=int, default=8)
+    parser.add_argument("--label", default="this", help="first word of each line printed")
     args = parser.parse_args()
     seconds = []
-    for name in present_logs(args.logs):
-        _, keyframes = joint_cut(list(read_carmen(carmen_log(name))), args.robots, 40)
+    for name in args.logs:
+        path = CARMEN / f"{name}.log.gz"
+        if not path.is_file():
+            print(f"{name}: skipped ({path} is absent)", flush=True)
+            continue
+        _, keyframes = joint_cut(list(read_carmen(path)), args.robots, 40)
         started = time.perf_counter()
         result = merge_joint(keyframes, MergeConfig(), budget=0.0)
         elapsed = time.perf_counter() - started
         seconds.append(elapsed)
         placed = sum(p is not None for p in result.placements.values())
-        print(f"{name} {args.robots} {elapsed:.2f} {placed}/{args.robots}", flush=True)
+        print(f"{args.label} {name} {args.robots} {elapsed:.2f} {placed}/{args.robots}", flush=True)
     if seconds:
         print(f"median {np.median(seconds):.2f} s, max {max(seconds):.2f} s")
 
