@@ -137,11 +137,11 @@ BLOCKS = (
         "Placements published wrong, robots merged, closures and joins: dense bags, own maps",
         (
             (
-                *("--source", "bag", "--bags", "mit-csail", "fr079", "aces"),
-                *("--robots", "2", "4", "--maps", "own", "--updates", "8", "--jobs", "2"),
+                *("--source", "bag", "--bags", "mit-csail", "fr079", "aces", "intel"),
+                *("--robots", "2", "4", "8", "--maps", "own", "--updates", "8", "--jobs", "2"),
             ),
         ),
-        hours=1.0,
+        hours=2.5,
         judge=False,
     ),
     _decisions_block(
