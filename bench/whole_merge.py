@@ -30,16 +30,17 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-try:
-    from bench.harness import joint_cut
-except ImportError:  # an older checkout first on the path: its own cut (the same one)
-    from bench.merge_speed import joint_cut  # type: ignore[no-redef]
 from multi_robot_mapper.core.merging import MergeConfig  # noqa: E402
 from multi_robot_mapper.core.merging.joint import merge_joint  # noqa: E402
 from multi_robot_mapper.io.carmen import read_carmen  # noqa: E402
 
-CARMEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
-LOGS = ("intel", "aces", "fhw", "csail")
+try:
+    from bench.harness import CARMEN, LOGS, joint_cut
+except ImportError:  # an older checkout first on the path: its own cut (the same one)
+    from bench.merge_speed import joint_cut  # type: ignore[no-redef]
+
+    CARMEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "carmen"
+    LOGS = ("intel", "aces", "fhw", "csail")
 
 
 def main() -> None:
