@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 from bench.harness import judge_every_run, map_run  # noqa: E402
 from bench.reference_check import ReferenceJudge  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.local_mapping.attempts import pose_of_match  # noqa: E402
+from multi_robot_mapper.core.matching.integrate import pose_of_match  # noqa: E402
 from multi_robot_mapper.io.bags import RobotRecording, TimedPose, TimedScan  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data  # noqa: E402
 

@@ -30,6 +30,7 @@ from multi_robot_mapper.core.local_mapping import (
 )
 from multi_robot_mapper.core.local_mapping.held import OUTLIER
 from multi_robot_mapper.core.matching import integrate
+from multi_robot_mapper.core.matching.shape import Shapes
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import (
     LaserModel,
@@ -71,6 +72,31 @@ def _track_half_a_metre_ahead() -> tuple[attempts.Attempt, bool, bool]:
     return attempts.match_scan(
         LocalMapperConfig(), references, segments.segments, scan, motions, True, lambda *_: None
     )
+
+
+@pytest.mark.parametrize(
+    "tracking",
+    [
+        {"local_map_keyframes": 3},
+        {"velocity_window": 0.5},
+        {"motion_prior": True, "velocity_window": 0.5},
+    ],
+    ids=["local_map", "velocity_window", "motion_prior"],
+)
+def test_the_opt_in_tracking_of_corridors_tracks_a_drive_within_centimetres(  # type: ignore[no-untyped-def]
+    office_drive, tracking: dict[str, object]
+) -> None:
+    # Issue 47 item 5, each off by default (docs/decisions.md, tracking in corridors): on
+    # when asked, it tracks a drive through the office as well as the default does.
+    stamps, scans, truth = office_drive
+    mapper = LocalMapper(dataclasses.replace(LocalMapperConfig(), **tracking))  # type: ignore[arg-type]
+    poses = [feed(mapper, float(t), s).pose for t, s in zip(stamps, scans, strict=True)]
+    assert mapper.pieces_started == 0 and all(p is not None for p in poses)
+    for pose, true_pose in zip(poses, truth, strict=True):
+        expected = se2.between(truth[0], true_pose)
+        assert pose is not None
+        assert np.hypot(pose[0] - expected[0], pose[1] - expected[1]) < 0.05
+        assert abs(se2.wrap_angle(pose[2] - expected[2])) < np.radians(1.0)
 
 
 def test_a_simulated_drive_is_tracked_within_centimetres(office_drive) -> None:  # type: ignore[no-untyped-def]
@@ -212,7 +238,16 @@ def test_a_tracked_placement_far_from_the_prediction_needs_the_search_to_agree(
     tracked = (0.5, 0.0, np.pi / 2)
     searched: list[bool] = []
 
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
+    def fake(
+        reference,
+        new,
+        config,
+        heuristics=(),
+        extra_hypotheses=None,
+        views=None,
+        judged=None,
+        prior=None,
+    ):  # type: ignore[no-untyped-def]
         searched.append(bool(heuristics))
         if heuristics:
             pose, confidence = search_finds, 0.9
@@ -261,7 +296,16 @@ def test_a_confident_track_within_the_tolerance_of_its_prediction_needs_no_searc
     # starting between two scans explains.
     calls: list[bool] = []
 
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
+    def fake(
+        reference,
+        new,
+        config,
+        heuristics=(),
+        extra_hypotheses=None,
+        views=None,
+        judged=None,
+        prior=None,
+    ):  # type: ignore[no-untyped-def]
         calls.append(bool(heuristics))
         return fake_match(refined_to, confidence, judged)
 
@@ -283,7 +327,16 @@ def test_a_rival_moves_a_confident_track_that_stayed_near_a_wrong_prediction(
     truth = (0.5, 0.0, 0.3)
     calls: list[bool] = []
 
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
+    def fake(
+        reference,
+        new,
+        config,
+        heuristics=(),
+        extra_hypotheses=None,
+        views=None,
+        judged=None,
+        prior=None,
+    ):  # type: ignore[no-untyped-def]
         calls.append(bool(heuristics))
         if len(extra_hypotheses) == 1:
             return fake_match((0.5, 0.0, 0.06), 0.81, judged)  # the prediction alone
@@ -441,7 +494,16 @@ def _match_in_two_pieces(
     segments, _ = extract_scan(scan, EXTRACTION)
     keyframes = {k: segments.segments.copy() for k in (0, 1, 2, 3)}
 
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
+    def fake(
+        reference,
+        new,
+        config,
+        heuristics=(),
+        extra_hypotheses=None,
+        views=None,
+        judged=None,
+        prior=None,
+    ):  # type: ignore[no-untyped-def]
         pose, confidence = matches[next(k for k, s in keyframes.items() if s is reference)]
         return fake_match(pose, confidence, judged)
 
@@ -571,7 +633,16 @@ def test_a_search_that_is_not_confident_is_searched_again_with_the_shapes(
     segments, _ = extract_scan(scan, EXTRACTION)
     calls: list[int] = []
 
-    def fake(reference, new, config, heuristics=(), extra_hypotheses=None, views=None, judged=None):  # type: ignore[no-untyped-def]
+    def fake(
+        reference,
+        new,
+        config,
+        heuristics=(),
+        extra_hypotheses=None,
+        views=None,
+        judged=None,
+        prior=None,
+    ):  # type: ignore[no-untyped-def]
         calls.append(len(extra_hypotheses))
         if len(calls) == 1:
             pose, confidence = (0.2, 0.0, 0.0), 0.3
@@ -590,7 +661,7 @@ def test_a_search_that_is_not_confident_is_searched_again_with_the_shapes(
         [(0.0, 0.0, 0.0)],
         False,
         lambda stage, _: stages.append(stage),
-        attempts.Shapes(LocalMapperConfig().shape),
+        Shapes(LocalMapperConfig().shape),
     )
     assert len(calls) == 2 and calls[1] > calls[0]  # the shape placements came in
     assert "shape" in stages

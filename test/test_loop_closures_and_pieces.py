@@ -29,6 +29,7 @@ from multi_robot_mapper.core.local_mapping import (
 )
 from multi_robot_mapper.core.local_mapping import joins as piece_joins
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
+from multi_robot_mapper.core.matching.integrate import hypotheses_of
 from multi_robot_mapper.core.pose_graph import ReachBound
 
 # The simulated office repeats its rooms: the join model (calibrated on generated buildings,
@@ -450,7 +451,7 @@ def test_a_closure_edge_is_the_windows_placement_between_the_members_that_see_mo
     volume = np.linalg.slogdet(edge.information)[1]
     for i in first_window.tolist():
         for j in last_window.tolist():
-            T_i_j = attempts.hypotheses_of([se2.between(pose(i), pose(j))])[0]
+            T_i_j = hypotheses_of([se2.between(pose(i), pose(j))])[0]
             other = closer._edge(i, j, T_i_j, robust=True)
             assert np.linalg.slogdet(other.information)[1] <= volume + 1e-9
     # Walls of both scans overlap there: tighter than the ceiling of an unconstrained edge

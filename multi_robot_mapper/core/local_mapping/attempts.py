@@ -19,8 +19,10 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeScan
+from multi_robot_mapper.core.local_mapping.local_map import LocalMap
 from multi_robot_mapper.core.logistic import LogisticModel, model_number, read_object
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
+from multi_robot_mapper.core.matching.beams import Viewpoint
 from multi_robot_mapper.core.matching.confidence import (
     LIKELY,
     LOOK_ALIKE_TURNS,
@@ -28,8 +30,9 @@ from multi_robot_mapper.core.matching.confidence import (
     RIGHT_DISTANCE,
     TRACK_TURNS,
 )
-from multi_robot_mapper.core.matching.shape import Shape, match_shapes, shape_of_scan
-from multi_robot_mapper.core.matching.shape_config import ShapeConfig
+from multi_robot_mapper.core.matching.integrate import hypotheses_of, pose_of_match
+from multi_robot_mapper.core.matching.prior import MotionPrior
+from multi_robot_mapper.core.matching.shape import Shapes, match_shapes
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.se2 import Pose
 
@@ -214,17 +217,6 @@ def _turned_from_prediction(motion: Pose, predicted: Pose) -> bool:
     return turn > max(TRACK_TURNS) + RIGHT_ANGLE
 
 
-def pose_of_match(T_1_2: FloatArray) -> Pose:
-    """INTEGRATE's (theta, tx, ty) as an (x, y, theta) pose."""
-    return (float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0]))
-
-
-def hypotheses_of(poses: list[Pose]) -> FloatArray:
-    """(x, y, theta) poses as INTEGRATE hypotheses (theta, tx, ty)."""
-    stacked = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    return np.column_stack((stacked[:, 2], stacked[:, 0], stacked[:, 1]))
-
-
 @dataclasses.dataclass(frozen=True)
 class Reference:
     """A scan a new scan can be matched against, and where it is."""
@@ -233,6 +225,8 @@ class Reference:
     view: LaserScanData
     anchor: Anchor
     stamp: float  # when it was taken (s)
+    # several scans fused (a local map): where each was taken, in the reference's frame
+    viewpoints: list[Viewpoint] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -259,26 +253,12 @@ class References:
     # the scans since the last placed one are held, not placed (core.local_mapping.held): in
     # its own piece too the robot is found only where its own top speed takes it
     own_speed_only: bool = False
-
-
-class Shapes:
-    """Wolter's shapes of the scans the front end matches, each made once: a bounded cache,
-    keyed by the scan object (kept alive while cached, so its id is not reused)."""
-
-    def __init__(self, config: ShapeConfig, size: int = 64) -> None:
-        self.config = config
-        self._size = size
-        self._cache: dict[int, tuple[LaserScanData, Shape]] = {}
-
-    def __call__(self, view: LaserScanData) -> Shape:
-        entry = self._cache.get(id(view))
-        if entry is not None and entry[0] is view:
-            return entry[1]
-        shape = shape_of_scan(view, self.config)
-        if len(self._cache) >= self._size:
-            del self._cache[next(iter(self._cache))]  # the oldest
-        self._cache[id(view)] = (view, shape)
-        return shape
+    # metres of wall the constant-velocity prediction is worth as a motion prior along the
+    # direction a tracked match cannot observe (core.matching.prior); None: not decisive
+    prior_support: float | None = None
+    # the keyframe with the recent keyframes of its piece, fused: what tracking matches
+    # against (core.local_mapping.local_map; None: the keyframe alone)
+    local_map: LocalMap | None = None
 
 
 def match_scan(
@@ -348,28 +328,40 @@ class _ScanMatching:
         search: bool,
         guesses_from_last: list[Pose],
         judge_near_prediction: bool = False,
+        prior: bool = False,
     ) -> Attempt:
         """The new scan matched against ``reference`` from the predictions
         ``guesses_from_last`` (motions from the last placed scan; with ``search``,
         INTEGRATE's own hypotheses too, and the shapes' where that is not confident), kept
         with its confidence in context; the time it took counted. With
         ``judge_near_prediction`` its confidence is read only within the correctness tolerance
-        of the first prediction."""
+        of the first prediction. With ``prior`` the first prediction is a motion prior along
+        the direction the match cannot observe (when it is decisive: ``prior_support``)."""
         started = time.perf_counter()
         anchor = reference.anchor
         guesses = self._predictions(anchor, guesses_from_last)
+        support = self.references.prior_support
+        motion_prior = (
+            MotionPrior(hypotheses_of(guesses[:1])[0], support, self.config.wall_sigma)
+            if prior and support is not None
+            else None
+        )
         result = integrate(
             reference.segments,
             self.new,
             self.config.integrate,
             heuristics=HEURISTICS if search else (),
             extra_hypotheses=hypotheses_of(guesses),
-            views=(reference.view, self.view),
+            views=(
+                reference.view if reference.viewpoints is None else reference.viewpoints,
+                self.view,
+            ),
             judged=(
                 (lambda T: close_to(pose_of_match(T), guesses[0], RIGHT_DISTANCE, RIGHT_ANGLE))
                 if judge_near_prediction
                 else None
             ),
+            prior=motion_prior,
         )
         checked = result.seconds.get("confidence", 0.0)
         shaping = 0.0
@@ -527,11 +519,15 @@ class _ScanMatching:
         return Reference(scan.segments, scan.view, Anchor(keyframe, (0.0, 0.0, 0.0)), scan.stamp)
 
     def track(self, motions: list[Pose]) -> tuple[Attempt, bool, bool] | None:
-        """The placement tracked against the last keyframe from the predictions, when the
-        motion model and the match agree (or a likely search does not disagree); None when
-        tracking settles nothing (the search goes on, :meth:`search`)."""
+        """The placement tracked from the predictions against the last keyframe (or the local
+        map around it, where there is one: the keyframe with those before it, fused in its
+        frame), when the motion model and the match agree (or a likely search does not
+        disagree); None when tracking settles nothing (the search goes on, :meth:`search`)."""
         here = self.references.here
         start = self.keyframe_reference(self.references.keyframe)
+        local = self.references.local_map
+        if local is not None:
+            start = dataclasses.replace(start, segments=local.segments, viewpoints=local.viewpoints)
         # A fast laser's prediction is good: refined alone, it lands next to it. When it lands
         # farther, or is not confident, it is refined again with rivals a wrong minimum cannot
         # hide from: turned either way (a turn that starts between two scans is the usual
@@ -539,7 +535,9 @@ class _ScanMatching:
         # the look-alike's rival, or the right answer when the prediction found the look-alike).
         # Its confidence is read only within the tolerance of the prediction: beyond it the
         # placement is discarded whatever its confidence (most scans that need the rivals).
-        quick = self.attempt("track", start, False, motions[:1], judge_near_prediction=True)
+        quick = self.attempt(
+            "track", start, False, motions[:1], judge_near_prediction=True, prior=True
+        )
         # A sure one settles anywhere within the tolerance: on every shared log cut into 4
         # robots (bench/track_near.py, its fourth table) the 1 599 sure ones there were all
         # right; the 0.81 that stayed 17 deg off on aces (below) is far from sure.
@@ -550,10 +548,11 @@ class _ScanMatching:
             and self.reachable(quick)
         ):
             return quick, True, True
-        self.attempts.remove(quick)
+        # (by identity: attempts hold arrays, and an earlier one may equal it field by field)
+        del self.attempts[next(i for i, a in enumerate(self.attempts) if a is quick)]
         x, y, theta = motions[0]
         rivals = [(x, y, theta + d) for d in (*TRACK_TURNS, *LOOK_ALIKE_TURNS) if d]
-        track = self.attempt("track", start, False, motions + rivals)
+        track = self.attempt("track", start, False, motions + rivals, prior=True)
         if track.confidence >= self.threshold and self.reachable(track):
             motion = se2.between(here, track.pose)
             if close_to(motion, motions[0], RIGHT_DISTANCE, RIGHT_ANGLE) or (
@@ -569,7 +568,11 @@ class _ScanMatching:
             # Far from the prediction, the placement may be a look-alike the prediction led
             # to: the search with no guess confirms it, or finds a likely rival, and then
             # neither settles alone.
-            search = self.attempt("search", self.references.last, True, motions)
+            search = (
+                self.searched
+                if self.searched is not None
+                else self.attempt("search", self.references.last, True, motions)
+            )
             self.searched = search
             self.rivals_disagree = (
                 search.confidence >= LIKELY

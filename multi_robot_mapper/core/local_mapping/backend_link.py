@@ -17,7 +17,7 @@ from multi_robot_mapper.core.local_mapping.backend import (
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.joins import LostFrom
 from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeScan
-from multi_robot_mapper.core.local_mapping.loop_closer import BackendUpdate
+from multi_robot_mapper.core.local_mapping.loop_closer import BackendUpdate, Closure
 from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.se2 import Pose
 
@@ -122,3 +122,21 @@ class BackendLink:
                 continue
             self._poses[scan.index] = se2.compose(self._poses[edge.first], edge.T_first_second)
             self._pieces[scan.index] = self._pieces[edge.first]
+
+    def keyframes(self) -> list[Keyframe]:
+        """Every keyframe the back end has taken, with the map segments it owns, as of its
+        last update (safe to call from any thread while the back end works)."""
+        with self._lock:
+            return list(self._keyframes)
+
+    @property
+    def closures(self) -> list[Closure]:
+        """The loop closures and joins in the graph (from a worker process: after the
+        keyframe it is on)."""
+        return self.backend.closures
+
+    @property
+    def idle(self) -> bool:
+        """No keyframe waits for the back end and none is being worked on."""
+        with self._lock:
+            return not self._queue and not self._busy

@@ -184,6 +184,35 @@ class LocalMapperConfig:
         minimum=0.1,
         maximum=1000.0,
     )
+    velocity_window: float = param(
+        0.0,
+        unit="s",
+        doc="the constant-velocity prediction is the robot's motion over its placed scans of "
+        "this many seconds (at least the last one; 0: the last placed motion alone). Not "
+        "averaged: over 0.5 s on the dense aces bag, 6 pieces instead of 9 but 5 tracking "
+        "breaks instead of 1 (docs/decisions.md, tracking in corridors)",
+        minimum=0.0,
+        maximum=10.0,
+    )
+    local_map_keyframes: int = param(
+        1,
+        unit="keyframes",
+        doc="a scan is tracked against the last keyframe fused with the keyframes before it "
+        "in its piece, this many in all (1: the last keyframe alone). 1: with 3, the dense "
+        "aces bag kept 6 393 scans posed instead of 3 862 with no tracking break, the dense "
+        "intel bag 10 156 instead of 13 556 (docs/decisions.md, tracking in corridors)",
+        minimum=1,
+        maximum=10,
+    )
+    motion_prior: bool = param(
+        False,
+        unit="",
+        doc="tracking weighs the constant-velocity prediction along the direction a match "
+        "cannot observe (the weakest of its point-to-line Hessian), as a motion prior worth "
+        "the robot's own measured prediction error (core/matching/prior.py). Off: on the "
+        "dense aces and intel bags it let the velocity's error carry scans along corridors "
+        "(10 and 14 tracking breaks instead of 1; docs/decisions.md, tracking in corridors)",
+    )
     integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
     # Wolter's shape matching: a second source of hypotheses for a search that is not
     # confident (README, "Local mapping").

@@ -24,10 +24,11 @@ import dataclasses
 import numpy as np
 from numpy.typing import NDArray
 
-from multi_robot_mapper.core.local_mapping.attempts import in_context, pose_of_match, reach_in
+from multi_robot_mapper.core.local_mapping.attempts import in_context, reach_in
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.joins import LostFrom
 from multi_robot_mapper.core.matching import MatchResult, integrate
+from multi_robot_mapper.core.matching.integrate import pose_of_match
 from multi_robot_mapper.core.scan import LaserScanData
 
 FloatArray = NDArray[np.float64]

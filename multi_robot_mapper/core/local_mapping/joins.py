@@ -17,7 +17,7 @@ import numpy as np
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.placement import Reach
-from multi_robot_mapper.core.local_mapping.attempts import close_to, pose_of_match
+from multi_robot_mapper.core.local_mapping.attempts import close_to
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
 from multi_robot_mapper.core.local_mapping.windows import (
@@ -27,6 +27,7 @@ from multi_robot_mapper.core.local_mapping.windows import (
     WindowMatcher,
 )
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
+from multi_robot_mapper.core.matching.integrate import pose_of_match
 from multi_robot_mapper.core.pose_graph import ReachBound
 from multi_robot_mapper.core.se2 import Pose
 

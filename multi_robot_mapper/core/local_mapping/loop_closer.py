@@ -48,7 +48,7 @@ import numpy as np
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.model import graph_prior
 from multi_robot_mapper.core.evidence.placement import Reach
-from multi_robot_mapper.core.local_mapping.attempts import close_to, hypotheses_of, pose_of_match
+from multi_robot_mapper.core.local_mapping.attempts import close_to
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.evidence import without_approach
 from multi_robot_mapper.core.local_mapping.joins import LostFrom, PieceJoins
@@ -58,6 +58,7 @@ from multi_robot_mapper.core.local_mapping.windows import (
     FloatArray,
 )
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
+from multi_robot_mapper.core.matching.integrate import hypotheses_of, pose_of_match
 from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.se2 import Pose
 

@@ -51,9 +51,7 @@ from multi_robot_mapper.core.local_mapping.attempts import (
     Attempt,
     Reference,
     References,
-    Shapes,
     match_scan,
-    pose_of_match,
     reach_in,
 )
 from multi_robot_mapper.core.local_mapping.backend import (
@@ -66,9 +64,13 @@ from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.held import OUTLIER, HeldScan, follow_match
 from multi_robot_mapper.core.local_mapping.joins import LostFrom
 from multi_robot_mapper.core.local_mapping.keyframe_map import Keyframe, KeyframeScan
-from multi_robot_mapper.core.local_mapping.loop_closer import Closure
+from multi_robot_mapper.core.local_mapping.local_map import LocalMaps
+from multi_robot_mapper.core.local_mapping.motion import RecentMotion
 from multi_robot_mapper.core.matching import MatchResult
+from multi_robot_mapper.core.matching.integrate import pose_of_match
+from multi_robot_mapper.core.matching.prior import prior_support
 from multi_robot_mapper.core.matching.refine import match_information
+from multi_robot_mapper.core.matching.shape import Shapes
 from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.se2 import Pose
@@ -79,8 +81,6 @@ IntArray = NDArray[np.int64]
 
 # Back-end times kept (per keyframe): enough for any replay, bounded for a node running for hours.
 _TIMES_KEPT = 100_000
-# Placed motions whose speeds say how fast the robot drives (the latest: a robot's pace changes).
-_SPEEDS_KEPT = 1_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,10 +151,9 @@ class LocalMapper(BackendLink):
         self.last_backend_error: str | None = None  # the newest one's traceback
         self.optimise_seconds: deque[float] = deque(maxlen=_TIMES_KEPT)  # per keyframe
         self._last: _Last | None = None
-        self._velocity: FloatArray | None = None  # (x, y, theta) per second, last scan frame
-        # the speeds (m/s) of the latest placed motions (how far a lost robot can drive), and
-        self._speeds: deque[float] = deque(maxlen=_SPEEDS_KEPT)
-        self._periods: deque[float] = deque(maxlen=_SPEEDS_KEPT)  # their seconds (the median)
+        # the velocity, how far its predictions miss, the robot's top speed and scan period
+        self._motion = RecentMotion(self.config.velocity_window)
+        self._local_maps = LocalMaps()  # the local map tracking matches against
         # piece when placed -> (stamp, anchor) of the robot's last scan placed in it
         self._last_in_piece: dict[int, tuple[float, Anchor]] = {}
         self._piece_of_last = 0
@@ -246,9 +245,9 @@ class LocalMapper(BackendLink):
         pose = chosen.pose
         motion = se2.between(self._placed_pose_unlocked(last.anchor), pose)
         if dt > 0.0:
-            self._velocity = np.asarray(motion) / dt
-            self._speeds.append(float(np.hypot(motion[0], motion[1])) / dt)
-            self._periods.append(dt)
+            evidence = chosen.result.evidence
+            support = None if evidence is None else evidence.support
+            self._motion.placed(dt, motion, self._motion.predict(dt), support)
         placed = Anchor(anchor.keyframe, T_keyframe_new)
         keyframe_added = False
         known = self._known_view(pose, chosen.piece) if self.config.revisit_keyframes else None
@@ -345,11 +344,7 @@ class LocalMapper(BackendLink):
         driven at its own top speed (as a lost robot is in the pieces it left)."""
         config = self.config
         keyframe = last.anchor.keyframe
-        # The constant-velocity prediction and "did not move", from the last scan.
-        motions: list[Pose] = [(0.0, 0.0, 0.0)]
-        if self._velocity is not None:
-            vx, vy, vtheta = (float(v) for v in self._velocity * dt)
-            motions.insert(0, (vx, vy, vtheta))
+        motions, period, worth = self._predictions(dt)
         with self._lock:
             piece = self._pieces[keyframe]
             newest_first = sorted(self._poses, reverse=True)
@@ -371,9 +366,13 @@ class LocalMapper(BackendLink):
                 left=left,
                 top_speed=self._top_speed(),
                 elapsed=dt,
-                period=float(np.median(self._periods)) if self._periods else None,
+                period=period,
                 own_speed_only=after_held,
+                prior_support=worth,
             )
+        recent = [k for k in older if references.pieces[k] == piece]
+        local_map = self._local_maps.around(keyframe, recent, references, config)
+        references = dataclasses.replace(references, local_map=local_map)
         self.last_attempts = []  # this scan's (a lost robot's held scans are matched in turn)
         chosen, integrated, tracked = match_scan(
             config,
@@ -381,13 +380,31 @@ class LocalMapper(BackendLink):
             new,
             view,
             motions,
-            self._velocity is not None,
+            len(motions) > 1,
             self._count,
             self._shapes,
             self.last_attempts,
         )
         self.scans_tracked += tracked
         return chosen, integrated
+
+    def _predictions(self, dt: float) -> tuple[list[Pose], float | None, float | None]:
+        """The constant-velocity prediction (when a velocity is known) and "did not move",
+        from the last scan ``dt`` seconds before; the robot's usual scan period; and what the
+        prediction is worth as a motion prior (metres of wall; None: not weighed)."""
+        motions: list[Pose] = [(0.0, 0.0, 0.0)]
+        predicted = self._motion.predict(dt)
+        if predicted is not None:
+            motions.insert(0, predicted)
+        period = self._motion.period()
+        if not self.config.motion_prior:
+            return motions, period, None
+        sigma = self._motion.prior_sigma(dt, period)
+        return (
+            motions,
+            period,
+            None if sigma is None else prior_support(sigma, self.config.wall_sigma),
+        )
 
     def _known_view(self, pose: Pose, piece: int) -> Anchor | None:
         """The anchor on the nearest keyframe of ``piece`` within ``keyframe_distance`` and
@@ -456,7 +473,7 @@ class LocalMapper(BackendLink):
         anchor = Anchor(index, (0.0, 0.0, 0.0))
         self._last = _Last(stamp, segments, view, anchor)
         self._record(stamp, anchor)
-        self._velocity = None
+        self._motion.reset()
         self.scans_accepted += 1
         if index > 0:
             self.pieces_started += 1
@@ -481,18 +498,13 @@ class LocalMapper(BackendLink):
         elif self.inline_backend:
             self.run_backend()
 
-    @property
-    def idle(self) -> bool:
-        """No keyframe waits for the back end and none is being worked on."""
-        with self._lock:
-            return not self._queue and not self._busy
-
     def reconfigure(self, config: LocalMapperConfig) -> None:
         """New settings from the next scan and the next keyframe on; the map is kept."""
         self.config = config
         self.backend.reconfigure(config)
         if config.shape != self._shapes.config:
             self._shapes = Shapes(config.shape)
+        self._motion.window = config.velocity_window
 
     # --- reading ----------------------------------------------------------------------------
 
@@ -508,12 +520,7 @@ class LocalMapper(BackendLink):
         return np.vstack(pieces) if pieces else np.zeros((0, 4))
 
     def _top_speed(self) -> float | None:
-        """How fast the robot drives at most, by its placed motions: their 95th percentile,
-        which one wrong placement (or a motion over a short, jittery interval) cannot move.
-        None before there are any."""
-        if not self._speeds:
-            return None
-        return float(np.percentile(np.asarray(self._speeds), 95.0))
+        return self._motion.top_speed()
 
     def _left(self, stamp: float, pieces: set[int]) -> dict[int, tuple[Pose, float]]:
         """For each of ``pieces``: the pose of the robot's last scan placed in it (in its
@@ -544,12 +551,6 @@ class LocalMapper(BackendLink):
                 counts[piece] = counts.get(piece, 0) + scans
         return min(counts, key=lambda p: (-counts[p], p)) if counts else 0
 
-    def keyframes(self) -> list[Keyframe]:
-        """Every keyframe the back end has taken, with the map segments it owns, as of its
-        last update (safe to call from any thread while the back end works)."""
-        with self._lock:
-            return list(self._keyframes)
-
     def trajectory(self, piece: int | None = None) -> tuple[FloatArray, FloatArray]:
         """Stamps (N,) and poses (N, 3) of the placed scans of ``piece`` (default: the main
         piece), at the keyframes' current poses."""
@@ -578,12 +579,6 @@ class LocalMapper(BackendLink):
             np.array([a.keyframe for _, a in kept], dtype=np.int64),
             np.array([a.T_keyframe_scan for _, a in kept], dtype=np.float64).reshape(-1, 3),
         )
-
-    @property
-    def closures(self) -> list[Closure]:
-        """The loop closures and joins in the graph (from a worker process: after the
-        keyframe it is on)."""
-        return self.backend.closures
 
     def _placed_pose(self, anchor: Anchor) -> Pose:
         return se2.compose(self._poses[anchor.keyframe], anchor.T_keyframe_scan)

@@ -21,8 +21,6 @@ from multi_robot_mapper.core.evidence.model import (
     installed_model,
 )
 from multi_robot_mapper.core.evidence.placement import Reach
-from multi_robot_mapper.core.fusion import fuse
-from multi_robot_mapper.core.local_mapping.attempts import hypotheses_of, pose_of_match
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.evidence import (
     Weighed,
@@ -32,9 +30,11 @@ from multi_robot_mapper.core.local_mapping.evidence import (
     probability_of,
 )
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
+from multi_robot_mapper.core.local_mapping.local_map import fused_keyframes
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
 from multi_robot_mapper.core.matching.beams import Viewpoint
 from multi_robot_mapper.core.matching.confidence import TRACK_TURNS
+from multi_robot_mapper.core.matching.integrate import hypotheses_of, pose_of_match
 from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
 from multi_robot_mapper.core.se2 import Pose
@@ -109,24 +109,14 @@ class WindowMatcher:
         keyframes in all), their scans fused in its frame, and their viewpoints: a window
         sees more of a place than one scan, and its matches are surer (README, "Match
         confidence": window pairs)."""
-        members = self._window_members(center)
-        T_center = se2.invert(se2.matrix_from_pose(*self.keyframes.pose(center)))
-        fused, owner = np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
-        viewpoints = []
-        for k in sorted(int(m) for m in members):
-            scan = self.keyframes.scans[k]
-            T = T_center @ se2.matrix_from_pose(*self.keyframes.pose(k))
-            placed = se2.transform_segments(T, scan.segments)
-            fused, owner = fuse(
-                fused,
-                owner,
-                placed,
-                np.full(len(placed), k, dtype=np.int64),
-                self.config.integrate,
-                self.config.fusion_tolerance,
-            )
-            viewpoints.append(Viewpoint(scan.view, T))
-        return fused, viewpoints
+        return fused_keyframes(
+            center,
+            [int(k) for k in self._window_members(center)],
+            self.keyframes.pose,
+            self.keyframes.scans.__getitem__,
+            self.config.integrate,
+            self.config.fusion_tolerance,
+        )
 
     def _match_windows(
         self, first: int, second: int, predicted: Pose | None, search: bool = True

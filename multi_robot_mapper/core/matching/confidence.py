@@ -75,6 +75,9 @@ class MatchEvidence:
     fraction: float  # INTEGRATE's net value / shorter set's segment length
     # both sets' returns judged with the best rival placement (all zero: no rival)
     rival: BeamAgreement = dataclasses.field(default_factory=BeamAgreement.nothing)
+    # metres of wall a motion prior adds across the least constrained direction (tracking:
+    # core.matching.prior; not stored by as_array: the model is fitted on matches without one)
+    prior_support: float = 0.0
 
     def as_array(self) -> FloatArray:
         """The raw evidence as 19 numbers (:meth:`from_array` inverts it): what the fitting
@@ -113,11 +116,12 @@ class MatchEvidence:
         confirmed = np.log1p(both.confirmed)
         score, rival = max(self.score, 0.0), max(self.rival_score, 0.0)
         uniqueness = (score - rival) / score if score > 0.0 else 0.0
-        support = np.log1p(max(self.support, 0.0))
+        fixed = max(self.support, 0.0) + max(self.prior_support, 0.0)  # across the weakest
+        support = np.log1p(fixed)
         sides = (self.second_in_first, self.first_in_second)
         margin = _beam_margin(both, self.rival)
         ambiguity = (1.0 - float(np.clip(margin / TIE_MARGIN, 0.0, 1.0))) / (
-            1.0 + max(self.support, 0.0) / SLIDE_SUPPORT
+            1.0 + fixed / SLIDE_SUPPORT
         )
         kept = 1.0 - ambiguity
         return np.array(

@@ -34,7 +34,13 @@ from multi_robot_mapper.core.matching.hypotheses import (
     hypotheses,
     landmarks,
 )
-from multi_robot_mapper.core.matching.refine import refine_many
+from multi_robot_mapper.core.matching.prior import (
+    MotionPrior,
+    excluded_by,
+    support_with_prior,
+    weighs,
+)
+from multi_robot_mapper.core.matching.refine import normal_equations, refine_many
 from multi_robot_mapper.core.matching.scoring import (
     information,
     pruned_values,
@@ -42,6 +48,7 @@ from multi_robot_mapper.core.matching.scoring import (
     score_pairs,
     transform_values,
 )
+from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -81,6 +88,17 @@ class MatchResult:
         )
 
 
+def pose_of_match(T_1_2: FloatArray) -> Pose:
+    """INTEGRATE's (theta, tx, ty) as an (x, y, theta) pose."""
+    return (float(T_1_2[1]), float(T_1_2[2]), float(T_1_2[0]))
+
+
+def hypotheses_of(poses: list[Pose]) -> FloatArray:
+    """(x, y, theta) poses as INTEGRATE hypotheses (theta, tx, ty)."""
+    stacked = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    return np.column_stack((stacked[:, 2], stacked[:, 0], stacked[:, 1]))
+
+
 def integrate(
     segments1: FloatArray,
     segments2: FloatArray,
@@ -91,6 +109,7 @@ def integrate(
     views: tuple[Views, Views] = (None, None),
     hypothesis_sets: tuple[FloatArray, FloatArray] | None = None,
     judged: Callable[[FloatArray], bool] | None = None,
+    prior: MotionPrior | None = None,
 ) -> MatchResult:
     """Find how S2 lies in S1's frame with no initial guess (INTEGRATE steps 1-2).
 
@@ -116,6 +135,11 @@ def integrate(
     Steps: hypotheses (Alg. 2 and the heuristics of III-A); values (Alg. 4 l. 5-19, after a
     prescreen when there are many); the best distinct ones, refused ones dropped (Alg. 4
     l. 6-7, 20-23); refinement; slides along corridors; the best net score wins.
+
+    A motion ``prior`` (:mod:`~core.matching.prior`: tracking, where the robot's recent
+    motion predicts the placement) decides the least constrained direction: the refinement
+    weighs it there, no hypothesis is slid along it, and a rival it rules out is no rival
+    (the fit's spread counts the prior as the walls it is worth).
     """
     clock = _StageClock()
     rng = np.random.default_rng(config.seed)
@@ -134,12 +158,20 @@ def integrate(
     clock.lap("evaluation")
     if candidates.size == 0:
         return _no_match(len(transforms), evaluated, clock)
-    refined = refine_many(segments1, segments2, transforms[candidates], config)
+    refined = refine_many(segments1, segments2, transforms[candidates], config, prior)
     clock.lap("refinement")
-    ranked = _ranked(segments1, segments2, transforms, candidates, refined, views, config)
+    ranked = _ranked(segments1, segments2, transforms, candidates, refined, views, config, prior)
     clock.lap("ranking")
     return _judged_result(
-        segments1, segments2, ranked, shorter, views, config, judged, clock, transforms, evaluated
+        segments1,
+        segments2,
+        ranked,
+        shorter,
+        (views, config, prior),
+        judged,
+        clock,
+        transforms,
+        evaluated,
     )
 
 
@@ -207,11 +239,13 @@ def _ranked(
     refined: FloatArray,
     views: tuple[Views, Views],
     config: IntegrateConfig,
+    prior: MotionPrior | None = None,
 ) -> _Ranked:
     """The ``refined`` candidates (rows ``candidates`` of ``transforms``, refined) with the
     hypotheses slid along corridors, ranked by their net score: a refined one that was refused
     (or lost its overlap) falls back to its unrefined hypothesis, and the best one, when slid,
-    is refined too."""
+    is refined too. With a motion ``prior`` nothing the walls leave unobserved is slid: the
+    prior decides the offset along the corridor."""
     refined_values, scores, support, slide = _net_scores(
         segments1, segments2, refined, views, config
     )
@@ -224,6 +258,8 @@ def _ranked(
             refined_values[bad], scores[bad], support[bad], slide[bad] = _net_scores(
                 segments1, segments2, refined[bad], views, config
             )
+    # The prior decides the offset along a corridor where it counts: nothing to slide there.
+    support[_weighs(segments1, segments2, refined, config, prior)] = np.inf
     slid, slid_values, slid_scores = _slide(
         segments1, segments2, refined, scores, support, slide, views, config
     )
@@ -251,8 +287,7 @@ def _judged_result(
     segments2: FloatArray,
     ranked: _Ranked,
     shorter: float,
-    views: tuple[Views, Views],
-    config: IntegrateConfig,
+    setting: tuple[tuple[Views, Views], IntegrateConfig, MotionPrior | None],
     judged: Callable[[FloatArray], bool] | None,
     clock: _StageClock,
     transforms: FloatArray,
@@ -260,7 +295,9 @@ def _judged_result(
 ) -> MatchResult:
     """The best ranked placement as the match: its validity (net value, fraction and cross
     support) and, where ``judged`` wants it, its confidence (of the ``transforms``
-    hypotheses, ``evaluated`` were evaluated in full)."""
+    hypotheses, ``evaluated`` were evaluated in full; ``setting``: the views, the config and
+    the motion prior)."""
+    views, config, prior = setting
     refined, scores, pick = ranked.transforms, ranked.scores, ranked.pick
     best_T, best_value = refined[pick], float(ranked.values[pick])
     # Validity on the net value: overlap that the other scan's free space contradicts counts
@@ -268,7 +305,7 @@ def _judged_result(
     through, _ = seen_through_many(segments1, segments2, best_T[None, :], views, config)
     best_score = best_value - config.free_space_weight * float(through[0])
     fraction = best_score / shorter
-    best_support, slide = _support_and_slide(segments1, segments2, best_T, config)
+    best_support, slide, total = _support_and_slide(segments1, segments2, best_T, config)
     valid = (
         best_score >= config.min_match_value
         and fraction >= config.min_match_fraction
@@ -278,8 +315,13 @@ def _judged_result(
     if judged is None or judged(best_T):
         # The confidence: the beams of both sets on the chosen placement, how far it beats
         # its best rival (a distinct placement, beyond the correctness tolerance), the fit's
-        # spread.
+        # spread. A rival the motion prior rules out is none, nor is a slide along the
+        # direction it decides.
         rivals = _distinct_from(refined, best_T)
+        counts = _weighs(segments1, segments2, best_T[None, :], config, prior)
+        weighed = prior if counts.size and counts[0] else None
+        if weighed is not None:
+            rivals &= ~excluded_by(weighed, refined, slide)
         evidence = match_evidence(
             segments1,
             segments2,
@@ -290,8 +332,9 @@ def _judged_result(
             rival_score=float(scores[rivals].max()) if rivals.any() else 0.0,
             rival_T=refined[rivals][int(np.argmax(scores[rivals]))] if rivals.any() else None,
             support=best_support,
+            prior_support=support_with_prior(best_support, total, weighed) - best_support,
             fraction=fraction,
-            slide=slide,
+            slide=slide if weighed is None else None,
         )
         probability = confidence(evidence.features())
         clock.lap("confidence")
@@ -323,12 +366,29 @@ class _StageClock:
 
 def _support_and_slide(
     segments1: FloatArray, segments2: FloatArray, T_1_2: FloatArray, config: IntegrateConfig
-) -> tuple[float, FloatArray]:
-    """The cross support of ``T_1_2`` and its least constrained direction (a unit vector in
-    S1's frame): along a corridor, the way the placement could slide."""
+) -> tuple[float, FloatArray, float]:
+    """The cross support of ``T_1_2``, its least constrained direction (a unit vector in
+    S1's frame: along a corridor, the way the placement could slide) and the matched length
+    (the trace of the walls' normal matrix: the two eigenvalues' sum)."""
     scores = score_pairs(segments1, segments2, T_1_2.reshape(1, 3), config)
     support, direction = information(segments1, scores, 1)
-    return float(support[0]), np.asarray(direction[0], dtype=np.float64)
+    total = float(scores.value.sum())
+    return float(support[0]), np.asarray(direction[0], dtype=np.float64), total
+
+
+def _weighs(
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    config: IntegrateConfig,
+    prior: MotionPrior | None,
+) -> BoolArray:
+    """Where ``prior`` counts for each of ``transforms`` (:func:`~core.matching.prior.
+    weighs`, on the walls' Gauss-Newton matrix there)."""
+    system = None if prior is None else normal_equations(segments1, segments2, transforms, config)
+    if system is None:
+        return np.zeros(len(transforms), dtype=bool)
+    return weighs(prior, system[0])
 
 
 def _distinct_from(transforms: FloatArray, T: FloatArray) -> BoolArray:
@@ -351,6 +411,7 @@ def match_evidence(
     fraction: float,
     rival_T: FloatArray | None = None,
     slide: FloatArray | None = None,
+    prior_support: float = 0.0,
 ) -> MatchEvidence:
     """The evidence for the placement ``T_1_2`` (theta, tx, ty) of S2 in S1: each side's
     returns (points along its segments when its views are unknown) judged by the other side's
@@ -393,7 +454,9 @@ def match_evidence(
         candidate = pair[0] + pair[1]
         if rival.total <= 0.0 or _explained(candidate) > _explained(rival):
             rival = candidate
-    return MatchEvidence(judged[0], judged[1], score, rival_score, support, fraction, rival)
+    return MatchEvidence(
+        judged[0], judged[1], score, rival_score, support, fraction, rival, prior_support
+    )
 
 
 def _explained(agreement: BeamAgreement) -> float:

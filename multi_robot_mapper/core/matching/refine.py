@@ -7,6 +7,7 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.matching.config import IntegrateConfig
+from multi_robot_mapper.core.matching.prior import MotionPrior, add_prior
 from multi_robot_mapper.core.matching.scoring import (
     PairGeometry,
     geometry_scores,
@@ -25,7 +26,11 @@ def refine(
 
 
 def refine_many(
-    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+    segments1: FloatArray,
+    segments2: FloatArray,
+    transforms: FloatArray,
+    config: IntegrateConfig,
+    prior: MotionPrior | None = None,
 ) -> FloatArray:
     """Point-to-line least squares (Cox; Wolter 5.1) of several hypotheses at once.
 
@@ -35,8 +40,10 @@ def refine_many(
     linear along a segment, so two Gauss points per pair integrate the normal equations
     exactly (before weighting); a Cauchy weight (scale ``point_distance_tolerance``) lets the
     nearer of two parallel candidate lines win. A damped Gauss-Newton step solves each 3x3
-    system, so the offset along a bare corridor (not observable) stays where it was.
-    ``refine_iterations`` 0 returns the hypotheses unchanged.
+    system, so the offset along a bare corridor (not observable) stays where it was; with a
+    motion ``prior`` it goes where the prior puts it (:func:`~core.matching.prior.add_prior`:
+    along the least constrained direction only). ``refine_iterations`` 0 returns the
+    hypotheses unchanged.
     """
     T = np.array(transforms, dtype=np.float64).reshape(-1, 3)
     count = len(T)
@@ -51,7 +58,7 @@ def refine_many(
         system = _normal_equations(geometry, T[live], config)
         if system is None:
             break
-        H, g = system
+        H, g = system if prior is None else add_prior(*system, T[live], prior)
         # Levenberg damping: a direction no matched line constrains gets no step.
         damping = 1e-6 + 1e-4 * np.trace(H, axis1=1, axis2=2)
         H += damping[:, None, None] * np.eye(3)[None, :, :]

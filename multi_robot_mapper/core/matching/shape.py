@@ -485,3 +485,23 @@ def match_scans(
     """:func:`match_shapes` of two scans' shapes."""
     config = config if config is not None else ShapeConfig()
     return match_shapes(shape_of_scan(reference, config), shape_of_scan(perceived, config), config)
+
+
+class Shapes:
+    """Wolter's shapes of the scans the front end matches, each made once: a bounded cache,
+    keyed by the scan object (kept alive while cached, so its id is not reused)."""
+
+    def __init__(self, config: ShapeConfig, size: int = 64) -> None:
+        self.config = config
+        self._size = size
+        self._cache: dict[int, tuple[LaserScanData, Shape]] = {}
+
+    def __call__(self, view: LaserScanData) -> Shape:
+        entry = self._cache.get(id(view))
+        if entry is not None and entry[0] is view:
+            return entry[1]
+        shape = shape_of_scan(view, self.config)
+        if len(self._cache) >= self._size:
+            del self._cache[next(iter(self._cache))]  # the oldest
+        self._cache[id(view)] = (view, shape)
+        return shape

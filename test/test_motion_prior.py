@@ -1,0 +1,156 @@
+"""The motion prior of tracking (issue 47 item 5): the direction a match cannot observe, taken
+from its point-to-line Hessian; the prior weighed along it only; the robot's recent motion and
+how far its predictions miss."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from multi_robot_mapper.core.extraction import extract_scan
+from multi_robot_mapper.core.extraction_config import ExtractionConfig
+from multi_robot_mapper.core.local_mapping.motion import ERRORS_NEEDED, RecentMotion
+from multi_robot_mapper.core.matching import IntegrateConfig, integrate
+from multi_robot_mapper.core.matching.prior import (
+    DECISIVE_SIGMA,
+    MotionPrior,
+    prior_support,
+    weakest_directions,
+)
+from multi_robot_mapper.core.matching.refine import normal_equations, refine_many
+from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
+
+CONFIG = IntegrateConfig()
+LASER = LaserModel(beams=361, range_noise=0.005, dropout=0.0, range_max=20.0)
+# A 2.4 m wide corridor along x, 60 m long: its ends beyond the laser's reach.
+CORRIDOR = np.array([[-30.0, -1.2, 30.0, -1.2], [-30.0, 1.2, 30.0, 1.2]])
+ROOM = np.array(
+    [[-3.0, -2.0, 3.0, -2.0], [3.0, -2.0, 3.0, 2.0], [3.0, 2.0, -3.0, 2.0], [-3.0, 2.0, -3.0, -2.0]]
+)
+
+
+def _scans(world: np.ndarray, moved: float, seed: int = 3) -> tuple[np.ndarray, ...]:
+    rng = np.random.default_rng(seed)
+    first = simulate_scan(world, (0.0, 0.0, 0.0), LASER, rng)
+    second = simulate_scan(world, (moved, 0.1, 0.0), LASER, rng)
+    return (
+        first,
+        second,
+        *(extract_scan(s, ExtractionConfig())[0].segments for s in (first, second)),
+    )
+
+
+def test_the_weakest_direction_of_a_corridor_match_is_along_it() -> None:
+    _, _, s1, s2 = _scans(CORRIDOR, 0.5)
+    H, _ = normal_equations(s1, s2, np.array([[0.0, 0.5, 0.1]]), CONFIG)
+    u, weakest = weakest_directions(H)
+    assert abs(u[0, 0]) == pytest.approx(1.0, abs=1e-3)  # along x
+    assert weakest[0] < 1e-6 < np.trace(H[0])
+
+
+def test_the_prior_decides_the_corridor_offset_and_the_walls_the_rest() -> None:
+    # Refined from 0.3 m ahead along the corridor and 0.15 m across it: without a prior the
+    # offset along stays where it started (nothing observes it), the walls fix the one across;
+    # with a prior at the truth, the offset along goes to the prior.
+    _, _, s1, s2 = _scans(CORRIDOR, 0.5)
+    start = np.array([[0.0, 0.8, 0.25]])
+    alone = refine_many(s1, s2, start, CONFIG)[0]
+    prior = MotionPrior(np.array([0.0, 0.5, 0.0]), prior_support(0.01, 0.05) or 0.0, 0.05)
+    pulled = refine_many(s1, s2, start, CONFIG, prior)[0]
+    assert alone[1] == pytest.approx(0.8, abs=0.01)
+    assert alone[2] == pytest.approx(0.1, abs=0.01) and pulled[2] == pytest.approx(0.1, abs=0.01)
+    assert pulled[1] == pytest.approx(0.5, abs=0.01)
+    # The prior's own across-corridor guess (0.0) is not weighed: the walls observe that way.
+
+
+def test_where_the_walls_observe_every_direction_the_prior_is_not_weighed() -> None:
+    _, _, s1, s2 = _scans(ROOM, 0.5)
+    start = np.array([[0.0, 0.6, 0.15]])
+    wrong_prior = MotionPrior(np.array([0.0, 1.5, 1.0]), 100.0, 0.05)
+    alone = refine_many(s1, s2, start, CONFIG)[0]
+    with_prior = refine_many(s1, s2, start, CONFIG, wrong_prior)[0]
+    np.testing.assert_allclose(with_prior, alone, atol=1e-9)
+    assert alone[1:] == pytest.approx([0.5, 0.1], abs=0.01)
+
+
+def test_a_corridor_match_with_a_decisive_prior_is_confident_where_the_prior_puts_it() -> None:
+    first, second, s1, s2 = _scans(CORRIDOR, 0.5)
+    guess = np.array([[0.0, 0.52, 0.1]])
+    blind = integrate(s1, s2, CONFIG, heuristics=(), extra_hypotheses=guess, views=(first, second))
+    prior = MotionPrior(guess[0], prior_support(0.01, 0.05) or 0.0, 0.05)
+    tracked = integrate(
+        s1, s2, CONFIG, heuristics=(), extra_hypotheses=guess, views=(first, second), prior=prior
+    )
+    assert blind.confidence < 0.5  # the corridor fits everywhere along it
+    assert tracked.T_1_2[1:] == pytest.approx([0.52, 0.1], abs=0.02)
+    assert tracked.confidence > 0.9
+    assert tracked.evidence is not None and tracked.evidence.support < 0.1  # the walls' own
+    assert tracked.evidence.prior_support > 1.0
+
+
+def test_a_prior_is_decisive_only_within_a_third_of_the_tolerance() -> None:
+    assert prior_support(DECISIVE_SIGMA * 1.01, 0.05) is None
+    assert prior_support(0.0, 0.05) is None
+    assert prior_support(0.05, 0.05) == pytest.approx(1.0)  # worth a metre of wall
+    assert prior_support(0.025, 0.05) == pytest.approx(4.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    speed=st.floats(0.05, 2.0),
+    turn_rate=st.floats(-1.0, 1.0),
+    period=st.sampled_from([0.025, 0.1, 0.2, 1.0]),
+)
+def test_a_constant_twist_is_predicted_exactly(
+    speed: float, turn_rate: float, period: float
+) -> None:
+    recent = RecentMotion()
+    step = (speed * period, 0.0, turn_rate * period)
+    for _ in range(30):
+        recent.placed(period, step, recent.predict(period), None)
+    predicted = recent.predict(period)
+    assert predicted is not None
+    np.testing.assert_allclose(predicted, step, atol=1e-9 + 1e-6 * speed)
+
+
+def test_the_velocity_is_the_mean_over_its_window_not_the_last_jitter() -> None:
+    recent = RecentMotion(window=0.5)
+    for k in range(10):  # 0.6 m/s with +-5 cm of matching jitter, alternating
+        recent.placed(0.1, (0.06 + (0.05 if k % 2 else -0.05), 0.0, 0.0), None, None)
+    velocity = recent.velocity()
+    assert velocity is not None and velocity[0] == pytest.approx(0.6, abs=0.11)
+    recent.window = 0.0  # the last placed motion alone (the mapper's default)
+    recent.placed(0.1, (0.11, 0.0, 0.0), None, None)
+    velocity = recent.velocity()
+    assert velocity is not None and velocity[0] == pytest.approx(1.1)
+
+
+def test_prediction_errors_come_only_from_placements_the_walls_fix() -> None:
+    recent = RecentMotion()
+    for _ in range(ERRORS_NEEDED + 5):
+        # A corridor's placement (no support) says nothing of the prediction's error.
+        recent.placed(0.1, (0.1, 0.0, 0.0), (0.05, 0.0, 0.0), 0.0)
+    assert recent.prior_sigma(0.1, 0.1) is None
+    for _ in range(ERRORS_NEEDED):
+        recent.placed(0.1, (0.1, 0.0, 0.0), (0.09, 0.0, 0.0), 5.0)  # 1 cm missed each time
+    sigma = recent.prior_sigma(0.1, 0.1)
+    assert sigma is not None and sigma == pytest.approx(0.01 / 2.146, rel=0.01)
+    # Twice the time ahead: twice the velocity's error, and twice again for the acceleration.
+    assert recent.prior_sigma(0.2, 0.1) == pytest.approx(4.0 * sigma)
+
+
+def test_a_velocity_carried_on_unobserved_is_worth_less_the_longer_it_is_carried() -> None:
+    # Down a bare corridor the velocity is not measured, only carried on: its error moves
+    # every scan placed since one way, so the prior's spread grows with that time.
+    recent = RecentMotion()
+    for _ in range(ERRORS_NEEDED):
+        recent.placed(0.1, (0.1, 0.0, 0.0), (0.09, 0.0, 0.0), 5.0)
+    observed = recent.prior_sigma(0.1, 0.1)
+    for _ in range(4):
+        recent.placed(0.1, (0.1, 0.0, 0.0), (0.1, 0.0, 0.0), 0.0)  # 0.4 s unobserved
+    assert observed is not None
+    assert recent.prior_sigma(0.1, 0.1) == pytest.approx(5.0 * observed)
+    recent.placed(0.1, (0.1, 0.0, 0.0), (0.09, 0.0, 0.0), 5.0)  # the walls see it again
+    assert recent.prior_sigma(0.1, 0.1) == pytest.approx(observed)
