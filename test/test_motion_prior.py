@@ -103,16 +103,17 @@ def test_a_prior_is_decisive_only_within_a_third_of_the_tolerance() -> None:
     turn_rate=st.floats(-1.0, 1.0),
     period=st.sampled_from([0.025, 0.1, 0.2, 1.0]),
 )
-def test_a_constant_twist_is_predicted_exactly(
+def test_the_last_motion_is_predicted_again_and_a_steady_drive_over_a_window(
     speed: float, turn_rate: float, period: float
 ) -> None:
-    recent = RecentMotion()
     step = (speed * period, 0.0, turn_rate * period)
+    alone = RecentMotion()  # the mapper's default: the last placed motion
+    straight = RecentMotion(window=0.5)
     for _ in range(30):
-        recent.placed(period, step, recent.predict(period), None)
-    predicted = recent.predict(period)
-    assert predicted is not None
-    np.testing.assert_allclose(predicted, step, atol=1e-9 + 1e-6 * speed)
+        alone.placed(period, step, alone.predict(period), None)
+        straight.placed(period, (*step[:2], 0.0), straight.predict(period), None)
+    np.testing.assert_allclose(alone.predict(period) or (), step, atol=1e-12)
+    np.testing.assert_allclose(straight.predict(period) or (), (*step[:2], 0.0), atol=1e-9)
 
 
 def test_the_velocity_is_the_mean_over_its_window_not_the_last_jitter() -> None:

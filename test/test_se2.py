@@ -5,8 +5,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
@@ -90,22 +89,3 @@ def test_fit_points_recovers_the_motion_of_a_point_set(x: float, y: float, theta
     T_to_from = se2.matrix_from_pose(x, y, theta)
     moved = se2.transform_points(T_to_from, points)
     np.testing.assert_allclose(se2.fit_points(points, moved), T_to_from, atol=1e-9)
-
-
-@settings(max_examples=60, deadline=None)
-@given(
-    x=st.floats(-20.0, 20.0),
-    y=st.floats(-20.0, 20.0),
-    theta=st.floats(-3.1, 3.1),
-)
-def test_exp_inverts_log(x: float, y: float, theta: float) -> None:
-    np.testing.assert_allclose(se2.exp(se2.log((x, y, theta))), (x, y, theta), atol=1e-9)
-
-
-def test_exp_of_a_twist_drives_the_arc_not_the_chord() -> None:
-    # A quarter turn at 1 m/s over pi/2 s: a quarter circle of radius 1 m.
-    x, y, theta = se2.exp((np.pi / 2, 0.0, np.pi / 2))
-    assert (x, y, theta) == pytest.approx((1.0, 1.0, np.pi / 2))
-    # Half of it, composed twice, is the whole: a constant twist.
-    half = se2.exp((np.pi / 4, 0.0, np.pi / 4))
-    assert se2.compose(half, half) == pytest.approx((x, y, theta))

@@ -125,31 +125,6 @@ def compose_each(T_a_b: ArrayLike, T_b_c: ArrayLike) -> FloatArray:
     )
 
 
-def _left_jacobian(theta: float) -> FloatArray:
-    """SE(2)'s V(theta): the translation of ``exp`` is V times the twist's linear part."""
-    if abs(theta) < 1e-9:
-        return np.eye(2)
-    a, b = np.sin(theta) / theta, (1.0 - np.cos(theta)) / theta
-    return np.array([[a, -b], [b, a]])
-
-
-def log(T: ArrayLike) -> FloatArray:
-    """The twist ``(vx, vy, omega)`` whose :func:`exp` is the pose ``(x, y, theta)``: the
-    constant body velocity (per unit time) that drives from the origin to it."""
-    x, y, theta = (float(v) for v in np.asarray(T, dtype=np.float64))
-    theta = float(wrap_angle(theta))
-    vx, vy = np.linalg.solve(_left_jacobian(theta), [x, y])
-    return np.array([vx, vy, theta])
-
-
-def exp(twist: ArrayLike) -> Pose:
-    """The pose ``(x, y, theta)`` reached from the origin by the constant body velocity
-    ``twist`` ``(vx, vy, omega)`` in unit time (the arc, not the chord)."""
-    vx, vy, omega = (float(v) for v in np.asarray(twist, dtype=np.float64))
-    x, y = _left_jacobian(omega) @ np.array([vx, vy])
-    return (float(x), float(y), float(wrap_angle(omega)))
-
-
 def rigid_fit(poses_from: FloatArray, poses_to: FloatArray) -> FloatArray:
     """``T_to_from`` (3x3): the rigid motion that best carries ``(K, 3)`` poses given in frame
     ``from`` onto the same poses given in frame ``to`` (least squares on their positions,

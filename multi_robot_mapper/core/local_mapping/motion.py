@@ -3,8 +3,8 @@ scan, how far such predictions have missed, and so what the prediction is worth 
 prior along the direction a match cannot observe (:mod:`core.matching.prior`; issue 47 item 5).
 
 The velocity is the robot's motion over its placed scans of the last ``window`` seconds (at
-least the last one; the mapper's ``velocity_window``, 0 by default: the last motion alone), as a
-twist (:func:`se2.log`), and the prediction is its arc (:func:`se2.exp`). The prediction's own
+least the last one; the mapper's ``velocity_window``, 0 by default: the last motion alone), per
+second, scaled to the time predicted (as the mapper always predicted). The prediction's own
 error is measured on the robot's placements where the walls fix every direction
 (:data:`MEASURED_SUPPORT`): its spread per second, read from the latest :data:`ERRORS_KEPT`, is
 the prior's standard deviation, grown with the time predicted and with the time since the walls
@@ -67,28 +67,27 @@ class RecentMotion:
         return bool(self._motions)
 
     def velocity(self) -> FloatArray | None:
-        """The twist (vx, vy, omega) per second in the last scan's frame (:func:`se2.log`), or
-        None before any motion."""
+        """(x, y, theta) per second: the last scan's pose in the frame of the scan the
+        window starts at, divided by the window's seconds (applied from the last scan, as the
+        constant-velocity prediction; with the last motion alone, exactly that motion again
+        over as many seconds). None before any motion."""
         if not self._motions:
             return None
         seconds = sum(dt for dt, _ in self._motions)
         if seconds <= 0.0:
             return None
-        # The motions composed: the last scan's pose in the frame of the scan the window
-        # starts at. Under a constant twist the motion over the next as many seconds, seen
-        # from the last scan, is the same: the twist is its logarithm per second.
-        T_start_last: Pose = (0.0, 0.0, 0.0)
-        for _, motion in self._motions:
+        T_start_last = self._motions[0][1]
+        for _, motion in list(self._motions)[1:]:
             T_start_last = se2.compose(T_start_last, motion)
-        return se2.log(T_start_last) / seconds
+        return np.asarray(T_start_last) / seconds
 
     def predict(self, seconds: float) -> Pose | None:
-        """The constant-velocity motion over ``seconds`` from the last scan (the arc of the
-        twist, :func:`se2.exp`)."""
+        """The constant-velocity motion over ``seconds`` from the last scan."""
         velocity = self.velocity()
         if velocity is None:
             return None
-        return se2.exp(velocity * seconds)
+        vx, vy, vtheta = (float(v) for v in velocity * seconds)
+        return (vx, vy, vtheta)
 
     def placed(
         self,
