@@ -33,11 +33,11 @@ unit: $(STAMP)
 
 test: lint typecheck unit
 
-# The property-based fuzz tests of test/test_fuzz.py at 25 times their examples, with a new
-# random seed each run (`make test` runs them on a fixed seed in well under a minute).
+# The property-based fuzz tests of test/cross/test_fuzz.py at 25 times their examples, with a
+# new random seed each run (`make test` runs them on a fixed seed in well under a minute).
 # MRM_FUZZ_SCALE=100 make fuzz for longer.
 fuzz: $(STAMP)
-	MRM_FUZZ=1 $(BIN)/python -m pytest test/test_fuzz.py --hypothesis-show-statistics
+	MRM_FUZZ=1 $(BIN)/python -m pytest test/cross/test_fuzz.py --hypothesis-show-statistics
 
 demo: $(STAMP)
 	$(BIN)/mrm demo --out demo_output

@@ -118,7 +118,7 @@ def names_code_that_exists(name: str) -> bool:
 def test_every_test_a_page_names_exists(page: Path) -> None:
     defined = {
         name
-        for test_file in (REPO / "test").glob("test_*.py")
+        for test_file in (REPO / "test").rglob("test_*.py")
         for name in re.findall(r"^def (test_\w+)", test_file.read_text(encoding="utf-8"), re.M)
     }
     named = set(re.findall(r"`(test_\w+)`", page.read_text(encoding="utf-8")))

@@ -31,7 +31,7 @@ from multi_robot_mapper.ros.bringup import build_system, robot_names
 from multi_robot_mapper.ros.live import Observer, ScanPlayer, timeline
 from multi_robot_mapper.ros.testing import default_domain_id, isolated_context, spin_until
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PARAMS = REPO / "config" / SYSTEM_PARAMS_FILE
 LAUNCH = REPO / "launch" / "multi_robot_mapper.launch.py"
 

@@ -120,7 +120,7 @@ def test_simulate_replay_pivot_evaluate_merges_the_robots(capsys, tmp_path: Path
     # The merging parameters come from config/map_merger.yaml and --set merge.*: a link
     # threshold no link can reach leaves the second robot unmerged, reported as such.
     strict = tmp_path / "strict"
-    shipped = Path(__file__).resolve().parents[1] / "config" / "map_merger.yaml"
+    shipped = Path(__file__).resolve().parents[2] / "config" / "map_merger.yaml"
     code, _, err = mrm(
         capsys,
         *("replay", bag, "--out", strict, "--method", "pivot", "--merger-config", shipped),

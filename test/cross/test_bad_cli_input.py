@@ -22,7 +22,7 @@ from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.io.outputs import atomic_write_text, staged_folder
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def mrm(capsys: pytest.CaptureFixture[str], *args: object) -> tuple[int, str, str]:

@@ -21,7 +21,7 @@ from multi_robot_mapper.io.config_files import (
     parameters_from_yaml,
 )
 
-CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 
 
 def test_shipped_yaml_equals_the_documented_defaults() -> None:

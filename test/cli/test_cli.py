@@ -390,7 +390,7 @@ def test_the_viewer_configs_show_what_record_writes_and_are_installed() -> None:
 
     from multi_robot_mapper.ros import recording
 
-    repo = Path(__file__).resolve().parents[1]
+    repo = Path(__file__).resolve().parents[2]
     layout = json.loads((repo / "config" / "foxglove_layout.json").read_text())
     panels = layout["configById"]
     scene = panels["3D!mrm_map"]

@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-CORE = Path(__file__).resolve().parents[1] / "multi_robot_mapper" / "core"
+CORE = Path(__file__).resolve().parents[2] / "multi_robot_mapper" / "core"
 FORBIDDEN = (
     "rclpy",
     "sensor_msgs",

@@ -514,7 +514,7 @@ def test_a_wrong_beam_geometry_bends_the_map(
 def shared_bags() -> Path:
     """../shared/data/bags beside this clone (or beside the folder of worktrees holding it)."""
     here = Path(__file__).resolve()
-    for folder in here.parents[2:4]:
+    for folder in here.parents[3:5]:
         if (folder / "shared" / "data" / "bags").is_dir():
             return folder / "shared" / "data" / "bags"
     pytest.skip("real-data bags not found (../shared/data/bags is not beside this clone)")

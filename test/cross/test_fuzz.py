@@ -506,7 +506,7 @@ def test_fuzzed_params_files_give_a_config_or_one_config_error(
     from multi_robot_mapper.core.mapper_config import RobotMapperConfig
     from multi_robot_mapper.io.config_files import load_config
 
-    shipped = (Path(__file__).resolve().parents[1] / "config" / "robot_mapper.yaml").read_bytes()
+    shipped = (Path(__file__).resolve().parents[2] / "config" / "robot_mapper.yaml").read_bytes()
     path = tmp_path_factory.mktemp("yaml") / "params.yaml"
     path.write_bytes(_mutate(shipped, *mutation, noise))
     try:
