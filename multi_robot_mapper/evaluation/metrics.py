@@ -16,7 +16,7 @@ Where evo is used, and where not:
 - The pair errors are evo's RPE (delta = 1 frame, ``E = rel_ref^-1 rel_est``, translation
   part and rotation angle) written out in numpy for SE(2): evo pairs consecutive *posed*
   poses, whereas here a pair is two consecutive *scans* and an unposed scan must fail its
-  pairs. ``test/test_evaluation.py`` checks the numbers equal evo's RPE on a posed track.
+  pairs. ``test/evaluation/test_evaluation.py`` checks the numbers equal evo's RPE on a posed track.
 - ATE is the RMSE of aligned positions (evo's APE translation part), a one-liner in numpy.
 
 Point-to-segment distances are exact distances to candidate segments found through a KD-tree
