@@ -6,21 +6,36 @@ scan is matched (:func:`match_scan`)."""
 from __future__ import annotations
 
 import dataclasses
-import functools
-import json
 import time
-from collections.abc import Callable, Mapping
-from importlib import resources
-from types import MappingProxyType
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
+from multi_robot_mapper.core.local_mapping.context import (
+    CONTEXT_FEATURES as CONTEXT_FEATURES,
+)
+from multi_robot_mapper.core.local_mapping.context import (
+    CONTEXT_MODEL_FILE as CONTEXT_MODEL_FILE,
+)
+from multi_robot_mapper.core.local_mapping.context import CONTEXTS as CONTEXTS
+from multi_robot_mapper.core.local_mapping.context import (
+    ContextCalibration as ContextCalibration,
+)
+from multi_robot_mapper.core.local_mapping.context import (
+    context_model_json as context_model_json,
+)
+from multi_robot_mapper.core.local_mapping.context import in_context as in_context
+from multi_robot_mapper.core.local_mapping.context import (
+    installed_context_model as installed_context_model,
+)
+from multi_robot_mapper.core.local_mapping.context import (
+    load_context_model as load_context_model,
+)
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeScan
 from multi_robot_mapper.core.local_mapping.local_map import LocalMap
-from multi_robot_mapper.core.logistic import LogisticModel, model_number, read_object
 from multi_robot_mapper.core.matching import HEURISTICS, MatchResult, integrate
 from multi_robot_mapper.core.matching.beams import Viewpoint
 from multi_robot_mapper.core.matching.confidence import (
@@ -76,93 +91,6 @@ def reach_in(top_speed: float, seconds: float) -> float:
 def close_to(a: Pose, b: Pose, distance: float, angle: float) -> bool:
     dx, dy, dtheta = se2.between(b, a)
     return bool(np.hypot(dx, dy) <= distance and abs(dtheta) <= angle)
-
-
-# What a front-end match was asked, each with its own base rate of right answers: the last
-# keyframe from the prediction, the last scan with no guess, an older keyframe of the robot's
-# piece, a keyframe of another piece (where the robot was before it got lost).
-CONTEXTS = ("track", "search", "recent", "other")
-
-
-CONTEXT_MODEL_FILE = "context_model.json"
-
-
-# What a context's calibration weighs: the match confidence's log-odds, its one feature.
-CONTEXT_FEATURES = ("confidence_log_odds",)
-
-
-class ContextCalibration(LogisticModel):
-    """Platt scaling of one context, a logistic model of the match confidence's log-odds:
-    log-odds in context = slope * log-odds of the match confidence + intercept."""
-
-    def __init__(self, slope: float, intercept: float) -> None:
-        super().__init__(CONTEXT_FEATURES, intercept, np.array([slope]))
-
-    @property
-    def slope(self) -> float:
-        return float(self.weights[0])
-
-
-def load_context_model(
-    text: str, source: str = CONTEXT_MODEL_FILE
-) -> Mapping[str, ContextCalibration]:
-    """The calibration of each of :data:`CONTEXTS` in a ``context_model.json`` text (``source``
-    names the file in errors), read-only. Every context needs a finite intercept and a
-    positive finite slope (more evidence never means less confidence); ValueError, naming
-    ``source`` and what is wrong, otherwise."""
-    contexts = read_object(text, source, "'contexts'").get("contexts")
-    if not isinstance(contexts, dict):
-        raise ValueError(f"{source}: expected an object with 'contexts'")
-    if set(contexts) != set(CONTEXTS):
-        raise ValueError(
-            f"{source}: calibrates contexts {sorted(contexts)}, the front end asks {list(CONTEXTS)}"
-        )
-    model = {}
-    for context in CONTEXTS:
-        entry = contexts[context] if isinstance(contexts[context], dict) else {}
-        slope, intercept = (
-            model_number(entry.get(key), f"{source}: {context} {key}")
-            for key in ("slope", "intercept")
-        )
-        if slope <= 0.0:
-            raise ValueError(f"{source}: {context} slope {slope} must be positive")
-        model[context] = ContextCalibration(slope, intercept)
-    return MappingProxyType(model)
-
-
-def context_model_json(model: Mapping[str, ContextCalibration], fitted: str, command: str) -> str:
-    """``context_model.json``'s text for ``model`` (what :func:`load_context_model` reads),
-    with how and on what it was ``fitted`` and the ``command`` that fitted it."""
-    contexts = {c: {"slope": model[c].slope, "intercept": model[c].intercept} for c in CONTEXTS}
-    data = {"contexts": contexts, "fitted": fitted, "command": command}
-    return json.dumps(data, indent=2) + "\n"
-
-
-@functools.cache
-def installed_context_model() -> Mapping[str, ContextCalibration]:
-    """The calibration shipped with the package (``context_model.json``), read once."""
-    path = resources.files(__package__).joinpath(CONTEXT_MODEL_FILE)
-    return load_context_model(path.read_text(encoding="utf-8"), str(path))
-
-
-def in_context(
-    confidence: float, context: str, model: Mapping[str, ContextCalibration] | None = None
-) -> float:
-    """P(right) of a front-end match with this :mod:`~core.matching.confidence`, given its
-    context (:data:`CONTEXTS`).
-
-    The confidence model is fitted on a mixture of scan pairs (consecutive, revisits,
-    unrelated places: ``bench/fit_confidence.py``), so its base rate is the mixture's. The
-    front end asks narrower questions: at a match confidence of 0.5-0.8, a search against the
-    last scan, one scan interval before, was right 93 % of the time on the shared logs, a
-    match against another piece's keyframe 23 % (``bench/fit_placement.py``, README
-    "Confidence in context"). Bayes' rule moves the log-odds by each context's prior; a
-    slope lets the evidence count more or less there too (Platt scaling, fitted per context
-    on the front end's own matches with the reference, written into ``context_model.json``:
-    :func:`installed_context_model`, unless ``model`` is given)."""
-    calibration = (installed_context_model() if model is None else model)[context]
-    p = min(max(confidence, 1e-9), 1.0 - 1e-9)
-    return float(calibration.probabilities([float(np.log(p / (1.0 - p)))]))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -227,6 +155,11 @@ class Reference:
     stamp: float  # when it was taken (s)
     # several scans fused (a local map): where each was taken, in the reference's frame
     viewpoints: list[Viewpoint] | None = None
+
+    @property
+    def views(self) -> LaserScanData | list[Viewpoint]:
+        """What its beams saw: its scan, or each fused scan where it was taken."""
+        return self.view if self.viewpoints is None else self.viewpoints
 
 
 @dataclasses.dataclass(frozen=True)
@@ -328,40 +261,29 @@ class _ScanMatching:
         search: bool,
         guesses_from_last: list[Pose],
         judge_near_prediction: bool = False,
-        prior: bool = False,
     ) -> Attempt:
         """The new scan matched against ``reference`` from the predictions
         ``guesses_from_last`` (motions from the last placed scan; with ``search``,
         INTEGRATE's own hypotheses too, and the shapes' where that is not confident), kept
-        with its confidence in context; the time it took counted. With
-        ``judge_near_prediction`` its confidence is read only within the correctness tolerance
-        of the first prediction. With ``prior`` the first prediction is a motion prior along
-        the direction the match cannot observe (when it is decisive: ``prior_support``)."""
+        with its confidence in context; the time it took counted. ``judge_near_prediction``:
+        its confidence read only near the first prediction. A track's first prediction is a
+        motion prior (:meth:`_motion_prior`)."""
         started = time.perf_counter()
         anchor = reference.anchor
         guesses = self._predictions(anchor, guesses_from_last)
-        support = self.references.prior_support
-        motion_prior = (
-            MotionPrior(hypotheses_of(guesses[:1])[0], support, self.config.wall_sigma)
-            if prior and support is not None
-            else None
-        )
         result = integrate(
             reference.segments,
             self.new,
             self.config.integrate,
             heuristics=HEURISTICS if search else (),
             extra_hypotheses=hypotheses_of(guesses),
-            views=(
-                reference.view if reference.viewpoints is None else reference.viewpoints,
-                self.view,
-            ),
+            views=(reference.views, self.view),
             judged=(
                 (lambda T: close_to(pose_of_match(T), guesses[0], RIGHT_DISTANCE, RIGHT_ANGLE))
                 if judge_near_prediction
                 else None
             ),
-            prior=motion_prior,
+            prior=self._motion_prior(guesses[0]) if stage == "track" else None,
         )
         checked = result.seconds.get("confidence", 0.0)
         shaping = 0.0
@@ -391,6 +313,14 @@ class _ScanMatching:
         if shaping:
             self.count("shape", shaping)
         return done
+
+    def _motion_prior(self, predicted: Pose) -> MotionPrior | None:
+        """The prediction ``predicted`` (in the reference's frame) as a motion prior, where it
+        is decisive (``prior_support``)."""
+        support = self.references.prior_support
+        if support is None:
+            return None
+        return MotionPrior(hypotheses_of([predicted])[0], support, self.config.wall_sigma)
 
     def _predictions(self, anchor: Anchor, motions: list[Pose]) -> list[Pose]:
         """The new scan's predicted placements in the frame of the reference scan at
@@ -518,16 +448,20 @@ class _ScanMatching:
         scan = self.references.scans[keyframe]
         return Reference(scan.segments, scan.view, Anchor(keyframe, (0.0, 0.0, 0.0)), scan.stamp)
 
-    def track(self, motions: list[Pose]) -> tuple[Attempt, bool, bool] | None:
-        """The placement tracked from the predictions against the last keyframe (or the local
-        map around it, where there is one: the keyframe with those before it, fused in its
-        frame), when the motion model and the match agree (or a likely search does not
-        disagree); None when tracking settles nothing (the search goes on, :meth:`search`)."""
-        here = self.references.here
+    def tracked_against(self) -> Reference:
+        """The last keyframe's scan, or the local map around it where there is one."""
         start = self.keyframe_reference(self.references.keyframe)
         local = self.references.local_map
-        if local is not None:
-            start = dataclasses.replace(start, segments=local.segments, viewpoints=local.viewpoints)
+        if local is None:
+            return start
+        return dataclasses.replace(start, segments=local.segments, viewpoints=local.viewpoints)
+
+    def track(self, motions: list[Pose]) -> tuple[Attempt, bool, bool] | None:
+        """The placement tracked from the predictions (:meth:`tracked_against`), when the
+        motion model and the match agree (or a likely search does not disagree); None when
+        tracking settles nothing (the search goes on, :meth:`search`)."""
+        here = self.references.here
+        start = self.tracked_against()
         # A fast laser's prediction is good: refined alone, it lands next to it. When it lands
         # farther, or is not confident, it is refined again with rivals a wrong minimum cannot
         # hide from: turned either way (a turn that starts between two scans is the usual
@@ -535,9 +469,7 @@ class _ScanMatching:
         # the look-alike's rival, or the right answer when the prediction found the look-alike).
         # Its confidence is read only within the tolerance of the prediction: beyond it the
         # placement is discarded whatever its confidence (most scans that need the rivals).
-        quick = self.attempt(
-            "track", start, False, motions[:1], judge_near_prediction=True, prior=True
-        )
+        quick = self.attempt("track", start, False, motions[:1], judge_near_prediction=True)
         # A sure one settles anywhere within the tolerance: on every shared log cut into 4
         # robots (bench/track_near.py, its fourth table) the 1 599 sure ones there were all
         # right; the 0.81 that stayed 17 deg off on aces (below) is far from sure.
@@ -548,11 +480,10 @@ class _ScanMatching:
             and self.reachable(quick)
         ):
             return quick, True, True
-        # (by identity: attempts hold arrays, and an earlier one may equal it field by field)
-        del self.attempts[next(i for i, a in enumerate(self.attempts) if a is quick)]
+        self.attempts.remove(quick)
         x, y, theta = motions[0]
         rivals = [(x, y, theta + d) for d in (*TRACK_TURNS, *LOOK_ALIKE_TURNS) if d]
-        track = self.attempt("track", start, False, motions + rivals, prior=True)
+        track = self.attempt("track", start, False, motions + rivals)
         if track.confidence >= self.threshold and self.reachable(track):
             motion = se2.between(here, track.pose)
             if close_to(motion, motions[0], RIGHT_DISTANCE, RIGHT_ANGLE) or (

@@ -114,32 +114,25 @@ def integrate(
     """Find how S2 lies in S1's frame with no initial guess (INTEGRATE steps 1-2).
 
     ``judged(T_1_2)`` says whether the chosen placement's confidence is wanted (None:
-    always); where it is not, the result has confidence 0 and no evidence, and the beams of
-    both sets are not read for it (a caller that will discard such a placement saves that).
+    always); where not, it is 0 with no evidence, the beams unread (a discarded placement).
 
     ``hypothesis_sets`` (same frames as S1 and S2) are the sets whose landmarks generate the
-    hypotheses when they differ from the sets evaluated: a local mapper draws hypotheses from
-    the last keyframe's scan (few segments, few landmarks) and evaluates them on the partial
-    map around it (every wall seen nearby).
+    hypotheses when they differ from the sets evaluated (a local mapper's last keyframe's scan,
+    evaluated on the partial map around it).
 
     ``views`` are the scans each set was seen in (one scan at the set's origin, or several
-    viewpoints for a submap), when known. Overlap length
-    cannot tell a corridor's true motion from standing still (the visible stretch of wall moves
-    with the robot); the beams can: under a wrong hypothesis one scan's walls lie where the
-    other scan's beams passed (seen through), and few of its returns lie where the other's
-    beams ended (confirmed). The ``refine_candidates`` best distinct hypotheses are refined
-    and ranked by overlap - ``free_space_weight`` x seen through + ``confirmed_weight`` x
-    confirmed + ``cross_support_weight`` x cross support (without views: overlap and cross
-    support). Validity uses overlap minus seen through only.
+    viewpoints for a submap), when known. Overlap length cannot tell a corridor's true motion
+    from standing still (the visible wall moves with the robot); the beams can: under a wrong
+    hypothesis one scan's walls lie where the other's beams passed (seen through), and few of
+    its returns lie where the other's beams ended (confirmed). The ``refine_candidates`` best
+    distinct hypotheses are refined and ranked by overlap - ``free_space_weight`` x seen
+    through + ``confirmed_weight`` x confirmed + ``cross_support_weight`` x cross support
+    (without views: overlap and cross support). Validity uses overlap minus seen through.
 
     Steps: hypotheses (Alg. 2 and the heuristics of III-A); values (Alg. 4 l. 5-19, after a
     prescreen when there are many); the best distinct ones, refused ones dropped (Alg. 4
-    l. 6-7, 20-23); refinement; slides along corridors; the best net score wins.
-
-    A motion ``prior`` (:mod:`~core.matching.prior`: tracking, where the robot's recent
-    motion predicts the placement) decides the least constrained direction: the refinement
-    weighs it there, no hypothesis is slid along it, and a rival it rules out is no rival
-    (the fit's spread counts the prior as the walls it is worth).
+    l. 6-7, 20-23); refinement; slides along corridors; the best net score wins. A motion
+    ``prior`` (:mod:`~core.matching.prior`) decides the least constrained direction.
     """
     clock = _StageClock()
     rng = np.random.default_rng(config.seed)
@@ -162,16 +155,9 @@ def integrate(
     clock.lap("refinement")
     ranked = _ranked(segments1, segments2, transforms, candidates, refined, views, config, prior)
     clock.lap("ranking")
+    setting = (views, config, prior)
     return _judged_result(
-        segments1,
-        segments2,
-        ranked,
-        shorter,
-        (views, config, prior),
-        judged,
-        clock,
-        transforms,
-        evaluated,
+        segments1, segments2, ranked, shorter, setting, judged, clock, transforms, evaluated
     )
 
 
@@ -297,8 +283,8 @@ def _judged_result(
     support) and, where ``judged`` wants it, its confidence (of the ``transforms``
     hypotheses, ``evaluated`` were evaluated in full; ``setting``: the views, the config and
     the motion prior)."""
-    views, config, prior = setting
-    refined, scores, pick = ranked.transforms, ranked.scores, ranked.pick
+    views, config, _ = setting
+    refined, pick = ranked.transforms, ranked.pick
     best_T, best_value = refined[pick], float(ranked.values[pick])
     # Validity on the net value: overlap that the other scan's free space contradicts counts
     # against it (two unrelated rectilinear places easily overlap by a third).
@@ -313,28 +299,8 @@ def _judged_result(
     )
     probability, evidence = 0.0, None
     if judged is None or judged(best_T):
-        # The confidence: the beams of both sets on the chosen placement, how far it beats
-        # its best rival (a distinct placement, beyond the correctness tolerance), the fit's
-        # spread. A rival the motion prior rules out is none, nor is a slide along the
-        # direction it decides.
-        rivals = _distinct_from(refined, best_T)
-        counts = _weighs(segments1, segments2, best_T[None, :], config, prior)
-        weighed = prior if counts.size and counts[0] else None
-        if weighed is not None:
-            rivals &= ~excluded_by(weighed, refined, slide)
-        evidence = match_evidence(
-            segments1,
-            segments2,
-            best_T,
-            views,
-            config,
-            score=float(scores[pick]),
-            rival_score=float(scores[rivals].max()) if rivals.any() else 0.0,
-            rival_T=refined[rivals][int(np.argmax(scores[rivals]))] if rivals.any() else None,
-            support=best_support,
-            prior_support=support_with_prior(best_support, total, weighed) - best_support,
-            fraction=fraction,
-            slide=slide if weighed is None else None,
+        evidence = _evidence_of(
+            (segments1, segments2), ranked, setting, (best_support, slide, total), fraction
         )
         probability = confidence(evidence.features())
         clock.lap("confidence")
@@ -348,6 +314,42 @@ def _judged_result(
         probability,
         evidence,
         clock.seconds,
+    )
+
+
+def _evidence_of(
+    sets: tuple[FloatArray, FloatArray],
+    ranked: _Ranked,
+    setting: tuple[tuple[Views, Views], IntegrateConfig, MotionPrior | None],
+    spread: tuple[float, FloatArray, float],
+    fraction: float,
+) -> MatchEvidence:
+    """What the confidence of the best ranked placement is read from: the beams of both sets
+    on it, how far it beats its best rival (a distinct placement, beyond the correctness
+    tolerance), the fit's ``spread`` (support, least constrained direction, matched length). A
+    rival the motion prior rules out is none, nor is a slide along the direction it decides."""
+    (segments1, segments2), (views, config, prior) = sets, setting
+    refined, scores, pick = ranked.transforms, ranked.scores, ranked.pick
+    best_T = refined[pick]
+    support, slide, total = spread
+    rivals = _distinct_from(refined, best_T)
+    counts = _weighs(segments1, segments2, best_T[None, :], config, prior)
+    weighed = prior if counts.size and counts[0] else None
+    if weighed is not None:
+        rivals &= ~excluded_by(weighed, refined, slide)
+    return match_evidence(
+        segments1,
+        segments2,
+        best_T,
+        views,
+        config,
+        score=float(scores[pick]),
+        rival_score=float(scores[rivals].max()) if rivals.any() else 0.0,
+        rival_T=refined[rivals][int(np.argmax(scores[rivals]))] if rivals.any() else None,
+        support=support,
+        prior_support=support_with_prior(support, total, weighed) - support,
+        fraction=fraction,
+        slide=slide if weighed is None else None,
     )
 
 

@@ -26,6 +26,7 @@ from multi_robot_mapper.core.local_mapping import (
     LocalMapperConfig,
     LocalUpdate,
     attempts,
+    context,
     keyframe_map,
 )
 from multi_robot_mapper.core.local_mapping.held import OUTLIER
@@ -46,7 +47,7 @@ def as_matched(monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """Every context keeps the match confidence as it is: a fake INTEGRATE's confidences are
     then the ones the front end decides on."""
     calibration = {c: attempts.ContextCalibration(1.0, 0.0) for c in attempts.CONTEXTS}
-    monkeypatch.setattr(attempts, "installed_context_model", lambda: calibration)
+    monkeypatch.setattr(context, "installed_context_model", lambda: calibration)
 
 
 def _only_the_last_scan(segments: np.ndarray, scan: LaserScanData) -> attempts.References:
@@ -711,7 +712,7 @@ def test_the_front_end_decides_on_the_confidence_in_context(
     calibration = {
         c: attempts.ContextCalibration(1.0, shift.get(c, 0.0)) for c in attempts.CONTEXTS
     }
-    monkeypatch.setattr(attempts, "installed_context_model", lambda: calibration)
+    monkeypatch.setattr(context, "installed_context_model", lambda: calibration)
     monkeypatch.setattr(attempts, "integrate", lambda *a, **k: fake_match((0.4, 0.0, 0.0), 0.6))
     scan = stranger_scan()
     segments, _ = extract_scan(scan, EXTRACTION)
