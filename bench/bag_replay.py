@@ -45,7 +45,7 @@ import numpy as np  # noqa: E402
 from bench.harness import BAGS  # noqa: E402
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig  # noqa: E402
 from multi_robot_mapper.core.pipeline import TimedLaserScan, run_offline  # noqa: E402
-from multi_robot_mapper.evaluation.metrics import align_se2  # noqa: E402
+from multi_robot_mapper.evaluation.metrics import aligned_rmse  # noqa: E402
 from multi_robot_mapper.evaluation.relations import (  # noqa: E402
     RELATION_MATCH_S,
     read_relations,
@@ -141,9 +141,7 @@ def replay(name: str, args: argparse.Namespace) -> dict[str, Any]:
     both = [i for i, t in enumerate(stamps) if t in truth_of and np.isfinite(poses[i, 0])]
     if both:
         ref = np.array([truth_of[stamps[i]] for i in both])
-        T = align_se2(poses[both], ref)
-        moved = poses[both, :2] @ T[:2, :2].T + T[:2, 2]
-        row["ate_m"] = round(float(np.sqrt(np.mean(np.sum((moved - ref[:, :2]) ** 2, 1)))), 4)
+        row["ate_m"] = round(aligned_rmse(poses[both], ref), 4)
         row["ate_scans"] = len(both)
     relations = read_relations(BAGS / f"{RELATIONS.get(name, name)}.relations")
     clock, tolerance, how = relation_clock(name, recording)

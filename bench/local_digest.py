@@ -19,7 +19,7 @@ from bench.harness import CARMEN
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.local_mapping import LocalMapper
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.evaluation.metrics import align_se2
+from multi_robot_mapper.evaluation.metrics import aligned_rmse
 from multi_robot_mapper.io.carmen import carmen_scan_data, monotonic_stamps, read_carmen
 
 LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079", "edmonton")
@@ -37,9 +37,7 @@ def digest(name: str) -> str:
     reference = np.array(
         [log[int(i)].reference_pose for i in np.searchsorted(stamps, placed_stamps)]
     )
-    T = align_se2(poses, reference)
-    moved = poses[:, :2] @ T[:2, :2].T + T[:2, 2]
-    ate = float(np.sqrt(np.mean(np.sum((moved - reference[:, :2]) ** 2, axis=1))))
+    ate = aligned_rmse(poses, reference)
     accepted = sum(c.accepted for c in mapper.closures)
     fingerprint = hashlib.sha1(np.round(poses, 4).tobytes()).hexdigest()[:10]
     return (

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.bag_local_error import BREAK_M, BREAK_RAD
 from bench.harness import BAGS
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import extract_scan
@@ -32,15 +33,13 @@ from multi_robot_mapper.core.local_mapping import LocalMapper
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
-from multi_robot_mapper.evaluation.metrics import align_se2
+from multi_robot_mapper.evaluation.metrics import aligned_rmse
 from multi_robot_mapper.io.recordings import (
     BeamGeometry,
     read_bags,
     read_truth_csv,
     with_beam_geometry,
 )
-
-BREAK_M, BREAK_RAD = 0.3, 0.1
 
 
 def _setting(text: str) -> tuple[str, Any]:
@@ -70,9 +69,7 @@ def run_bag(name: str, settings: dict[str, Any]) -> dict[str, Any]:
     poses = np.full((len(stamps), 3), np.nan)
     poses[np.searchsorted(stamps, final_stamps)] = final_poses
     both = np.isfinite(poses[index, 0])
-    T = align_se2(poses[index[both]], reference[both])
-    moved = poses[index[both], :2] @ T[:2, :2].T + T[:2, 2]
-    ate = float(np.sqrt(np.mean(np.sum((moved - reference[both, :2]) ** 2, axis=1))))
+    ate = aligned_rmse(poses[index[both]], reference[both])
     breaks = _tracking_breaks(placed, index, reference)
     return {
         "bag": name,

@@ -195,6 +195,16 @@ def align_se2(estimate: FloatArray, reference: FloatArray) -> FloatArray:
     return T
 
 
+def aligned_rmse(estimate: FloatArray, reference: FloatArray) -> float:
+    """The positions' RMS error (m) after :func:`align_se2`: a trajectory's ATE against its
+    reference, in one frame fitted to it."""
+    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
+    ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
+    T = align_se2(est, ref)
+    moved = est[:, :2] @ T[:2, :2].T + T[:2, 2]
+    return float(np.sqrt(np.mean(np.sum((moved - ref[:, :2]) ** 2, axis=1))))
+
+
 # --------------------------------------------------------------------------------------- pairs
 
 

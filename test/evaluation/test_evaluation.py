@@ -381,3 +381,18 @@ def test_cli_user_errors_are_one_line_with_exit_2(
     refused(write_recordings(tmp_path / "shifted", shifted), "matches no scan")
     del recordings["robot2"]
     refused(write_recordings(tmp_path / "one_robot", recordings), "robot2")
+
+
+def test_aligned_rmse_is_zero_for_a_moved_copy_and_the_offset_of_a_shifted_point() -> None:
+    from multi_robot_mapper.core import se2 as _se2
+    from multi_robot_mapper.evaluation.metrics import aligned_rmse
+
+    reference = np.array([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [4.0, 3.0, 1.0], [0.0, 3.0, 2.0]])
+    moved = _se2.compose_each(np.tile([2.0, -1.0, 0.7], (4, 1)), reference)
+    assert aligned_rmse(moved, reference) < 1e-9
+    # Two of four points 0.1 m off, in opposite directions: no rigid fit takes that away, and
+    # the fit is never worse than none (RMS 0.1 / sqrt(2) as they stand).
+    shifted = reference.copy()
+    shifted[0, 0] += 0.1
+    shifted[2, 0] -= 0.1
+    assert 0.01 < aligned_rmse(shifted, reference) <= 0.1 / np.sqrt(2.0) + 1e-12
