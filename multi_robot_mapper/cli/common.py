@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import math
 import re
+from collections.abc import Mapping
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
@@ -67,29 +69,31 @@ def finish_parsers(parser: argparse.ArgumentParser) -> None:
 
 # Every number a command-line option takes, with its allowed range: one table, checked before
 # any work (the node and config parameters have theirs in the config dataclasses).
-CLI_LIMITS: dict[str, tuple[float, float, str]] = {
-    "robots": (1, 100, "robots"),
-    "seed": (0, 2**32 - 1, ""),
-    "rate": (0.1, 1000.0, "Hz"),
-    # simulate: no more than the front end takes (larger scans are refused as corrupt)
-    "beams": (2, ExtractionConfig().max_beams, "beams"),
-    # demo: 100 times slower plays its 38 s of scans in an hour (duration's bound); faster
-    # than 100 times, every mapper drops nearly every scan
-    "speed": (0.01, 100.0, "times real time"),
-    "noise": (0.0, 1.0, "m"),
-    "duration": (0.1, 3600.0, "s"),
-    # replay --record-period: seconds of bag time between two recorded merges
-    "record_period": (0.1, 3600.0, "s"),
-    "clutter": (0.0, 2.0, "objects/m^2"),
-    # simulate --world generated: a building's largest extent, its walking people, and the
-    # driving between kept scans of a sparse run
-    "size": (20.0, 200.0, "m"),
-    "people": (0, 1000, "people"),
-    "sparse": (0.05, 100.0, "m"),
-    "overlap_scans": (0, 1_000_000, "scans"),
-    "range_max": (0.1, 100_000.0, "m"),
-    "max_points": (1, 10_000_000, "points"),
-}
+CLI_LIMITS: Mapping[str, tuple[float, float, str]] = MappingProxyType(
+    {
+        "robots": (1, 100, "robots"),
+        "seed": (0, 2**32 - 1, ""),
+        "rate": (0.1, 1000.0, "Hz"),
+        # simulate: no more than the front end takes (larger scans are refused as corrupt)
+        "beams": (2, ExtractionConfig().max_beams, "beams"),
+        # demo: 100 times slower plays its 38 s of scans in an hour (duration's bound); faster
+        # than 100 times, every mapper drops nearly every scan
+        "speed": (0.01, 100.0, "times real time"),
+        "noise": (0.0, 1.0, "m"),
+        "duration": (0.1, 3600.0, "s"),
+        # replay --record-period: seconds of bag time between two recorded merges
+        "record_period": (0.1, 3600.0, "s"),
+        "clutter": (0.0, 2.0, "objects/m^2"),
+        # simulate --world generated: a building's largest extent, its walking people, and the
+        # driving between kept scans of a sparse run
+        "size": (20.0, 200.0, "m"),
+        "people": (0, 1000, "people"),
+        "sparse": (0.05, 100.0, "m"),
+        "overlap_scans": (0, 1_000_000, "scans"),
+        "range_max": (0.1, 100_000.0, "m"),
+        "max_points": (1, 10_000_000, "points"),
+    }
+)
 # simulate keeps every reading in memory before writing: about 1 GB at this many.
 MAX_SIMULATED_READINGS = 100_000_000
 

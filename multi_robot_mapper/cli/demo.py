@@ -25,6 +25,7 @@ import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 from rclpy.executors import MultiThreadedExecutor
@@ -49,7 +50,7 @@ from multi_robot_mapper.ros.recording import LiveRecorder
 from multi_robot_mapper.ros.testing import default_domain_id, isolated_context
 
 FloatArray = np.typing.NDArray[np.float64]
-LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
+LEVELS = MappingProxyType({0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"})
 
 
 @dataclasses.dataclass(frozen=True)

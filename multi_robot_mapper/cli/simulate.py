@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -41,14 +42,16 @@ GENERATED = "generated"
 DEFAULT_OVERLAP = "small"
 DEFAULT_SPARSE_M = 0.5
 # Options only a generated building takes, and their "not given" values.
-_GENERATED_ONLY = {
-    "kind": None,
-    "size": None,
-    "glass": False,
-    "people": None,
-    "overlap": None,
-    "sparse": None,
-}
+_GENERATED_ONLY = MappingProxyType(
+    {
+        "kind": None,
+        "size": None,
+        "glass": False,
+        "people": None,
+        "overlap": None,
+        "sparse": None,
+    }
+)
 
 
 def register(subparsers: Any) -> None:

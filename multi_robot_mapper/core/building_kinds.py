@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import NDArray
@@ -312,12 +313,14 @@ def mixed(rng: Rng, size: float) -> tuple[Layout, str]:
     return combined(parts), "none"
 
 
-PLAN_KINDS: dict[str, Callable[[Rng, float], tuple[Layout, str]]] = {
-    "room_row": room_row,
-    "mirror_wings": mirror_wings,
-    "rotation_wings": rotation_wings,
-    "bare_corridors": bare_corridors,
-    "pillar_hall": pillar_hall,
-    "mixed": mixed,
-}
+PLAN_KINDS: Mapping[str, Callable[[Rng, float], tuple[Layout, str]]] = MappingProxyType(
+    {
+        "room_row": room_row,
+        "mirror_wings": mirror_wings,
+        "rotation_wings": rotation_wings,
+        "bare_corridors": bare_corridors,
+        "pillar_hall": pillar_hall,
+        "mixed": mixed,
+    }
+)
 """Every plan kind by name: ``builder(rng, size_m) -> (layout, symmetry)``."""

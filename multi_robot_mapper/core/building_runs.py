@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,7 +48,7 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
-OVERLAP_LEVELS = {"none": 0.0, "small": 0.1, "large": 0.6}
+OVERLAP_LEVELS = MappingProxyType({"none": 0.0, "small": 0.1, "large": 0.6})
 """Named overlaps (``mrm simulate --overlap``): the share of each route driven in the shared
 part. Robots also meet on their way to and from it, so the ground they really share is more:
 over drawn buildings, 3 robots and 80 m routes, a mean of 0 (none), about a third (small) and

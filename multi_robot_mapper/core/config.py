@@ -18,11 +18,14 @@ import difflib
 import functools
 import typing
 from collections.abc import Mapping
+from types import MappingProxyType
 from typing import Any, TypeVar
 
 C = TypeVar("C")
 
-_SCALAR_TYPES: dict[str, type] = {"float": float, "int": int, "bool": bool, "str": str}
+_SCALAR_TYPES: Mapping[str, type] = MappingProxyType(
+    {"float": float, "int": int, "bool": bool, "str": str}
+)
 
 
 class ConfigError(ValueError):

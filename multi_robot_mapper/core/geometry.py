@@ -8,6 +8,7 @@ the cost model in ``extraction``).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -17,18 +18,20 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 _TINY, _ZERO, _ONE = np.array(1e-18), np.array(0.0), np.array(1.0)
-_COUNTING: list[IntArray] = [np.arange(4096, dtype=np.int64)]
-_COUNTING[0].flags.writeable = False
+
+
+@functools.lru_cache(maxsize=8)
+def _counting(size: int) -> IntArray:
+    """``np.arange(size)``, read-only (memoised: a pure function of ``size``)."""
+    counting = np.arange(size, dtype=np.int64)
+    counting.flags.writeable = False
+    return counting
 
 
 def arange_view(n: int) -> IntArray:
-    """``np.arange(n)`` as a read-only view of a cached array."""
-    counting = _COUNTING[0]
-    if n > counting.size:
-        counting = np.arange(max(n, 2 * counting.size), dtype=np.int64)
-        counting.flags.writeable = False
-        _COUNTING[0] = counting
-    return counting[:n]
+    """``np.arange(n)`` as a read-only view of a cached array (one per power of two from
+    4096 up, so that every call does not allocate)."""
+    return _counting(max(4096, 1 << max(n - 1, 0).bit_length()))[:n]
 
 
 def ranges_index(first: IntArray, stop: IntArray) -> tuple[IntArray, IntArray, IntArray]:

@@ -24,6 +24,7 @@ than bending two robots' maps). The rest of core sees numpy arrays only:
 from __future__ import annotations
 
 import dataclasses
+from types import MappingProxyType
 
 import gtsam
 import numpy as np
@@ -36,10 +37,12 @@ FloatArray = NDArray[np.float64]
 
 # The prior that holds each piece's first keyframe where it is: 1 mm, 0.006 degrees.
 _ANCHOR_SIGMAS = np.array([1e-3, 1e-3, 1e-4])
-_KERNELS = {
-    "huber": gtsam.noiseModel.mEstimator.Huber.Create,
-    "dcs": gtsam.noiseModel.mEstimator.DCS.Create,
-}
+_KERNELS = MappingProxyType(
+    {
+        "huber": gtsam.noiseModel.mEstimator.Huber.Create,
+        "dcs": gtsam.noiseModel.mEstimator.DCS.Create,
+    }
+)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -12,6 +12,7 @@ reported as :class:`ScanNotice` so a node can warn (throttled) and go on.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -116,7 +117,7 @@ def scan_points(scan: LaserScanData, max_beams: int = 100_000) -> ScanPoints:
                 f"[range_min={range_min:g}, range_max={range_max:g}) m",
             )
         )
-    cos, sin = _beam_directions(angle_min, angle_increment, n)
+    cos, sin = _beam_directions(float(angle_min), float(angle_increment), n)
     if index.size == n and angle_increment > 0.0:
         rv = r  # every beam valid, already counter-clockwise: no gathers
     else:
@@ -263,22 +264,14 @@ def _dropped_by_kind(
 # A laser never changes its beam geometry, so the cosine and sine of every beam angle are
 # computed once per (angle_min, angle_increment, beam count) and reused: the trigonometry is
 # the dearest part of the conversion. A few geometries (one per laser) are kept.
-_BEAM_TABLES: dict[tuple[float, float, int], tuple[FloatArray, FloatArray]] = {}
-_MAX_BEAM_TABLES = 16
-
-
+@functools.lru_cache(maxsize=16)
 def _beam_directions(
     angle_min: float, angle_increment: float, n: int
 ) -> tuple[FloatArray, FloatArray]:
-    """Cosine and sine of beam i's angle ``angle_min + i * angle_increment`` (read-only, cached)."""
-    key = (float(angle_min), float(angle_increment), n)
-    table = _BEAM_TABLES.get(key)
-    if table is None:
-        angles = angle_min + angle_increment * np.arange(n, dtype=np.float64)
-        cos, sin = np.cos(angles), np.sin(angles)
-        cos.flags.writeable = False
-        sin.flags.writeable = False
-        if len(_BEAM_TABLES) >= _MAX_BEAM_TABLES:
-            _BEAM_TABLES.clear()
-        table = _BEAM_TABLES[key] = (cos, sin)
-    return table
+    """Cosine and sine of beam i's angle ``angle_min + i * angle_increment`` (read-only,
+    memoised: a pure function of the geometry)."""
+    angles = angle_min + angle_increment * np.arange(n, dtype=np.float64)
+    cos, sin = np.cos(angles), np.sin(angles)
+    cos.flags.writeable = False
+    sin.flags.writeable = False
+    return cos, sin

@@ -44,6 +44,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 from collections import deque
+from types import MappingProxyType
 from typing import Generic, TypeVar
 
 import numpy as np
@@ -58,16 +59,18 @@ COPY_MIN_RETURNS = 10
 # Intervals between mapped scans the cadence is measured over (their median).
 _CADENCE_INTERVALS = 21
 # The LaserScan fields each refusal is about (for the node's warnings).
-REASON_FIELDS = {
-    "zero_stamp": "header.stamp",
-    "future_stamp": "header.stamp",
-    "angle_fields": "angle_min/angle_max/angle_increment/ranges",
-    "duplicate_stamp": "header.stamp",
-    "stale_stamp": "header.stamp",
-    "stamp_jump_ahead": "header.stamp",
-    "stamp_jump_back": "header.stamp",
-    "copied_ranges": "ranges",
-}
+REASON_FIELDS = MappingProxyType(
+    {
+        "zero_stamp": "header.stamp",
+        "future_stamp": "header.stamp",
+        "angle_fields": "angle_min/angle_max/angle_increment/ranges",
+        "duplicate_stamp": "header.stamp",
+        "stale_stamp": "header.stamp",
+        "stamp_jump_ahead": "header.stamp",
+        "stamp_jump_back": "header.stamp",
+        "copied_ranges": "ranges",
+    }
+)
 # Angle fields within this are the same (float32 fields carried through float64: exact in
 # practice; the slack only absorbs a round trip through text).
 _ANGLE_TOLERANCE = 1e-6  # rad

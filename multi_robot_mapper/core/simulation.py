@@ -10,6 +10,8 @@ drawn from a seeded generator so a seed always gives the same scans.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping, Sequence
+from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,11 +50,13 @@ class LaserModel:
         return self.field_of_view / (self.beams - 1)
 
 
-LASERS: dict[str, LaserModel] = {
-    "utm30lx": LaserModel(),
-    # The SICK LMS 200/291 of the CARMEN logs: 181 beams over 180 deg, 1 deg apart, 80 m.
-    "lms": LaserModel(beams=181, field_of_view=np.pi, range_max=80.0, rate=10.0),
-}
+LASERS: Mapping[str, LaserModel] = MappingProxyType(
+    {
+        "utm30lx": LaserModel(),
+        # The SICK LMS 200/291 of the CARMEN logs: 181 beams over 180 deg, 1 deg apart, 80 m.
+        "lms": LaserModel(beams=181, field_of_view=np.pi, range_max=80.0, rate=10.0),
+    }
+)
 """The simulated lasers by name (``mrm simulate --laser``); they share the noise model."""
 
 
@@ -235,7 +239,7 @@ def route_section(route: FloatArray, start: float, length: float) -> FloatArray:
 
 
 def plan_paths(
-    route: list[tuple[float, float]] | FloatArray,
+    route: Sequence[tuple[float, float]] | FloatArray,
     robots: int,
     distance: float,
     overlap: float = 0.3,

@@ -7,6 +7,9 @@ A world is a ``(W, 4)`` segment set; :data:`WORLDS` names each world's builder a
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from types import MappingProxyType
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -144,39 +147,43 @@ def rooms_world() -> FloatArray:
     return np.vstack(walls)
 
 
-WORLDS = {"office": office_world, "corridors": corridors_world, "rooms": rooms_world}
+WORLDS = MappingProxyType(
+    {"office": office_world, "corridors": corridors_world, "rooms": rooms_world}
+)
 
 # One closed tour of waypoints (world frame, m) through each world: every leg keeps at least
 # 0.3 m from every wall (test_simulation checks it), doors are crossed square on.
-ROUTES: dict[str, list[tuple[float, float]]] = {
-    "office": [
-        (4.6, 3.6),
-        (17.5, 3.6),
-        (21.0, 4.2),
-        (23.5, 7.0),
-        (21.0, 10.5),
-        (16.5, 9.6),
-        (9.0, 9.6),
-        (5.5, 9.0),
-        (4.6, 6.5),
-        (4.6, 5.0),
-    ],
-    "corridors": [
-        (1.5, 1.5),
-        (7.6, 1.5),
-        (7.6, 5.0),
-        (10.6, 8.5),
-        (10.6, 11.5),
-        (13.0, 12.6),
-        (16.0, 12.6),
-        (16.0, 18.5),
-        (27.0, 18.5),
-        *[
-            (27.0 + 3.5 * float(np.cos(a)), 15.0 + 3.5 * float(np.sin(a)))
-            for a in np.linspace(np.pi / 2, 0.0, 7)[1:-1]
-        ],
-        (30.5, 15.0),
-        (30.5, 1.5),
-    ],
-    "rooms": [(3.5, 3.0), (10.5, 3.0), (17.5, 3.0), (17.5, 9.0), (10.5, 9.0), (3.5, 9.0)],
-}
+ROUTES: Mapping[str, tuple[tuple[float, float], ...]] = MappingProxyType(
+    {
+        "office": (
+            (4.6, 3.6),
+            (17.5, 3.6),
+            (21.0, 4.2),
+            (23.5, 7.0),
+            (21.0, 10.5),
+            (16.5, 9.6),
+            (9.0, 9.6),
+            (5.5, 9.0),
+            (4.6, 6.5),
+            (4.6, 5.0),
+        ),
+        "corridors": (
+            (1.5, 1.5),
+            (7.6, 1.5),
+            (7.6, 5.0),
+            (10.6, 8.5),
+            (10.6, 11.5),
+            (13.0, 12.6),
+            (16.0, 12.6),
+            (16.0, 18.5),
+            (27.0, 18.5),
+            *[
+                (27.0 + 3.5 * float(np.cos(a)), 15.0 + 3.5 * float(np.sin(a)))
+                for a in np.linspace(np.pi / 2, 0.0, 7)[1:-1]
+            ],
+            (30.5, 15.0),
+            (30.5, 1.5),
+        ),
+        "rooms": ((3.5, 3.0), (10.5, 3.0), (17.5, 3.0), (17.5, 9.0), (10.5, 9.0), (3.5, 9.0)),
+    }
+)

@@ -12,6 +12,7 @@ so.
 from __future__ import annotations
 
 from collections.abc import Callable
+from types import MappingProxyType
 from typing import TypeVar
 
 from rcl_interfaces.msg import (
@@ -35,12 +36,14 @@ from multi_robot_mapper.core.config import (
 
 C = TypeVar("C")
 
-_PARAMETER_TYPES = {
-    float: Parameter.Type.DOUBLE,
-    int: Parameter.Type.INTEGER,
-    bool: Parameter.Type.BOOL,
-    str: Parameter.Type.STRING,
-}
+_PARAMETER_TYPES = MappingProxyType(
+    {
+        float: Parameter.Type.DOUBLE,
+        int: Parameter.Type.INTEGER,
+        bool: Parameter.Type.BOOL,
+        str: Parameter.Type.STRING,
+    }
+)
 
 
 def declare_config(node: Node, cls: type[C], base: C | None = None) -> C:

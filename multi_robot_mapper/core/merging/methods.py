@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from types import MappingProxyType
 from typing import Protocol
 
 from multi_robot_mapper.core.local_mapping import Keyframe
@@ -25,7 +26,9 @@ class MergeMethod(Protocol):
 
 # pivot: the joint graph of every robot's keyframes, linked where their places match (the
 # pivot idea of Amigoni et al. without an order); ffs: the same, then Force Field Simulation.
-MERGE_METHODS: dict[str, MergeMethod] = {"pivot": merge_joint, "ffs": merge_ffs}
+MERGE_METHODS: Mapping[str, MergeMethod] = MappingProxyType(
+    {"pivot": merge_joint, "ffs": merge_ffs}
+)
 
 
 def merge_method(name: str) -> MergeMethod:
