@@ -74,6 +74,8 @@ from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.place_matching import (
     MatchKey,
     MatchRecord,
+    Places,
+    Targets,
     cached,
     content_digest,
     match_places,
@@ -109,6 +111,9 @@ class JointState:
     # Each map's intra-map edges and each set's walls in free space, per content.
     intra: OrderedDict[Any, Any] = dataclasses.field(default_factory=OrderedDict)
     seen: OrderedDict[Any, tuple[float, float]] = dataclasses.field(default_factory=OrderedDict)
+    # Each map as a place-matching target, and its places, per content (place_matching).
+    targets: Targets = dataclasses.field(default_factory=OrderedDict)
+    places: Places = dataclasses.field(default_factory=OrderedDict)
     # The global map's fusion, map by map (global_map.fuse_keyframes).
     fusion: FusionCache = dataclasses.field(default_factory=FusionCache)
 
@@ -137,17 +142,19 @@ def merge_joint(
     state = (
         previous.state if previous is not None and isinstance(previous.state, JointState) else None
     )
-    matches, counts = match_places(
+    new_state = _next_state(state)
+    new_state.matches, counts = match_places(
         units,
         config,
         state.matches if state is not None else {},
         _matching_budget(config.update_budget if budget is None else budget, state),
+        (new_state.targets, new_state.places),
     )
+    matches = new_state.matches
     matched = time.perf_counter()
     model = model if model is not None else installed_model()
-    new_state = _next_state(matches, state)
     verdicts = _verdicts(units, matches, config, model, state, new_state)
-    accepted = _accepted_pairs(units, verdicts, config, model)
+    accepted = _accepted_pairs(units, verdicts, config, model, new_state.targets)
     checked = time.perf_counter()
     previous_reference = None if previous is None else previous.reference
     group, ref_unit, chains = _placed_group(accepted, units, chosen, previous_reference, config)
@@ -177,6 +184,7 @@ def _accepted_pairs(
     verdicts: Mapping[tuple[UnitKey, UnitKey], PairVerdict],
     config: MergeConfig,
     model: LogisticModel,
+    kept: Targets,
 ) -> Accepted:
     """The pairs of maps accepted over the groups (:func:`~core.merging.consistency.
     accept_pairs`): no robot driving faster than ``max_speed`` between two of its pieces, and
@@ -184,7 +192,7 @@ def _accepted_pairs(
     reaches = robot_reaches(units, config.max_speed)
 
     def conflict(group_a: Any, group_b: Any, T: FloatArray) -> float:
-        targets = {key: target_of(units[key], config) for key in (*group_a, *group_b)}
+        targets = {key: target_of(units[key], config, kept) for key in (*group_a, *group_b)}
         return group_conflict(group_a, group_b, T, units, targets, config)
 
     return accept_pairs(list(verdicts.values()), units, config, model, reaches, conflict)
@@ -206,11 +214,13 @@ def _placed_group(
     return group, ref_unit, chains
 
 
-def _next_state(matches: dict[MatchKey, MatchRecord], state: JointState | None) -> JointState:
-    """The state this update leaves to the next: its ``matches``, and what the last update's
-    ``state`` kept per content (intra-map edges, walls in free space, the fusion)."""
-    new_state = JointState(matches)
+def _next_state(state: JointState | None) -> JointState:
+    """The state this update leaves to the next (its matches set once made), with what the
+    last update's ``state`` kept per content (targets, places, intra-map edges, walls in free
+    space, the fusion)."""
+    new_state = JointState()
     if state is not None:
+        new_state.targets, new_state.places = state.targets, state.places
         new_state.intra, new_state.seen = state.intra, state.seen
         new_state.fusion = state.fusion
     return new_state
@@ -282,7 +292,7 @@ def _verdicts(
             by_pair.setdefault(pair, []).append(candidate)
 
     def views_of(key: UnitKey) -> MapViews | None:
-        return target_of(units[key], config).views
+        return target_of(units[key], config, new_state.targets).views
 
     def seen_through(links: Sequence[LinkCandidate]) -> tuple[float, float]:
         # The same set on the same maps from one update to the next: measured once.
@@ -298,7 +308,7 @@ def _verdicts(
 
     def evidence_of(links: Sequence[LinkCandidate], T_first_second: FloatArray) -> PairEvidence:
         maps = (min(links[0].source, links[0].target), max(links[0].source, links[0].target))
-        targets = {key: target_of(units[key], config) for key in maps}
+        targets = {key: target_of(units[key], config, new_state.targets) for key in maps}
         return pair_evidence(maps, links, T_first_second, units, targets, config)
 
     digests = {key: content_digest(unit) for key, unit in units.items()}

@@ -43,11 +43,10 @@ class MatchRecord:
     candidates: list[LinkCandidate]
 
 
-# Targets (a map transformed for the correlation) and places of the maps seen most recently:
-# building them costs more than a place match, and a merger process sees the same maps for
-# many updates (one robot's map changes at a time). Keyed by map, content and settings.
-_TARGETS: OrderedDict[tuple[UnitKey, str, MergeConfig], Target] = OrderedDict()
-_PLACES: OrderedDict[tuple[UnitKey, str, MergeConfig], list[Place]] = OrderedDict()
+# Targets (a map transformed for the correlation) and places of the maps seen most recently
+# are kept in the merge's state (``JointState.targets``, ``.places``): building them costs more
+# than a place match, and a merger sees the same maps for many updates (one robot's map changes
+# at a time). Keyed by map, content and settings; at most KEPT of each.
 KEPT = 32
 
 
@@ -63,9 +62,14 @@ def cached(store: OrderedDict[Any, Any], key: Any, make: Callable[[], Any]) -> A
     return found
 
 
-def target_of(unit: MapUnit, config: MergeConfig) -> Target:
+Targets = OrderedDict[tuple[UnitKey, str, MergeConfig], Target]
+Places = OrderedDict[tuple[UnitKey, str, MergeConfig], list[Place]]
+
+
+def target_of(unit: MapUnit, config: MergeConfig, kept: Targets) -> Target:
+    """``unit`` as a target of place matches, made once per content (``kept``)."""
     key = (unit.key, MapSignature.of(unit.segments).digest, config)
-    return cast(Target, cached(_TARGETS, key, lambda: Target.of(unit, config)))
+    return cast(Target, cached(kept, key, lambda: Target.of(unit, config)))
 
 
 def content_digest(unit: MapUnit) -> str:
@@ -73,9 +77,10 @@ def content_digest(unit: MapUnit) -> str:
     return hashlib.sha1(unit.poses.tobytes() + unit.segments.tobytes()).hexdigest()
 
 
-def places_of_unit(unit: MapUnit, config: MergeConfig) -> list[Place]:
+def places_of_unit(unit: MapUnit, config: MergeConfig, kept: Places) -> list[Place]:
+    """``unit``'s places, made once per content (``kept``)."""
     key = (unit.key, content_digest(unit), config)
-    return cast(list[Place], cached(_PLACES, key, lambda: places_of(unit, config)))
+    return cast(list[Place], cached(kept, key, lambda: places_of(unit, config)))
 
 
 # --- links --------------------------------------------------------------------------------
@@ -97,14 +102,16 @@ def match_places(
     config: MergeConfig,
     old: Mapping[MatchKey, MatchRecord],
     budget: float | None,
+    kept: tuple[Targets, Places],
 ) -> tuple[dict[MatchKey, MatchRecord], dict[str, int]]:
     """Every place of each map of every pair searched on the other map: results kept while
     the place and the target map are unchanged, the rest matched within ``budget`` seconds,
     places never matched first, then changed places, then places of grown targets; the
     smaller maps' places before the larger maps', each pair's k-th place before any pair's
-    (k+1)-th."""
+    (k+1)-th. Targets and places are made once per content (``kept``: the merge state's)."""
     keys = sorted(k for k, u in units.items() if u.length >= config.place_min_length)
-    places = {key: places_of_unit(units[key], config) for key in keys}
+    targets, kept_places = kept
+    places = {key: places_of_unit(units[key], config, kept_places) for key in keys}
     signatures = {key: MapSignature.of(units[key].segments) for key in keys}
     records: dict[MatchKey, MatchRecord] = {}
     work: list[Work] = []
@@ -135,7 +142,7 @@ def match_places(
         drawing = drawings.get(place.digest)
         if drawing is None:
             drawing = drawings[place.digest] = place_drawing(place, config)
-        found = match_place(place, target_of(units[key[2]], config), config, drawing)
+        found = match_place(place, target_of(units[key[2]], config, targets), config, drawing)
         records[key] = MatchRecord(place.digest, signatures[key[2]], found)
         computed += 1
     counts = {
