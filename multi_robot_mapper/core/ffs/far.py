@@ -60,6 +60,11 @@ IntArray = NDArray[np.int64]
 _CELLS_PER_SIGMA = 1.0
 # Direction octants a cell's points are kept apart by (faces of a corner stay two points).
 _OCTANTS = 8
+# At most this many points are pulled per iteration, every k-th of the stacked bodies' points
+# (Sec. 3.5.1: the field need only be evaluated to a certain accuracy): where dozens of
+# keyframes see one room a point has a pull from each, and all of them would be 5-20 times
+# the 20 ms an iteration may take.
+_PULLED = 1000
 # Levenberg damping, relative to each pose parameter's own curvature: small enough that a
 # chain's soft modes (a corridor's length) converge in a few steps, large enough that a body
 # with a wall in one direction only stays put along it.
@@ -132,9 +137,12 @@ def wall_pulls(
 ) -> _Pulls:
     """Every point's pull towards each other body's nearest wall in reach (module doc);
     ``points``, ``directions`` placed in ``map``, ``cell`` the points' spacing."""
-    pairs = cKDTree(points).query_pairs(cutoff * sigma, output_type="ndarray")
-    i = np.concatenate([pairs[:, 0], pairs[:, 1]])
-    j = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    # Every point is a wall to pull towards; every stride-th one is pulled (module doc).
+    sources = np.arange(0, len(points), max(1, -(-len(points) // _PULLED)))
+    pairs = cKDTree(points[sources]).sparse_distance_matrix(
+        cKDTree(points), cutoff * sigma, output_type="ndarray"
+    )
+    i, j = sources[pairs["i"]], pairs["j"].astype(np.int64)
     cos = np.einsum("ij,ij->i", directions[i], directions[j])
     # Faces (bodies module): walls seen from opposite sides do not pull (Eq. 2's cosine).
     keep = (bodies.body[i] != bodies.body[j]) & (cos > 0.0)
