@@ -8,7 +8,8 @@ The first ``--bodies`` keyframes of the log (a new one where the laser moved 0.5
 0.35 rad, the local mapper's rule), each body one keyframe's scan as extracted (its segments),
 placed at the reference poses. FFS runs to convergence from there (R0; the first body holds
 the frame). FFS is :func:`run_ffs_far` (issue 51: a field as wide as the distortion, its start
-width ``start_width(T, R, bodies)``, about 0.55 m at the paper's distortion, cooled to 4 cm),
+width ``start_width(T, R, bodies)``, about 0.55 m at the paper's distortion, at least the
+config's 0.10 m, cooled to 4 cm),
 R0 and every seed alike; ``--published`` runs the published step the merger uses
 (:func:`run_ffs`, σ from 0.10 m) instead, the figures before issue 51. Then every other body
 is moved by uniform +-0.30 m and +-20 deg (``--distortion
@@ -142,8 +143,10 @@ def reconvergence(
     fixed[0] = True
     simulate = run_ffs if args.published else run_ffs_far
     if not args.published and "sigma_start" not in args.set_names:
+        # The distortion's width, never narrower than the config's start (0.10 m, the paper's
+        # 15 cm): from +-2 cm / +-1 deg a field starting at 4 cm left intel 4/10, from 0.10 m 10/10.
         width = start_width(shift, np.radians(turn), bodies)
-        config = dataclasses.replace(config, sigma_start=max(width, config.sigma_end))
+        config = dataclasses.replace(config, sigma_start=max(width, config.sigma_start))
     r0 = simulate(bodies, reference, config, fixed=fixed)
     moved_from_reference = deviation(r0.poses, reference)
     print(
