@@ -3,7 +3,7 @@ as the paper's experiment 4.2 (±0.30 m, ±20°), with a field as wide as that d
 to the paper's width.
 
 :func:`run_ffs_far` is Algorithm 1 with three changes, each for a reason measured on the shared
-logs' keyframes (docs/decisions.md, "Force Field Simulation from afar"):
+logs' keyframes (docs/decisions.md, "FFS from afar"):
 
 - **The field of a wall, not of its points.** A point p of one body is pulled by each other
   body b once, towards b's wall nearest to p (the soft nearest of b's points within
@@ -24,9 +24,11 @@ logs' keyframes (docs/decisions.md, "Force Field Simulation from afar"):
 
 Cooling (Sec. 3.2, Algorithm 1 line 14): σ shrinks geometrically from ``sigma_start`` to
 ``sigma_end`` by ``dt_factor`` per iteration (the paper's Δt factor 0.96: its σ 15 → 4 cm and
-Δt 5 → 1 both take about 40 iterations; a metre to 4 cm by 0.96 takes 79). While σ is wide
-the bodies are resampled coarser (one mass-weighted point per cell of about σ/2, Sec. 3.3's
-optional resampling and 3.5.1's approximation), so that a wide field stays fast. The run ends
+Δt 5 → 1 both take about 40 iterations; a metre to 4 cm by 0.96 takes 79); the step's share
+(Δt / Δt_0)², Δt cooled by the same factor, never below _LAST_SHARE. While σ is wide the
+bodies are resampled coarser (one mass-weighted point per cell of at most σ, Sec. 3.3's
+optional resampling and 3.5.1's approximation) and at most _PULLED points are pulled per
+iteration, so that a wide field stays fast. The run ends
 (line 15, read with ``<``) once σ has cooled and the largest relocation of a moving body is
 below ``stop_relocation`` (the largest, not the average: a chain's end still creeping while the
 rest stands still is not settled).
@@ -66,8 +68,8 @@ _OCTANTS = 8
 # the 20 ms an iteration may take.
 _PULLED = 1000
 # Levenberg damping, relative to each pose parameter's own curvature: small enough that a
-# chain's soft modes (a corridor's length) converge in a few steps, large enough that a body
-# with a wall in one direction only stays put along it.
+# chain's soft modes (a corridor's length) converge in a few steps. It does not hold a body
+# whose walls all run one way (aces's corridors slid metres: docs/decisions.md).
 _DAMPING = 1e-4
 # The step's share of the model's at the end of the cooling: the whole step cycles by about
 # half a millimetre at the end (the synthetic building of the tests), half of it settles.
