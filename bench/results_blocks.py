@@ -228,18 +228,25 @@ MEASURED = (
     ),
     _printed(
         "ffs_seeds",
-        "FFS re-convergence per seed at the paper's distortion (±0.30 m, ±20°), three logs",
-        tuple(_ffs(log, "0.30,20", 10) for log in ("intel", "freiburg-079", "csail")),
-        hours=0.05,
+        "FFS re-convergence per seed at the paper's distortion (±0.30 m, ±20°), six logs",
+        tuple(
+            _ffs(log, "0.30,20", 10)
+            for log in ("intel", "freiburg-079", "csail", "aces", "fhw", "edmonton")
+        ),
+        hours=0.1,
     ),
     _printed(
         "ffs_distortions",
         "FFS re-convergence by distortion: where it stops working",
         (
-            *(_ffs("intel", d, 10) for d in ("0.02,1", "0.10,5", "0.30,20", "0.50,30")),
-            *(_ffs(log, "0.02,1", 3) for log in ("freiburg-079", "csail")),
+            *(_ffs("intel", d, 10) for d in ("0.02,1", "0.10,5", "0.50,30", "1.00,45")),
+            *(
+                _ffs(log, d, 3)
+                for log in ("freiburg-079", "csail")
+                for d in ("0.02,1", "0.10,5", "0.50,30", "1.00,45")
+            ),
         ),
-        hours=0.3,
+        hours=0.2,
     ),
     Block(
         "confidence",
