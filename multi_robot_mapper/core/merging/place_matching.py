@@ -64,13 +64,14 @@ def cached(store: OrderedDict[Any, Any], key: Any, make: Callable[[], Any]) -> A
 
 
 def target_of(unit: MapUnit, config: MergeConfig) -> Target:
-    key = (unit.key, MapSignature.of(unit.segments).digest, config)
+    key = (unit.key, unit.segment_map.digest, config)
     return cast(Target, cached(_TARGETS, key, lambda: Target.of(unit, config)))
 
 
 def content_digest(unit: MapUnit) -> str:
     """A digest of a map's keyframe poses and segments."""
-    return hashlib.sha1(unit.poses.tobytes() + unit.segments.tobytes()).hexdigest()
+    # The segments' digest is the map's own, made once per unit (its signature reads it too).
+    return hashlib.sha1(unit.poses.tobytes() + unit.segment_map.digest.encode()).hexdigest()
 
 
 def places_of_unit(unit: MapUnit, config: MergeConfig) -> list[Place]:
@@ -105,7 +106,7 @@ def match_places(
     (k+1)-th."""
     keys = sorted(k for k, u in units.items() if u.length >= config.place_min_length)
     places = {key: places_of_unit(units[key], config) for key in keys}
-    signatures = {key: MapSignature.of(units[key].segments) for key in keys}
+    signatures = {key: MapSignature.of(units[key].segment_map) for key in keys}
     records: dict[MatchKey, MatchRecord] = {}
     work: list[Work] = []
     for i, a in enumerate(keys):
