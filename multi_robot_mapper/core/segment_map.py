@@ -41,7 +41,7 @@ class SegmentMap:
     """Wall segments ``(N, 4)`` (x1, y1, x2, y2; read only) and their derived geometry.
 
     Equality and hashing are by identity: two maps of equal content are equal in
-    :attr:`digest`. Build one with :meth:`of` (no copy of a read-only float64 array).
+    :attr:`digest`. Build one with :meth:`of` (a read-only copy of the caller's array).
     """
 
     segments: FloatArray
@@ -148,7 +148,8 @@ class SegmentMap:
     @contextlib.contextmanager
     def holding(self, key: Hashable, make: Callable[[], _Held]) -> Iterator[_Held]:
         """Within the block, ``make()`` (made once, or the one an enclosing block holds) is
-        held on this map under ``key`` for :meth:`held`; dropped when the last block ends."""
+        held on this map under ``key`` for :meth:`held`; dropped when the last block ends.
+        ``make`` runs under the map's lock: it should only set up (build lazily)."""
         with self._lock:
             entry = self._held.get(key)
             if entry is None:
