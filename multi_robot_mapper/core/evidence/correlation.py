@@ -30,7 +30,8 @@ from scipy import fft as sp_fft
 from scipy import ndimage
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.geometry import lines_of, sample_segments
+from multi_robot_mapper.core.geometry import sample_segments
+from multi_robot_mapper.core.segment_map import MapLike, SegmentMap
 
 FloatArray = NDArray[np.float64]
 
@@ -63,14 +64,15 @@ class Drawing:
     free: FloatArray  # (F, 2) points where the robot's laser saw nothing
 
     @staticmethod
-    def of(segments: FloatArray, free: FloatArray, cell: float) -> Drawing:
-        """Draw ``segments`` (sampled every half cell) with the free-space points ``free``."""
+    def of(walls: MapLike, free: FloatArray, cell: float) -> Drawing:
+        """Draw ``walls`` (sampled every half cell) with the free-space points ``free``."""
         spacing = 0.5 * cell
-        if len(segments) == 0:
+        if len(walls) == 0:
             empty = np.zeros(0)
             return Drawing(np.zeros((0, 2)), empty, empty, np.asarray(free).reshape(-1, 2))
+        segment_map = SegmentMap.of(walls)
+        segments, lines = segment_map.segments, segment_map.lines
         points, owner = sample_segments(segments, spacing)
-        lines = lines_of(segments)
         count = np.bincount(owner, minlength=len(segments))
         weight = (lines.length / np.maximum(count, 1))[owner]
         direction = np.arctan2(segments[:, 3] - segments[:, 1], segments[:, 2] - segments[:, 0])
@@ -193,12 +195,14 @@ def _line_peak(cell: float, blur: float) -> float:
     return float(0.5 * cell / (2.0 * np.sqrt(np.pi * (blur**2 + _DRAWN))))
 
 
-def wall_directions(segments: FloatArray) -> FloatArray:
+def wall_directions(walls: MapLike) -> FloatArray:
     """Length-weighted histogram of wall directions over [0, pi), blurred by one bin."""
-    if len(segments) == 0:
+    if len(walls) == 0:
         return np.zeros(_HISTOGRAM_BINS)
+    segment_map = SegmentMap.of(walls)
+    segments = segment_map.segments
     direction = np.arctan2(segments[:, 3] - segments[:, 1], segments[:, 2] - segments[:, 0])
-    return _histogram(direction, lines_of(segments).length)
+    return _histogram(direction, segment_map.length)
 
 
 def _histogram(direction: FloatArray, weight: FloatArray) -> FloatArray:
@@ -211,7 +215,7 @@ def _histogram(direction: FloatArray, weight: FloatArray) -> FloatArray:
     return np.asarray(ndimage.gaussian_filter1d(histogram, 1.0, mode="wrap"))
 
 
-def rotation_candidates(map_a: FloatArray, map_b: FloatArray, count: int) -> FloatArray:
+def rotation_candidates(map_a: MapLike, map_b: MapLike, count: int) -> FloatArray:
     """Rotations of map b that line its walls up with map a's: the ``count`` highest peaks
     (at least a fifth of the highest) of the circular cross-correlation of the two direction
     histograms, refined by a parabola through each peak, each also turned by pi (walls have no

@@ -50,6 +50,7 @@ from multi_robot_mapper.core.matching.prior import MotionPrior
 from multi_robot_mapper.core.matching.shape import Shapes, match_shapes
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.se2 import Pose
+from multi_robot_mapper.core.segment_map import MapLike, SegmentMap
 
 FloatArray = NDArray[np.float64]
 
@@ -99,7 +100,7 @@ class Attempt:
 
     result: MatchResult
     anchor: Anchor  # where the reference scan is (its keyframe, and the offset from it)
-    reference: FloatArray  # the reference scan's segments
+    reference: SegmentMap  # the reference scan's segments
     pose: Pose  # the new scan's pose in the piece, by this match
     piece: int  # the reference's piece
     stage: str  # "track", "search" or "recent"
@@ -149,12 +150,16 @@ def _turned_from_prediction(motion: Pose, predicted: Pose) -> bool:
 class Reference:
     """A scan a new scan can be matched against, and where it is."""
 
-    segments: FloatArray
+    segments: SegmentMap
     view: LaserScanData
     anchor: Anchor
     stamp: float  # when it was taken (s)
     # several scans fused (a local map): where each was taken, in the reference's frame
     viewpoints: list[Viewpoint] | None = None
+
+    def __post_init__(self) -> None:
+        # Segments given as an array (an edge: tests, one-off callers) become a map once.
+        object.__setattr__(self, "segments", SegmentMap.of(self.segments))
 
     @property
     def views(self) -> LaserScanData | list[Viewpoint]:
@@ -197,7 +202,7 @@ class References:
 def match_scan(
     config: LocalMapperConfig,
     references: References,
-    new: FloatArray,
+    new: MapLike,
     view: LaserScanData,
     motions: list[Pose],
     tracking: bool,
@@ -218,7 +223,7 @@ def match_scan(
     ``count(stage, seconds)`` is told where the time went; ``record`` (a list) receives every
     attempt kept."""
     attempts: list[Attempt] = record if record is not None else []
-    matching = _ScanMatching(config, references, new, view, count, shapes, attempts)
+    matching = _ScanMatching(config, references, SegmentMap.of(new), view, count, shapes, attempts)
     if tracking:
         # Tracking needs a prediction: after a new piece starts nothing is known of the
         # motion, and "did not move" refined in a corridor stays where it started.
@@ -236,7 +241,7 @@ class _ScanMatching:
         self,
         config: LocalMapperConfig,
         references: References,
-        new: FloatArray,
+        new: SegmentMap,
         view: LaserScanData,
         count: Callable[[str, float], None],
         shapes: Shapes | None,
@@ -446,7 +451,7 @@ class _ScanMatching:
     def keyframe_reference(self, keyframe: int) -> Reference:
         """A keyframe's scan as a reference."""
         scan = self.references.scans[keyframe]
-        return Reference(scan.segments, scan.view, Anchor(keyframe, (0.0, 0.0, 0.0)), scan.stamp)
+        return Reference(scan.segment_map, scan.view, Anchor(keyframe, (0.0, 0.0, 0.0)), scan.stamp)
 
     def tracked_against(self) -> Reference:
         """The last keyframe's scan, or the local map around it where there is one."""
@@ -454,7 +459,7 @@ class _ScanMatching:
         local = self.references.local_map
         if local is None:
             return start
-        return dataclasses.replace(start, segments=local.segments, viewpoints=local.viewpoints)
+        return dataclasses.replace(start, segments=local.segment_map, viewpoints=local.viewpoints)
 
     def track(self, motions: list[Pose]) -> tuple[Attempt, bool, bool] | None:
         """The placement tracked from the predictions (:meth:`tracked_against`), when the

@@ -17,6 +17,7 @@ other until joined.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +28,7 @@ from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.se2 import Pose
+from multi_robot_mapper.core.segment_map import SegmentMap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -53,6 +55,11 @@ class KeyframeScan:
     stamp: float
     segments: FloatArray  # (N, 4) the scan's segments
     view: LaserScanData  # the scan's beams
+
+    @functools.cached_property
+    def segment_map(self) -> SegmentMap:
+        """The scan's segments as a map, made once: what matching reads of them."""
+        return SegmentMap.of(self.segments)
 
 
 class KeyframeMap:

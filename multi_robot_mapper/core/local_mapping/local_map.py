@@ -11,6 +11,7 @@ older keyframes (which needs another to corroborate it).
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
@@ -24,6 +25,7 @@ from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeScan
 from multi_robot_mapper.core.matching.beams import Viewpoint
 from multi_robot_mapper.core.matching.config import IntegrateConfig
 from multi_robot_mapper.core.se2 import Pose
+from multi_robot_mapper.core.segment_map import SegmentMap
 
 FloatArray = NDArray[np.float64]
 
@@ -74,6 +76,11 @@ class LocalMap:
     keyframe: int
     segments: FloatArray
     viewpoints: list[Viewpoint]
+
+    @functools.cached_property
+    def segment_map(self) -> SegmentMap:
+        """The fused segments as a map, made once: what a scan is tracked against."""
+        return SegmentMap.of(self.segments)
 
 
 class LocalMaps:

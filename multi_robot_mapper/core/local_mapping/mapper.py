@@ -45,7 +45,6 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import SegmentScan
-from multi_robot_mapper.core.geometry import lines_of
 from multi_robot_mapper.core.local_mapping.attempts import (
     Anchor,
     Attempt,
@@ -74,6 +73,7 @@ from multi_robot_mapper.core.matching.shape import Shapes
 from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.se2 import Pose
+from multi_robot_mapper.core.segment_map import SegmentMap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -110,7 +110,7 @@ class _Last:
     """The newest accepted scan."""
 
     stamp: float
-    segments: FloatArray
+    segments: SegmentMap
     view: LaserScanData
     anchor: Anchor
 
@@ -209,20 +209,20 @@ class LocalMapper(BackendLink):
         return dataclasses.replace(update, seconds=dict(self._scan_seconds))
 
     def _add_scan(self, stamp: float, segments: SegmentScan, view: LaserScanData) -> LocalUpdate:
-        new = np.asarray(segments.segments, dtype=np.float64).reshape(-1, 4)
-        new = new[np.isfinite(new).all(axis=1)]
-        if float(lines_of(new).length.sum()) < self.config.integrate.min_match_value:
+        array = np.asarray(segments.segments, dtype=np.float64).reshape(-1, 4)
+        new = SegmentMap.of(array[np.isfinite(array).all(axis=1)])
+        if new.total_length < self.config.integrate.min_match_value:
             return self._set_aside("too little structure in the scan")
         return self._place(stamp, new, view)
 
-    def _place(self, stamp: float, new: FloatArray, view: LaserScanData) -> LocalUpdate:
+    def _place(self, stamp: float, new: SegmentMap, view: LaserScanData) -> LocalUpdate:
         last = self._last
         if last is None:
             return self._start_piece(stamp, new, view, "")
         dt = max(stamp - last.stamp, 0.0)
         holding = bool(self._held) and not self._replaying
-        if holding and (follow := self._follows_held(stamp, new, view)) is not None:
-            return self._hold(HeldScan(stamp, new, view, None, follow), follow.confidence)
+        if holding and (follow := self._follows_held(stamp, new.segments, view)) is not None:
+            return self._hold(HeldScan(stamp, new.segments, view, None, follow), follow.confidence)
         chosen, integrated = self._match(last, new, view, dt, after_held=holding)
         result, anchor, reference = chosen.result, chosen.anchor, chosen.reference
         T_keyframe_new = se2.compose(anchor.T_keyframe_scan, pose_of_match(result.T_1_2))
@@ -240,7 +240,7 @@ class LocalMapper(BackendLink):
             )
             if self._replaying:
                 return self._start_piece(stamp, new, view, LOST, lost_from)
-            return self._hold(HeldScan(stamp, new, view, lost_from), chosen.confidence)
+            return self._hold(HeldScan(stamp, new.segments, view, lost_from), chosen.confidence)
         self._set_aside_held()  # placed from the map: the scans held before it were outliers
         pose = chosen.pose
         motion = se2.between(self._placed_pose_unlocked(last.anchor), pose)
@@ -314,10 +314,10 @@ class LocalMapper(BackendLink):
         try:
             first = held[0]
             update = self._start_piece(
-                first.stamp, first.segments, first.view, LOST, first.lost_from
+                first.stamp, SegmentMap.of(first.segments), first.view, LOST, first.lost_from
             )
             for scan in held[1:]:
-                update = self._place(scan.stamp, scan.segments, scan.view)
+                update = self._place(scan.stamp, SegmentMap.of(scan.segments), scan.view)
         finally:
             self._replaying = False
         return dataclasses.replace(update, new_piece=True)
@@ -333,7 +333,7 @@ class LocalMapper(BackendLink):
     def _match(
         self,
         last: _Last,
-        new: FloatArray,
+        new: SegmentMap,
         view: LaserScanData,
         dt: float,
         after_held: bool = False,
@@ -427,11 +427,11 @@ class LocalMapper(BackendLink):
     def _new_keyframe(
         self,
         stamp: float,
-        segments: FloatArray,
+        segments: SegmentMap,
         view: LaserScanData,
         anchor: Anchor,
         result: MatchResult,
-        reference: FloatArray,
+        reference: SegmentMap,
     ) -> Anchor:
         """Make the scan a keyframe, with an edge to the keyframe its match started from. The
         edge's information is the match's (against ``reference``, the segments it was matched
@@ -453,13 +453,13 @@ class LocalMapper(BackendLink):
             piece = self._pieces[anchor.keyframe]
             pose = se2.compose(self._poses[anchor.keyframe], T_keyframe_new)
         edge = Edge(anchor.keyframe, index, T_keyframe_new, information, robust=False)
-        self._add_keyframe(KeyframeScan(index, stamp, segments, view), pose, piece, edge)
+        self._add_keyframe(KeyframeScan(index, stamp, segments.segments, view), pose, piece, edge)
         return Anchor(index, (0.0, 0.0, 0.0))
 
     def _start_piece(
         self,
         stamp: float,
-        segments: FloatArray,
+        segments: SegmentMap,
         view: LaserScanData,
         reason: str,
         lost_from: LostFrom | None = None,
@@ -468,7 +468,7 @@ class LocalMapper(BackendLink):
         ``lost_from``: the keyframe the robot was lost near and the guess of this scan's pose
         in its frame (the best match, not confident enough)."""
         index = len(self._scans)
-        scan = KeyframeScan(index, stamp, segments, view)
+        scan = KeyframeScan(index, stamp, segments.segments, view)
         self._add_keyframe(scan, (0.0, 0.0, 0.0), index, None, lost_from)
         anchor = Anchor(index, (0.0, 0.0, 0.0))
         self._last = _Last(stamp, segments, view, anchor)

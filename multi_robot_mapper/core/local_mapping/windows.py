@@ -90,8 +90,8 @@ class WindowMatcher:
         a, b = self.keyframes.scans[first], self.keyframes.scans[second]
         extra = None if predicted is None else hypotheses_of([predicted])
         return integrate(
-            a.segments,
-            b.segments,
+            a.segment_map,
+            b.segment_map,
             self.config.integrate,
             heuristics=HEURISTICS if search else (),
             extra_hypotheses=extra,
@@ -183,8 +183,8 @@ class WindowMatcher:
         a, b = self.keyframes.scans[first], self.keyframes.scans[second]
         config = self.config
         information = match_information(
-            a.segments,
-            b.segments,
+            a.segment_map,
+            b.segment_map,
             T_1_2,
             config.integrate,
             config.wall_sigma,

@@ -13,9 +13,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.geometry import lines_of, sample_segments
+from multi_robot_mapper.core.geometry import sample_segments
 from multi_robot_mapper.core.matching.config import IntegrateConfig
 from multi_robot_mapper.core.scan import LaserScanData, scan_points
+from multi_robot_mapper.core.segment_map import MapLike, SegmentMap
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -290,12 +291,14 @@ def beam_agreement(
     )
 
 
-def _segment_points(segments: FloatArray, config: IntegrateConfig) -> tuple[FloatArray, FloatArray]:
+def _segment_points(
+    segment_map: SegmentMap, config: IntegrateConfig
+) -> tuple[FloatArray, FloatArray]:
     """Points every 5 cm along the segments of at least ``free_space_min_length``."""
     spacing = 0.05
-    if len(segments) == 0:
+    if len(segment_map) == 0:
         return np.zeros((0, 2)), np.zeros(0)
-    long = segments[lines_of(segments).length >= config.free_space_min_length]
+    long = segment_map.segments[segment_map.length >= config.free_space_min_length]
     if len(long) == 0:
         return np.zeros((0, 2)), np.zeros(0)
     points, _ = sample_segments(long, spacing)
@@ -317,8 +320,8 @@ def viewpoints_of(views: Views) -> list[Viewpoint] | None:
 
 
 def seen_through_many(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: MapLike,
+    map2: MapLike,
     transforms: FloatArray,
     views: tuple[Views, Views],
     config: IntegrateConfig,
@@ -343,8 +346,8 @@ def seen_through_many(
         points1, weight1 = returns1.points, returns1.weights
         points2, weight2 = returns2.points, returns2.weights
     else:
-        points2, weight2 = _segment_points(segments2, config)
-        points1, weight1 = _segment_points(segments1, config)
+        points2, weight2 = _segment_points(SegmentMap.of(map2), config)
+        points1, weight1 = _segment_points(SegmentMap.of(map1), config)
     c, s = np.cos(transforms[:, 0])[:, None], np.sin(transforms[:, 0])[:, None]
     tx, ty = transforms[:, 1, None], transforms[:, 2, None]
     margin, spread = config.free_space_margin, config.free_space_spread

@@ -9,8 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.geometry import lines_of
 from multi_robot_mapper.core.matching.config import IntegrateConfig
+from multi_robot_mapper.core.segment_map import MapLike, SegmentMap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -29,20 +29,21 @@ class Landmarks:
 
 
 def landmarks_from_pairs(
-    segments: FloatArray, first: IntArray, second: IntArray, config: IntegrateConfig
+    segments: MapLike, first: IntArray, second: IntArray, config: IntegrateConfig
 ) -> Landmarks:
     """Landmarks of the given (i, j) pairs, both orders, dropping near-parallel pairs."""
     i = np.concatenate((first, second)).astype(np.int64)
     j = np.concatenate((second, first)).astype(np.int64)
     keep = i != j
     i, j = i[keep], j[keep]
-    lines = lines_of(segments)
+    segment_map = SegmentMap.of(segments)
+    lines = segment_map.lines
     ui, uj = lines.direction[i], lines.direction[j]
     sine = ui[:, 0] * uj[:, 1] - ui[:, 1] * uj[:, 0]
     ok = np.abs(sine) >= np.sin(config.min_landmark_angle)
     i, j, ui, uj, sine = i[ok], j[ok], ui[ok], uj[ok], sine[ok]
     # Intersection of p_i + s u_i and p_j + r u_j.
-    pi, pj = segments[i, :2], segments[j, :2]
+    pi, pj = segment_map.segments[i, :2], segment_map.segments[j, :2]
     delta = pj - pi
     s = (delta[:, 0] * uj[:, 1] - delta[:, 1] * uj[:, 0]) / sine
     vertex = pi + s[:, None] * ui
@@ -52,13 +53,13 @@ def landmarks_from_pairs(
 
 
 def consecutive_pairs(
-    segments: FloatArray, ordered: bool, config: IntegrateConfig
+    segments: MapLike, ordered: bool, config: IntegrateConfig
 ) -> tuple[IntArray, IntArray]:
     """Heuristic 1: consecutive segments of an ordered scan, both long enough (III-A-1)."""
     n = len(segments)
     if not ordered or n < 2:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    length = lines_of(segments).length
+    length = SegmentMap.of(segments).length
     long_enough = length >= max(
         config.min_segment_length, config.segment_length_percentage / 100.0 * length.max()
     )
@@ -68,10 +69,10 @@ def consecutive_pairs(
 
 
 def random_pairs(
-    segments: FloatArray, config: IntegrateConfig, rng: np.random.Generator
+    segments: MapLike, config: IntegrateConfig, rng: np.random.Generator
 ) -> tuple[IntArray, IntArray]:
     """Heuristic 2 (Alg. 3): N_k = 20 * 2^k random pairs of segments longer than f^k x longest."""
-    length = lines_of(segments).length
+    length = SegmentMap.of(segments).length
     firsts, seconds = [], []
     for k in range(1, config.random_rounds + 1):
         pool = np.flatnonzero(
@@ -91,9 +92,9 @@ def random_pairs(
     return np.concatenate(firsts), np.concatenate(seconds)
 
 
-def histogram_pairs(segments: FloatArray, config: IntegrateConfig) -> tuple[IntArray, IntArray]:
+def histogram_pairs(segments: MapLike, config: IntegrateConfig) -> tuple[IntArray, IntArray]:
     """Heuristic 3: principal-direction segments x normal-direction segments (III-A-3)."""
-    lines = lines_of(segments)
+    lines = SegmentMap.of(segments).lines
     usable = lines.length >= config.min_segment_length
     slots = config.histogram_slots
     bucket = (np.mod(lines.angle, np.pi) / np.pi * slots).astype(np.int64) % slots
@@ -111,21 +112,22 @@ def histogram_pairs(segments: FloatArray, config: IntegrateConfig) -> tuple[IntA
     return grid_p.ravel(), grid_q.ravel()
 
 
-def all_pairs(segments: FloatArray, config: IntegrateConfig) -> tuple[IntArray, IntArray]:
+def all_pairs(segments: MapLike, config: IntegrateConfig) -> tuple[IntArray, IntArray]:
     """Every pair of usable segments (Alg. 2 as written), for small sets."""
-    idx = np.flatnonzero(lines_of(segments).length >= config.min_segment_length)
+    idx = np.flatnonzero(SegmentMap.of(segments).length >= config.min_segment_length)
     a, b = np.triu_indices(idx.size, k=1)
     return idx[a], idx[b]
 
 
 def landmarks(
-    segments: FloatArray,
+    segments: MapLike,
     heuristics: tuple[str, ...],
     config: IntegrateConfig,
     ordered: bool,
     rng: np.random.Generator,
 ) -> Landmarks:
     """The landmarks of one segment set under the chosen heuristics (their union)."""
+    segments = SegmentMap.of(segments)
     firsts: list[IntArray] = []
     seconds: list[IntArray] = []
     for name in heuristics:
@@ -151,9 +153,9 @@ def landmarks(
 
 
 def hypotheses(
-    segments1: FloatArray,
+    segments1: MapLike,
     marks1: Landmarks,
-    segments2: FloatArray,
+    segments2: MapLike,
     marks2: Landmarks,
     config: IntegrateConfig,
 ) -> FloatArray:
@@ -170,8 +172,8 @@ def hypotheses(
     a1, a2 = np.nonzero(diff <= config.angle_difference_tolerance)
     if a1.size == 0:
         return np.zeros((0, 3))
-    phi1 = lines_of(segments1).angle
-    phi2 = lines_of(segments2).angle
+    phi1 = SegmentMap.of(segments1).lines.angle
+    phi2 = SegmentMap.of(segments2).lines.angle
     # Rotation that aligns the first lines; average in the second lines' disagreement (mod pi).
     base = phi1[marks1.first[a1]] - phi2[marks2.first[a2]]
     other = phi1[marks1.second[a1]] - phi2[marks2.second[a2]]
@@ -195,9 +197,9 @@ PAIRS_PER_KEPT_HYPOTHESIS = 50
 
 
 def _within_comparison_budget(
-    segments1: FloatArray,
+    segments1: MapLike,
     marks1: Landmarks,
-    segments2: FloatArray,
+    segments2: MapLike,
     marks2: Landmarks,
     config: IntegrateConfig,
 ) -> tuple[Landmarks, Landmarks]:
@@ -216,9 +218,9 @@ def _within_comparison_budget(
     )
 
 
-def _strongest(segments: FloatArray, marks: Landmarks, keep: int) -> Landmarks:
+def _strongest(segments: MapLike, marks: Landmarks, keep: int) -> Landmarks:
     """The ``keep`` landmarks whose shorter segment is longest (ties: the first)."""
-    length = lines_of(segments).length
+    length = SegmentMap.of(segments).length
     strength = np.minimum(length[marks.first], length[marks.second])
     chosen = np.sort(np.argsort(-strength, kind="stable")[:keep])
     return Landmarks(
@@ -226,9 +228,7 @@ def _strongest(segments: FloatArray, marks: Landmarks, keep: int) -> Landmarks:
     )
 
 
-def endpoint_hypotheses(
-    segments1: FloatArray, segments2: FloatArray, config: IntegrateConfig
-) -> FloatArray:
+def endpoint_hypotheses(map1: MapLike, map2: MapLike, config: IntegrateConfig) -> FloatArray:
     """Hypotheses that lay a long S2 segment on a long S1 segment, end points superimposed.
 
     Angles need two non-parallel segments; in a corridor every long segment is parallel and
@@ -236,7 +236,9 @@ def endpoint_hypotheses(
     senses) and the offset across the wall; superimposing their ends (a door frame, a wall's
     end) proposes the offset along it, and the evaluation decides which offset is right.
     """
-    l1, l2 = lines_of(segments1), lines_of(segments2)
+    first, second = SegmentMap.of(map1), SegmentMap.of(map2)
+    segments1, segments2 = first.segments, second.segments
+    l1, l2 = first.lines, second.lines
     long1 = np.flatnonzero(
         l1.length >= max(config.min_segment_length, 0.3 * l1.length.max(initial=0.0))
     )

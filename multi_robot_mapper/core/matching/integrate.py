@@ -5,13 +5,13 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import NamedTuple, TypeAlias
 
 import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.geometry import lines_of, sample_segments
+from multi_robot_mapper.core.geometry import sample_segments
 from multi_robot_mapper.core.matching.beams import (
     BeamAgreement,
     ViewReturns,
@@ -43,12 +43,14 @@ from multi_robot_mapper.core.matching.prior import (
 from multi_robot_mapper.core.matching.refine import normal_equations, refine_many
 from multi_robot_mapper.core.matching.scoring import (
     information,
+    pair_kept,
     pruned_values,
     refused,
     score_pairs,
     transform_values,
 )
 from multi_robot_mapper.core.se2 import Pose
+from multi_robot_mapper.core.segment_map import MapLike, SegmentMap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -100,14 +102,14 @@ def hypotheses_of(poses: list[Pose]) -> FloatArray:
 
 
 def integrate(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    segments1: MapLike,
+    segments2: MapLike,
     config: IntegrateConfig,
     heuristics: tuple[str, ...] = HEURISTICS,
     ordered: tuple[bool, bool] = (True, True),
     extra_hypotheses: FloatArray | None = None,
     views: tuple[Views, Views] = (None, None),
-    hypothesis_sets: tuple[FloatArray, FloatArray] | None = None,
+    hypothesis_sets: tuple[MapLike, MapLike] | None = None,
     judged: Callable[[FloatArray], bool] | None = None,
     prior: MotionPrior | None = None,
 ) -> MatchResult:
@@ -133,32 +135,62 @@ def integrate(
     prescreen when there are many); the best distinct ones, refused ones dropped (Alg. 4
     l. 6-7, 20-23); refinement; slides along corridors; the best net score wins. A motion
     ``prior`` (:mod:`~core.matching.prior`) decides the least constrained direction.
+
+    The two sets' pair geometry is built once for the whole match (:func:`~core.matching.
+    scoring.pair_kept`).
     """
+    map1, map2 = SegmentMap.of(segments1), SegmentMap.of(segments2)
+    with pair_kept(map1, map2):
+        return _integrate(
+            map1,
+            map2,
+            config,
+            (heuristics, ordered, extra_hypotheses, hypothesis_sets),
+            views,
+            judged,
+            prior,
+        )
+
+
+# integrate's heuristics, ordered, extra hypotheses and hypothesis sets
+_Generation: TypeAlias = tuple[
+    tuple[str, ...], tuple[bool, bool], FloatArray | None, tuple[MapLike, MapLike] | None
+]
+
+
+def _integrate(
+    map1: SegmentMap,
+    map2: SegmentMap,
+    config: IntegrateConfig,
+    generation: _Generation,
+    views: tuple[Views, Views],
+    judged: Callable[[FloatArray], bool] | None,
+    prior: MotionPrior | None,
+) -> MatchResult:
+    """:func:`integrate` of two maps (``generation``: how it makes its hypotheses)."""
+    heuristics, ordered, extra_hypotheses, hypothesis_sets = generation
     clock = _StageClock()
     rng = np.random.default_rng(config.seed)
-    shorter = _shorter_length(segments1, segments2)
-    source1, source2 = (segments1, segments2) if hypothesis_sets is None else hypothesis_sets
+    sources = (map1, map2) if hypothesis_sets is None else hypothesis_sets
     transforms, extras = _all_hypotheses(
-        source1, source2, heuristics, ordered, extra_hypotheses, config, rng
+        sources, heuristics, ordered, extra_hypotheses, config, rng
     )
     clock.lap("hypotheses")
     if len(transforms) == 0:
         return _no_match(0, 0, clock)
-    values, evaluated = pruned_values(segments1, segments2, transforms, config, extras)
+    values, evaluated = pruned_values(map1, map2, transforms, config, extras)
     # Alg. 4 l. 20-23 (keep the best), widened: the best few DISTINCT hypotheses are refused
     # (l. 6-7) or refined, then ranked by their net score (overlap and the scans' beams).
-    candidates = _distinct_candidates(segments1, segments2, transforms, values, config)
+    candidates = _distinct_candidates(map1, map2, transforms, values, config)
     clock.lap("evaluation")
     if candidates.size == 0:
         return _no_match(len(transforms), evaluated, clock)
-    refined = refine_many(segments1, segments2, transforms[candidates], config, prior)
+    refined = refine_many(map1, map2, transforms[candidates], config, prior)
     clock.lap("refinement")
-    ranked = _ranked(segments1, segments2, transforms, candidates, refined, views, config, prior)
+    ranked = _ranked(map1, map2, transforms, candidates, refined, views, config, prior)
     clock.lap("ranking")
     setting = (views, config, prior)
-    return _judged_result(
-        segments1, segments2, ranked, shorter, setting, judged, clock, transforms, evaluated
-    )
+    return _judged_result(map1, map2, ranked, setting, judged, clock, transforms, evaluated)
 
 
 def _no_match(hypotheses: int, evaluated: int, clock: _StageClock) -> MatchResult:
@@ -167,16 +199,8 @@ def _no_match(hypotheses: int, evaluated: int, clock: _StageClock) -> MatchResul
     return MatchResult(np.zeros(3), 0.0, 0.0, False, hypotheses, evaluated, seconds=clock.seconds)
 
 
-def _shorter_length(segments1: FloatArray, segments2: FloatArray) -> float:
-    """The total length of the shorter of the two sets (m; at least 1e-9)."""
-    total1 = float(lines_of(segments1).length.sum()) if len(segments1) else 0.0
-    total2 = float(lines_of(segments2).length.sum()) if len(segments2) else 0.0
-    return max(min(total1, total2), 1e-9)
-
-
 def _all_hypotheses(
-    source1: FloatArray,
-    source2: FloatArray,
+    sources: tuple[MapLike, MapLike],
     heuristics: tuple[str, ...],
     ordered: tuple[bool, bool],
     extra_hypotheses: FloatArray | None,
@@ -186,6 +210,7 @@ def _all_hypotheses(
     """The hypotheses (theta, tx, ty) to evaluate, the extra ones first, and how many extra
     ones there are: the extra ones (predictions), then the distinct ones of the landmarks of
     the two sets (Alg. 2 and the heuristics of III-A) and of their end points."""
+    source1, source2 = SegmentMap.of(sources[0]), SegmentMap.of(sources[1])
     marks1 = landmarks(source1, heuristics, config, ordered[0], rng) if len(source1) > 1 else None
     marks2 = landmarks(source2, heuristics, config, ordered[1], rng) if len(source2) > 1 else None
     raw = (
@@ -218,8 +243,8 @@ class _Ranked(NamedTuple):
 
 
 def _ranked(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: SegmentMap,
+    map2: SegmentMap,
     transforms: FloatArray,
     candidates: IntArray,
     refined: FloatArray,
@@ -232,22 +257,20 @@ def _ranked(
     (or lost its overlap) falls back to its unrefined hypothesis, and the best one, when slid,
     is refined too. With a motion ``prior`` nothing the walls leave unobserved is slid: the
     prior decides the offset along the corridor."""
-    refined_values, scores, support, slide = _net_scores(
-        segments1, segments2, refined, views, config
-    )
+    refined_values, scores, support, slide = _net_scores(map1, map2, refined, views, config)
     if config.refine_iterations > 0:
         # A refinement that slid into a crossing (or lost its overlap) falls back to the
         # unrefined hypothesis, which passed the refusal test.
-        bad = refused(segments1, segments2, refined, config) | (refined_values <= 0.0)
+        bad = refused(map1, map2, refined, config) | (refined_values <= 0.0)
         if bad.any():
             refined[bad] = transforms[candidates[bad]]
             refined_values[bad], scores[bad], support[bad], slide[bad] = _net_scores(
-                segments1, segments2, refined[bad], views, config
+                map1, map2, refined[bad], views, config
             )
     # The prior decides the offset along a corridor where it counts: nothing to slide there.
-    support[_weighs(segments1, segments2, refined, config, prior)] = np.inf
+    support[_weighs(map1, map2, refined, config, prior)] = np.inf
     slid, slid_values, slid_scores = _slide(
-        segments1, segments2, refined, scores, support, slide, views, config
+        map1, map2, refined, scores, support, slide, views, config
     )
     refined = np.vstack((refined, slid))
     refined_values = np.concatenate((refined_values, slid_values))
@@ -256,23 +279,20 @@ def _ranked(
     if pick >= len(candidates) and config.refine_iterations > 0:
         # A slid hypothesis sits on a grid along the corridor: refine it too (the damped
         # steps leave it where it is along a bare corridor).
-        polished = refine_many(segments1, segments2, refined[pick : pick + 1], config)
-        polished_value, polished_score, _, _ = _net_scores(
-            segments1, segments2, polished, views, config
-        )
+        polished = refine_many(map1, map2, refined[pick : pick + 1], config)
+        polished_value, polished_score, _, _ = _net_scores(map1, map2, polished, views, config)
         if (
             polished_score[0] >= scores[pick] - _POLISH_TOLERANCE
-            and not refused(segments1, segments2, polished, config)[0]
+            and not refused(map1, map2, polished, config)[0]
         ):
             refined[pick], refined_values[pick] = polished[0], polished_value[0]
     return _Ranked(refined, refined_values, scores, pick)
 
 
 def _judged_result(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: SegmentMap,
+    map2: SegmentMap,
     ranked: _Ranked,
-    shorter: float,
     setting: tuple[tuple[Views, Views], IntegrateConfig, MotionPrior | None],
     judged: Callable[[FloatArray], bool] | None,
     clock: _StageClock,
@@ -288,10 +308,10 @@ def _judged_result(
     best_T, best_value = refined[pick], float(ranked.values[pick])
     # Validity on the net value: overlap that the other scan's free space contradicts counts
     # against it (two unrelated rectilinear places easily overlap by a third).
-    through, _ = seen_through_many(segments1, segments2, best_T[None, :], views, config)
+    through, _ = seen_through_many(map1, map2, best_T[None, :], views, config)
     best_score = best_value - config.free_space_weight * float(through[0])
-    fraction = best_score / shorter
-    best_support, slide, total = _support_and_slide(segments1, segments2, best_T, config)
+    fraction = best_score / max(min(map1.total_length, map2.total_length), 1e-9)
+    best_support, slide, total = _support_and_slide(map1, map2, best_T, config)
     valid = (
         best_score >= config.min_match_value
         and fraction >= config.min_match_fraction
@@ -300,7 +320,7 @@ def _judged_result(
     probability, evidence = 0.0, None
     if judged is None or judged(best_T):
         evidence = _evidence_of(
-            (segments1, segments2), ranked, setting, (best_support, slide, total), fraction
+            (map1, map2), ranked, setting, (best_support, slide, total), fraction
         )
         probability = confidence(evidence.features())
         clock.lap("confidence")
@@ -318,7 +338,7 @@ def _judged_result(
 
 
 def _evidence_of(
-    sets: tuple[FloatArray, FloatArray],
+    sets: tuple[SegmentMap, SegmentMap],
     ranked: _Ranked,
     setting: tuple[tuple[Views, Views], IntegrateConfig, MotionPrior | None],
     spread: tuple[float, FloatArray, float],
@@ -328,18 +348,18 @@ def _evidence_of(
     on it, how far it beats its best rival (a distinct placement, beyond the correctness
     tolerance), the fit's ``spread`` (support, least constrained direction, matched length). A
     rival the motion prior rules out is none, nor is a slide along the direction it decides."""
-    (segments1, segments2), (views, config, prior) = sets, setting
+    (map1, map2), (views, config, prior) = sets, setting
     refined, scores, pick = ranked.transforms, ranked.scores, ranked.pick
     best_T = refined[pick]
     support, slide, total = spread
     rivals = _distinct_from(refined, best_T)
-    counts = _weighs(segments1, segments2, best_T[None, :], config, prior)
+    counts = _weighs(map1, map2, best_T[None, :], config, prior)
     weighed = prior if counts.size and counts[0] else None
     if weighed is not None:
         rivals &= ~excluded_by(weighed, refined, slide)
     return match_evidence(
-        segments1,
-        segments2,
+        map1,
+        map2,
         best_T,
         views,
         config,
@@ -367,27 +387,27 @@ class _StageClock:
 
 
 def _support_and_slide(
-    segments1: FloatArray, segments2: FloatArray, T_1_2: FloatArray, config: IntegrateConfig
+    map1: SegmentMap, map2: SegmentMap, T_1_2: FloatArray, config: IntegrateConfig
 ) -> tuple[float, FloatArray, float]:
     """The cross support of ``T_1_2``, its least constrained direction (a unit vector in
     S1's frame: along a corridor, the way the placement could slide) and the matched length
     (the trace of the walls' normal matrix: the two eigenvalues' sum)."""
-    scores = score_pairs(segments1, segments2, T_1_2.reshape(1, 3), config)
-    support, direction = information(segments1, scores, 1)
+    scores = score_pairs(map1, map2, T_1_2.reshape(1, 3), config)
+    support, direction = information(map1, scores, 1)
     total = float(scores.value.sum())
     return float(support[0]), np.asarray(direction[0], dtype=np.float64), total
 
 
 def _weighs(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: SegmentMap,
+    map2: SegmentMap,
     transforms: FloatArray,
     config: IntegrateConfig,
     prior: MotionPrior | None,
 ) -> BoolArray:
     """Where ``prior`` counts for each of ``transforms`` (:func:`~core.matching.prior.
     weighs`, on the walls' Gauss-Newton matrix there)."""
-    system = None if prior is None else normal_equations(segments1, segments2, transforms, config)
+    system = None if prior is None else normal_equations(map1, map2, transforms, config)
     if system is None:
         return np.zeros(len(transforms), dtype=bool)
     return weighs(prior, system[0])
@@ -401,8 +421,8 @@ def _distinct_from(transforms: FloatArray, T: FloatArray) -> BoolArray:
 
 
 def match_evidence(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: MapLike,
+    map2: MapLike,
     T_1_2: FloatArray,
     views: tuple[Views, Views],
     config: IntegrateConfig,
@@ -427,8 +447,8 @@ def match_evidence(
     returns = [
         ViewReturns.of(viewpoints, cap)
         if viewpoints is not None
-        else ViewReturns(*_segment_returns(segments, cap))
-        for viewpoints, segments in zip(sides, (segments1, segments2), strict=True)
+        else ViewReturns(*_segment_returns(SegmentMap.of(segments).segments, cap))
+        for viewpoints, segments in zip(sides, (map1, map2), strict=True)
     ]
     margin, spread = config.confirm_margin, config.free_space_spread
 
@@ -475,8 +495,8 @@ def _segment_returns(segments: FloatArray, spacing: float) -> tuple[FloatArray, 
 
 
 def _slide(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: SegmentMap,
+    map2: SegmentMap,
     transforms: FloatArray,
     scores: FloatArray,
     support: FloatArray,
@@ -503,15 +523,15 @@ def _slide(
     step = np.tile(offsets, top.size)
     shifted[:, 1] += step * np.repeat(direction[top, 0], offsets.size)
     shifted[:, 2] += step * np.repeat(direction[top, 1], offsets.size)
-    keep = ~refused(segments1, segments2, shifted, config)
+    keep = ~refused(map1, map2, shifted, config)
     shifted = shifted[keep]
-    values, net, _, _ = _net_scores(segments1, segments2, shifted, views, config)
+    values, net, _, _ = _net_scores(map1, map2, shifted, views, config)
     return shifted, values, net
 
 
 def _net_scores(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: SegmentMap,
+    map2: SegmentMap,
     transforms: FloatArray,
     views: tuple[Views, Views],
     config: IntegrateConfig,
@@ -524,11 +544,11 @@ def _net_scores(
     wins, the visible stretch of wall moving with the robot), and what tells the offsets
     apart is the little that crosses the corridor (door jambs, its end).
     """
-    scores = score_pairs(segments1, segments2, transforms, config)
+    scores = score_pairs(map1, map2, transforms, config)
     count = len(transforms)
     values = transform_values(scores, count)
-    support, direction = information(segments1, scores, count)
-    through, confirmed = seen_through_many(segments1, segments2, transforms, views, config)
+    support, direction = information(map1, scores, count)
+    through, confirmed = seen_through_many(map1, map2, transforms, views, config)
     net = (
         values
         - config.free_space_weight * through
@@ -539,8 +559,8 @@ def _net_scores(
 
 
 def _distinct_candidates(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: SegmentMap,
+    map2: SegmentMap,
     transforms: FloatArray,
     values: FloatArray,
     config: IntegrateConfig,
@@ -567,7 +587,7 @@ def _distinct_candidates(
         k = int(np.argmax(free))  # best remaining, the pool being sorted
         if k >= checked:
             end = min(len(order), k + chunk)
-            allowed[k:end] = ~refused(segments1, segments2, pool[k:end], config)
+            allowed[k:end] = ~refused(map1, map2, pool[k:end], config)
             checked, chunk = end, 2 * chunk
         if not allowed[k]:
             free[k] = False

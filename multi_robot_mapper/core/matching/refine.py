@@ -13,21 +13,20 @@ from multi_robot_mapper.core.matching.scoring import (
     geometry_scores,
     pair_geometry,
 )
+from multi_robot_mapper.core.segment_map import MapLike
 
 FloatArray = NDArray[np.float64]
 
 
-def refine(
-    segments1: FloatArray, segments2: FloatArray, T_1_2: FloatArray, config: IntegrateConfig
-) -> FloatArray:
+def refine(map1: MapLike, map2: MapLike, T_1_2: FloatArray, config: IntegrateConfig) -> FloatArray:
     """Point-to-line least squares (Cox; Wolter 5.1) from ``T_1_2``; see :func:`refine_many`."""
     T = np.asarray(T_1_2, dtype=np.float64).reshape(1, 3)
-    return np.asarray(refine_many(segments1, segments2, T, config)[0], dtype=np.float64)
+    return np.asarray(refine_many(map1, map2, T, config)[0], dtype=np.float64)
 
 
 def refine_many(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: MapLike,
+    map2: MapLike,
     transforms: FloatArray,
     config: IntegrateConfig,
     prior: MotionPrior | None = None,
@@ -47,9 +46,9 @@ def refine_many(
     """
     T = np.array(transforms, dtype=np.float64).reshape(-1, 3)
     count = len(T)
-    if count == 0 or len(segments1) == 0 or len(segments2) == 0 or config.refine_iterations == 0:
+    if count == 0 or len(map1) == 0 or len(map2) == 0 or config.refine_iterations == 0:
         return T
-    geometry = pair_geometry(segments1, segments2)
+    geometry = pair_geometry(map1, map2)
     active = np.ones(count, dtype=bool)
     for _ in range(config.refine_iterations):
         live = np.flatnonzero(active)
@@ -74,7 +73,7 @@ _GAUSS = np.array([0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0)])
 
 
 def normal_equations(
-    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+    map1: MapLike, map2: MapLike, transforms: FloatArray, config: IntegrateConfig
 ) -> tuple[FloatArray, FloatArray] | None:
     """``(H, g)``: the Gauss-Newton system ``sum w J J^T``, ``sum w J r`` of each hypothesis
     (``(T, 3, 3)`` and ``(T, 3)``, in (theta, tx, ty)), None when no segment pair matches.
@@ -85,7 +84,7 @@ def normal_equations(
     per pair integrate the normal equations exactly (before weighting): ``w`` is metres of
     overlapping segment, times a Cauchy weight (scale ``point_distance_tolerance``).
     """
-    return _normal_equations(pair_geometry(segments1, segments2), transforms, config)
+    return _normal_equations(pair_geometry(map1, map2), transforms, config)
 
 
 def _normal_equations(
@@ -133,8 +132,8 @@ def _normal_equations(
 
 
 def match_information(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: MapLike,
+    map2: MapLike,
     T_1_2: FloatArray,
     config: IntegrateConfig,
     wall_sigma: float,
@@ -153,7 +152,7 @@ def match_information(
     next), and a direction no wall constrains (along a bare corridor) keeps the ceiling.
     """
     T = np.asarray(T_1_2, dtype=np.float64).reshape(1, 3)
-    system = normal_equations(segments1, segments2, T, config)
+    system = normal_equations(map1, map2, T, config)
     H_thetat = np.zeros((3, 3)) if system is None else system[0][0]
     theta = float(T[0, 0])
     c, s = np.cos(theta), np.sin(theta)

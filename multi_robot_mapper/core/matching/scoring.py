@@ -3,15 +3,18 @@ crossings, the cheap prescreen, and the support of a match across its weakest di
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
+from collections.abc import Iterator
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from multi_robot_mapper.core.geometry import Lines, lines_of
+from multi_robot_mapper.core.geometry import Lines
 from multi_robot_mapper.core.matching.config import IntegrateConfig
+from multi_robot_mapper.core.segment_map import MapLike, SegmentMap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -52,68 +55,73 @@ class PairGeometry:
     parallel_at: FloatArray  # (N1 * N2,) theta mod pi that makes the pair parallel
 
 
-# Pair geometries kept: the matcher evaluates the same two sets about ten times per match
-# (values, each refinement iteration, refusal, ranking, slides); larger problems (whole maps)
-# are rebuilt each time rather than kept in memory.
-_KEPT_GEOMETRIES = 16
+# Pair geometries are held on the first map, within a :func:`pair_kept` block, up to this many
+# pairs: the matcher evaluates the same two maps about ten times per match (values, each
+# refinement iteration, refusal, ranking, slides); larger problems (whole maps) are rebuilt
+# each time rather than kept in memory.
 _KEPT_PAIRS = 40_000
 
 
-def pair_geometry(segments1: FloatArray, segments2: FloatArray) -> PairGeometry:
-    """The :class:`PairGeometry` of S1 and S2, remembered by content (a pure function of the
-    two arrays: one changed in place is a new key)."""
-    first = np.ascontiguousarray(segments1, dtype=np.float64).reshape(-1, 4)
-    second = np.ascontiguousarray(segments2, dtype=np.float64).reshape(-1, 4)
-    if len(first) * len(second) > _KEPT_PAIRS:
-        return _build_geometry(first, second)
-    return _kept_geometry(first.tobytes(), second.tobytes())
+class _HeldGeometry:
+    """The pair geometry of two maps, built on first use (what :func:`pair_kept` holds)."""
+
+    def __init__(self, map1: SegmentMap, map2: SegmentMap) -> None:
+        self.maps = (map1, map2)
+
+    @functools.cached_property
+    def geometry(self) -> PairGeometry:
+        return _build_geometry(*self.maps)
 
 
-@functools.lru_cache(maxsize=_KEPT_GEOMETRIES)
-def _kept_geometry(first: bytes, second: bytes) -> PairGeometry:
-    segments1 = np.frombuffer(first, dtype=np.float64).reshape(-1, 4)
-    segments2 = np.frombuffer(second, dtype=np.float64).reshape(-1, 4)
-    return _build_geometry(segments1, segments2)
+@contextlib.contextmanager
+def pair_kept(map1: SegmentMap, map2: SegmentMap) -> Iterator[None]:
+    """Within the block, :func:`pair_geometry` of ``map1`` and ``map2`` is built once (when
+    they make at most ``_KEPT_PAIRS`` pairs) and held on ``map1``; dropped after the block, so
+    that a map that lives long (a keyframe's scan) keeps nothing built with another."""
+    if len(map1) * len(map2) > _KEPT_PAIRS:
+        yield
+        return
+    with map1.holding(("pair", map2), lambda: _HeldGeometry(map1, map2)):
+        yield
 
 
-def _build_geometry(segments1: FloatArray, segments2: FloatArray) -> PairGeometry:
-    lines1, lines2 = lines_of(segments1), lines_of(segments2)
+def pair_geometry(map1: MapLike, map2: MapLike) -> PairGeometry:
+    """The :class:`PairGeometry` of S1 and S2: the one a :func:`pair_kept` block holds for
+    these two :class:`~core.segment_map.SegmentMap` instances, else built (arrays are
+    converted: a new array is a new map)."""
+    first, second = SegmentMap.of(map1), SegmentMap.of(map2)
+    held = first.held(("pair", second))
+    if isinstance(held, _HeldGeometry):
+        return held.geometry
+    return _build_geometry(first, second)
+
+
+def _build_geometry(map1: SegmentMap, map2: SegmentMap) -> PairGeometry:
+    lines1, lines2 = map1.lines, map2.lines
     grid_a, grid_b = np.meshgrid(
-        np.arange(len(segments1), dtype=np.int64),
-        np.arange(len(segments2), dtype=np.int64),
+        np.arange(len(map1), dtype=np.int64),
+        np.arange(len(map2), dtype=np.int64),
         indexing="ij",
     )
     first, second = grid_a.ravel(), grid_b.ravel()
-
-    def columns(segments: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        x1, y1, x2, y2 = (np.ascontiguousarray(segments[:, k]) for k in range(4))
-        return x1, y1, x2, y2
-
-    def xy(vectors: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return np.ascontiguousarray(vectors[:, 0]), np.ascontiguousarray(vectors[:, 1])
-
-    geometry = PairGeometry(
-        first_columns=columns(segments1),
-        second_columns=columns(segments2),
-        first_direction=xy(lines1.direction),
-        second_direction=xy(lines2.direction),
-        first_centres=xy(0.5 * (segments1[:, :2] + segments1[:, 2:])),
-        second_centres=xy(0.5 * (segments2[:, :2] + segments2[:, 2:])),
+    parallel_at = np.mod(lines1.angle[first] - lines2.angle[second], np.pi)
+    # A held geometry is shared by every later evaluation of the same maps: read only (the
+    # maps' own arrays already are).
+    for array in (first, second, parallel_at):
+        array.flags.writeable = False
+    return PairGeometry(
+        first_columns=map1.columns,
+        second_columns=map2.columns,
+        first_direction=map1.direction_columns,
+        second_direction=map2.direction_columns,
+        first_centres=map1.centres,
+        second_centres=map2.centres,
         lines1=lines1,
         lines2=lines2,
         first=first,
         second=second,
-        parallel_at=np.mod(lines1.angle[first] - lines2.angle[second], np.pi),
+        parallel_at=parallel_at,
     )
-    # Kept geometries are shared by every later evaluation of the same sets: read only.
-    for field in dataclasses.fields(geometry):
-        value = getattr(geometry, field.name)
-        parts = value if isinstance(value, tuple) else [value]
-        if isinstance(value, Lines):
-            parts = [getattr(value, f.name) for f in dataclasses.fields(value)]
-        for array in parts:
-            array.flags.writeable = False
-    return geometry
 
 
 def _candidate_triples(
@@ -141,8 +149,8 @@ def _candidate_triples(
 
 
 def score_pairs(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: MapLike,
+    map2: MapLike,
     transforms: FloatArray,
     config: IntegrateConfig,
 ) -> PairScores:
@@ -153,7 +161,7 @@ def score_pairs(
     segments of the max distance of the other's end points to its line) exceeds
     ``match_distance`` score 0; pairs that do not intersect are penalised by 0.95^(d/tol).
     """
-    return geometry_scores(pair_geometry(segments1, segments2), transforms, config)
+    return geometry_scores(pair_geometry(map1, map2), transforms, config)
 
 
 def geometry_scores(
@@ -335,7 +343,7 @@ def _segments_cross(
 
 
 def refused(
-    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+    map1: MapLike, map2: MapLike, transforms: FloatArray, config: IntegrateConfig
 ) -> BoolArray:
     """Hypotheses that make a long S1 segment cross a long S2 segment (Alg. 4 l. 6-7).
 
@@ -344,7 +352,9 @@ def refused(
     contradicting each other, and two walls crossing at a shallow angle are one wall slightly
     misaligned.
     """
-    lines1, lines2 = lines_of(segments1), lines_of(segments2)
+    first, second = SegmentMap.of(map1), SegmentMap.of(map2)
+    segments1, segments2 = first.segments, second.segments
+    lines1, lines2 = first.lines, second.lines
     long1 = np.flatnonzero(lines1.length > config.segment_length_refuse)
     long2 = np.flatnonzero(lines2.length > config.segment_length_refuse)
     out = np.zeros(len(transforms), dtype=bool)
@@ -381,14 +391,12 @@ def transform_values(scores: PairScores, count: int) -> FloatArray:
     return np.bincount(scores.hypothesis, weights=scores.value, minlength=count).astype(np.float64)
 
 
-def information(
-    segments1: FloatArray, scores: PairScores, count: int
-) -> tuple[FloatArray, FloatArray]:
+def information(map1: MapLike, scores: PairScores, count: int) -> tuple[FloatArray, FloatArray]:
     """Per hypothesis: smallest eigenvalue of sum(value n n^T) and its eigenvector (the
     direction matched walls constrain least, along a corridor)."""
     if scores.first.size == 0:
         return np.zeros(count), np.tile([1.0, 0.0], (count, 1))
-    u = lines_of(segments1).direction[scores.first]
+    u = SegmentMap.of(map1).lines.direction[scores.first]
     nx, ny, w, h = -u[:, 1], u[:, 0], scores.value, scores.hypothesis
     sxx = np.bincount(h, weights=w * nx * nx, minlength=count)
     sxy = np.bincount(h, weights=w * nx * ny, minlength=count)
@@ -401,32 +409,20 @@ def information(
 
 
 def cross_support(
-    segments1: FloatArray, segments2: FloatArray, T_1_2: FloatArray, config: IntegrateConfig
+    map1: MapLike, map2: MapLike, T_1_2: FloatArray, config: IntegrateConfig
 ) -> float:
     """Matched length in the least constrained direction: the smallest eigenvalue of the sum
     of matching value x n n^T over matched pairs (n the S1 line's normal). Zero when every
     matched wall is parallel, so the offset along them rests on where walls happen to end."""
     T = np.asarray(T_1_2, dtype=np.float64).reshape(1, 3)
-    return float(_cross_support_many(segments1, segments2, T, config)[0])
-
-
-def _cross_support_many(
-    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
-) -> FloatArray:
-    """:func:`cross_support` of each transform (closed-form 2x2 eigenvalue, no loop)."""
-    scores = score_pairs(segments1, segments2, transforms, config)
-    return information(segments1, scores, len(transforms))[0]
-
-
-def _longest(segments: FloatArray, count: int) -> IntArray:
-    """Indices of the ``count`` longest segments."""
-    length = lines_of(segments).length
-    return np.argsort(-length, kind="stable")[:count].astype(np.int64)
+    first, second = SegmentMap.of(map1), SegmentMap.of(map2)
+    scores = score_pairs(first, second, T, config)
+    return float(information(first, scores, 1)[0][0])
 
 
 def best_prescreened(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: MapLike,
+    map2: MapLike,
     transforms: FloatArray,
     keep: int,
     segments_used: int,
@@ -436,14 +432,15 @@ def best_prescreened(
     (:func:`_prescreen_values`) on the ``segments_used`` longest segments of each set."""
     if len(transforms) <= keep:
         return np.arange(len(transforms), dtype=np.int64)
-    long1 = _longest(segments1, segments_used)
-    long2 = _longest(segments2, segments_used)
-    rough = _prescreen_values(segments1[long1], segments2[long2], transforms, config)
+    first, second = SegmentMap.of(map1), SegmentMap.of(map2)
+    rough = _prescreen_values(
+        first.longest(segments_used), second.longest(segments_used), transforms, config
+    )
     return np.asarray(np.argpartition(-rough, keep - 1)[:keep], dtype=np.int64)
 
 
 def _prescreen_values(
-    segments1: FloatArray, segments2: FloatArray, transforms: FloatArray, config: IntegrateConfig
+    map1: SegmentMap, map2: SegmentMap, transforms: FloatArray, config: IntegrateConfig
 ) -> FloatArray:
     """A cheap lower-fidelity value of every hypothesis, for ranking only.
 
@@ -452,9 +449,10 @@ def _prescreen_values(
     crossing test; directions must agree within ``prescreen_match_angle``.
     """
     count = len(transforms)
-    if count == 0 or len(segments1) == 0 or len(segments2) == 0:
+    if count == 0 or len(map1) == 0 or len(map2) == 0:
         return np.zeros(count)
-    geometry = pair_geometry(segments1, segments2)
+    segments1, segments2 = map1.segments, map2.segments
+    geometry = pair_geometry(map1, map2)
     lines1 = geometry.lines1
     h, a, b = _candidate_triples(geometry, transforms[:, 0], config.prescreen_match_angle)
     if h.size == 0:
@@ -486,8 +484,8 @@ def _prescreen_values(
 
 
 def pruned_values(
-    segments1: FloatArray,
-    segments2: FloatArray,
+    map1: MapLike,
+    map2: MapLike,
     transforms: FloatArray,
     config: IntegrateConfig,
     forced: int = 0,
@@ -501,18 +499,15 @@ def pruned_values(
     10 x ``candidate_pool``, then ``prescreen_segments``; the ``candidate_pool`` best are
     evaluated in full (Alg. 4 l. 5-19), and so are the first ``forced`` hypotheses.
     """
+    first, second = SegmentMap.of(map1), SegmentMap.of(map2)
     count = len(transforms)
     pool = np.arange(forced, count)
     for segments_used, keep in (
         (max(1, config.prescreen_segments // 2), _ROUGH_CUT * config.candidate_pool),
         (config.prescreen_segments, config.candidate_pool),
     ):
-        pool = pool[
-            best_prescreened(segments1, segments2, transforms[pool], keep, segments_used, config)
-        ]
+        pool = pool[best_prescreened(first, second, transforms[pool], keep, segments_used, config)]
     pool = np.concatenate((np.arange(forced), pool))
     values = np.zeros(count)
-    values[pool] = transform_values(
-        score_pairs(segments1, segments2, transforms[pool], config), pool.size
-    )
+    values[pool] = transform_values(score_pairs(first, second, transforms[pool], config), pool.size)
     return values, int(pool.size)

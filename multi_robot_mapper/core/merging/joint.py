@@ -518,8 +518,8 @@ def _robot_pairs(
         if (ra, rb) in out and out[(ra, rb)].link.value >= value:
             continue
         link = Link(ra, rb, (0.0, 0.0, 0.0), value, 0.0, verdict.accepted)
-        signature_a = MapSignature.of(units[a].segments)
-        signature_b = MapSignature.of(units[b].segments)
+        signature_a = MapSignature.of(units[a].segment_map)
+        signature_b = MapSignature.of(units[b].segment_map)
         out[(ra, rb)] = PairRecord(link, signature_a, signature_b, False)
     return out
 

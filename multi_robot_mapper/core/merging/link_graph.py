@@ -30,6 +30,7 @@ from multi_robot_mapper.core.merging.pairwise import (
     no_match,
 )
 from multi_robot_mapper.core.se2 import Pose
+from multi_robot_mapper.core.segment_map import SegmentMap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -110,14 +111,15 @@ def pair_links(
     the robots' views. Returns the records and the INTEGRATE calls."""
     view = views or no_views
     robots = sorted(maps)
-    signatures = {r: MapSignature.of(maps[r]) for r in robots}
+    segment_maps = {r: SegmentMap.of(maps[r]) for r in robots}
+    signatures = {r: MapSignature.of(segment_maps[r]) for r in robots}
     records: dict[tuple[str, str], PairRecord] = {}
     calls = 0
     drawings: dict[str, Drawing] = {}
 
     def drawing(robot: str) -> Drawing:  # once per robot, on first use
         if robot not in drawings:
-            drawings[robot] = draw_map(maps[robot], view(robot), config)
+            drawings[robot] = draw_map(segment_maps[robot], view(robot), config)
         return drawings[robot]
 
     for i, a in enumerate(robots):
@@ -132,7 +134,8 @@ def pair_links(
                 continue
             if len(maps[a]) and len(maps[b]):
                 drawn = (drawing(a), drawing(b))
-                match = match_maps(maps[a], maps[b], config, view(a), view(b), drawn)
+                pair = (segment_maps[a], segment_maps[b])
+                match = match_maps(*pair, config, view(a), view(b), drawn)
             else:
                 match = no_match()
             calls += match.integrate_calls
@@ -349,7 +352,7 @@ def merge(
     views = view_source(clean, viewpoints or {}, config)
     records, calls = pair_links(clean, config, None if previous is None else previous.pairs, views)
     pairs_done = time.perf_counter()
-    lengths = {r: MapSignature.of(clean[r]).length for r in robots}
+    lengths = {r: SegmentMap.of(clean[r]).total_length for r in robots}
     kept = set() if previous is None else {(lk.robot_a, lk.robot_b) for lk in previous.links}
     all_links = [record.link for record in records.values()]
     joins = free_space_join(clean, views, config) if viewpoints else None

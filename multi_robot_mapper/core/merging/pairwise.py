@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,7 +14,6 @@ from multi_robot_mapper.core.evidence.correlation import (
     placement_scores,
     rotation_candidates,
 )
-from multi_robot_mapper.core.geometry import lines_of
 from multi_robot_mapper.core.matching import (
     MatchResult,
     integrate,
@@ -23,6 +21,7 @@ from multi_robot_mapper.core.matching import (
     refused,
     score_pairs,
 )
+from multi_robot_mapper.core.matching.scoring import pair_kept
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import (
     MapViews,
@@ -30,6 +29,7 @@ from multi_robot_mapper.core.merging.free_space import (
     seen_through_allowance,
 )
 from multi_robot_mapper.core.se2 import Pose
+from multi_robot_mapper.core.segment_map import MapLike, SegmentMap
 
 FloatArray = NDArray[np.float64]
 
@@ -62,10 +62,11 @@ class MapSignature:
     digest: str  # content hash: equal digests are equal maps
 
     @staticmethod
-    def of(segments: FloatArray) -> MapSignature:
-        array = np.ascontiguousarray(segments, dtype=np.float64)
-        length = float(lines_of(array).length.sum()) if len(array) else 0.0
-        return MapSignature(len(array), length, hashlib.sha1(array.tobytes()).hexdigest())
+    def of(segments: MapLike) -> MapSignature:
+        """The signature of a map (its digest made once per :class:`SegmentMap`: pass the
+        map that lives as long as its content)."""
+        segment_map = SegmentMap.of(segments)
+        return MapSignature(len(segment_map), segment_map.total_length, segment_map.digest)
 
     def close_to(self, earlier: MapSignature, config: MergeConfig) -> bool:
         """Did the map change little since ``earlier``? (Then a pair result is reused.)
@@ -98,8 +99,7 @@ def longest(segments: FloatArray, count: int) -> FloatArray:
     """The ``count`` longest segments, longest first."""
     if len(segments) == 0:
         return segments.reshape(0, 4)
-    order = np.argsort(-lines_of(segments).length, kind="stable")
-    return np.asarray(segments[order[:count]])
+    return np.asarray(segments[SegmentMap.of(segments).longest_first[:count]])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,8 +120,8 @@ class MapMatch:
 
 
 def match_maps(
-    map_a: FloatArray,
-    map_b: FloatArray,
+    map_a: MapLike,
+    map_b: MapLike,
     config: MergeConfig,
     views_a: MapViews | None = None,
     views_b: MapViews | None = None,
@@ -151,36 +151,39 @@ def match_maps(
     ``drawings`` are the two maps drawn for the correlation (:func:`draw_map`) when the
     caller keeps them from one pair to the next.
     """
+    map_a, map_b = SegmentMap.of(map_a), SegmentMap.of(map_b)
     if len(map_a) == 0 or len(map_b) == 0:
         return no_match()
     drawing_a, drawing_b = drawings or (
         draw_map(map_a, views_a, config),
         draw_map(map_b, views_b, config),
     )
-    judge_a = longest(map_a, config.judge_segments)
-    judge_b = longest(map_b, config.judge_segments)
+    judge_a = map_a.longest(config.judge_segments)
+    judge_b = map_b.longest(config.judge_segments)
     candidates = _candidates(map_a, map_b, drawing_a, drawing_b, config)
-    places = _best_places(judge_a, judge_b, drawing_a, drawing_b, candidates, config)
-    if places is None:
-        return no_match()
-    refined, scores = places
-    best = int(np.argmax(scores))
-    rivals = np.array([_distinct(row, refined[best]) for row in refined], dtype=bool)
-    uniqueness = _uniqueness(scores, best, rivals)
-    viewed = views_a is not None and views_b is not None
-    result = _place_evaluated(
-        judge_a, judge_b, candidates, refined[best], refined[~rivals], viewed, config
-    )
-    if result.value <= 0.0:
-        return MapMatch(result, 0.0, False, _INTEGRATE_CALLS, 0.0, uniqueness)
-    return _judged_link(
-        map_a, map_b, judge_a, judge_b, views_a, views_b, result, uniqueness, config
-    )
+    # The judges' pair geometry: built once for refusal, refinement, INTEGRATE, tight overlap.
+    with pair_kept(judge_a, judge_b):
+        places = _best_places(judge_a, judge_b, drawing_a, drawing_b, candidates, config)
+        if places is None:
+            return no_match()
+        refined, scores = places
+        best = int(np.argmax(scores))
+        rivals = np.array([_distinct(row, refined[best]) for row in refined], dtype=bool)
+        uniqueness = _uniqueness(scores, best, rivals)
+        viewed = views_a is not None and views_b is not None
+        result = _place_evaluated(
+            judge_a, judge_b, candidates, refined[best], refined[~rivals], viewed, config
+        )
+        if result.value <= 0.0:
+            return MapMatch(result, 0.0, False, _INTEGRATE_CALLS, 0.0, uniqueness)
+        return _judged_link(
+            map_a, map_b, judge_a, judge_b, views_a, views_b, result, uniqueness, config
+        )
 
 
 def _place_evaluated(
-    judge_a: FloatArray,
-    judge_b: FloatArray,
+    judge_a: SegmentMap,
+    judge_b: SegmentMap,
     candidates: FloatArray,
     chosen: FloatArray,
     same: FloatArray,
@@ -215,10 +218,10 @@ def _uniqueness(scores: FloatArray, best: int, rivals: NDArray[np.bool_]) -> flo
 
 
 def _judged_link(
-    map_a: FloatArray,
-    map_b: FloatArray,
-    judge_a: FloatArray,
-    judge_b: FloatArray,
+    map_a: SegmentMap,
+    map_b: SegmentMap,
+    judge_a: SegmentMap,
+    judge_b: SegmentMap,
     views_a: MapViews | None,
     views_b: MapViews | None,
     result: MatchResult,
@@ -237,7 +240,9 @@ def _judged_link(
         valid = valid and uniqueness >= config.link_min_uniqueness
     through = 0.0
     if valid and (views_a is not None or views_b is not None):
-        through = free_space_conflict(map_a, views_a, map_b, views_b, result.matrix, config)
+        through = free_space_conflict(
+            map_a.segments, views_a, map_b.segments, views_b, result.matrix, config
+        )
         valid = through <= seen_through_allowance(result.value, config)
     return MapMatch(result, tight, valid, _INTEGRATE_CALLS, through, uniqueness)
 
@@ -259,8 +264,8 @@ def _distinct(row: FloatArray, other: FloatArray) -> bool:
 
 
 def _best_places(
-    judge_a: FloatArray,
-    judge_b: FloatArray,
+    judge_a: SegmentMap,
+    judge_b: SegmentMap,
     drawing_a: Drawing,
     drawing_b: Drawing,
     candidates: FloatArray,
@@ -289,7 +294,7 @@ def _best_places(
     return refined, scores
 
 
-def draw_map(segments: FloatArray, views: MapViews | None, config: MergeConfig) -> Drawing:
+def draw_map(segments: MapLike, views: MapViews | None, config: MergeConfig) -> Drawing:
     """A map drawn for the correlation, with its free space when its views are known (one
     point per cell along each bearing marks every cell the beams cross)."""
     cell = config.correlation_cell
@@ -298,8 +303,8 @@ def draw_map(segments: FloatArray, views: MapViews | None, config: MergeConfig) 
 
 
 def _candidates(
-    map_a: FloatArray,
-    map_b: FloatArray,
+    map_a: SegmentMap,
+    map_b: SegmentMap,
     drawing_a: Drawing,
     drawing_b: Drawing,
     config: MergeConfig,
@@ -309,12 +314,12 @@ def _candidates(
     k, c = config.hypothesis_segments, config.coarse_segments
     ranking = dataclasses.replace(config.link_config(), all_pairs_below=k)
     angles = integrate(
-        longest(map_a, c),
-        longest(map_b, c),
+        map_a.longest(c),
+        map_b.longest(c),
         ranking,
         heuristics=("all",),
         ordered=(False, False),
-        hypothesis_sets=(longest(map_a, k), longest(map_b, k)),
+        hypothesis_sets=(map_a.longest(k), map_b.longest(k)),
     )
     if angles.value > 0.0:
         rows.append(angles.T_1_2.reshape(1, 3))
@@ -326,7 +331,7 @@ def _candidates(
 
 
 def tight_fraction(
-    segments1: FloatArray, segments2: FloatArray, T_1_2: FloatArray, config: MergeConfig
+    segments1: MapLike, segments2: MapLike, T_1_2: FloatArray, config: MergeConfig
 ) -> float:
     """Overlap of matching segments within ``tight_distance`` under ``T_1_2`` (INTEGRATE's
     row), as a fraction of the shorter set's total length."""
@@ -335,8 +340,9 @@ def tight_fraction(
         segment_distance_threshold=config.tight_distance
         / config.integrate.point_distance_tolerance,
     )
-    scores = score_pairs(segments1, segments2, np.asarray(T_1_2)[None, :], tight)
-    shorter = min(float(lines_of(segments1).length.sum()), float(lines_of(segments2).length.sum()))
+    map1, map2 = SegmentMap.of(segments1), SegmentMap.of(segments2)
+    scores = score_pairs(map1, map2, np.asarray(T_1_2)[None, :], tight)
+    shorter = min(map1.total_length, map2.total_length)
     return float(scores.value.sum()) / max(shorter, 1e-9)
 
 

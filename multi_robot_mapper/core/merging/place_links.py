@@ -54,6 +54,7 @@ from multi_robot_mapper.core.merging.pairwise import MapSignature, draw_map, lon
 from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, thin, viewpoints
 from multi_robot_mapper.core.merging.shape_placements import shape_placements, view_shapes
 from multi_robot_mapper.core.se2 import Pose
+from multi_robot_mapper.core.segment_map import SegmentMap
 
 FloatArray = NDArray[np.float64]
 
@@ -115,7 +116,7 @@ class Target:
     @staticmethod
     def of(unit: MapUnit, config: MergeConfig) -> Target:
         views = MapViews.of(unit.segments, unit.poses, config) if len(unit.poses) else None
-        drawing = draw_map(unit.segments, views, config)
+        drawing = draw_map(unit.segment_map, views, config)
         correlation = config.correlation()
         # A place (walls and free space) reaches place_radius from its centre: the grid must
         # hold it without wrapping round (its middle may lie off its centre).
@@ -127,7 +128,8 @@ class Target:
             if config.shape_hypotheses
             else []
         )
-        return Target(unit, MapSignature.of(unit.segments), drawing, prepared, poses, views, shapes)
+        signature = MapSignature.of(unit.segment_map)
+        return Target(unit, signature, drawing, prepared, poses, views, shapes)
 
 
 def place_drawing(place: Place, config: MergeConfig) -> Drawing:
@@ -136,7 +138,7 @@ def place_drawing(place: Place, config: MergeConfig) -> Drawing:
     cell = config.correlation_cell
     free = place.views.free_points(config, cell)
     free = free[np.hypot(free[:, 0], free[:, 1]) <= config.place_radius]
-    return Drawing.of(place.segments, free, cell)
+    return Drawing.of(place.segment_map, free, cell)
 
 
 def place_config(config: MergeConfig) -> IntegrateConfig:
@@ -180,7 +182,7 @@ def placement_hypotheses(
         return nothing, nothing
     drawn = drawing if drawing is not None else place_drawing(place, config)
     correlation = config.correlation()
-    rotations = rotation_candidates(unit.segments, place.segments, correlation.rotations)
+    rotations = rotation_candidates(unit.segment_map, place.segment_map, correlation.rotations)
     peaks, scores = correlation_peaks(
         target.drawing, drawn, rotations, correlation, target.correlation
     )
@@ -211,16 +213,18 @@ def match_place(
         return []
     hypotheses = np.vstack((correlated, shaped))
     # The target's walls and viewpoints around every placement tried, in the target's frame.
-    crop = longest(
-        segments_near(unit.segments, hypotheses[:, 1:], config.place_radius + _CROP_MARGIN),
-        _VERIFY_SEGMENTS,
+    crop = SegmentMap.of(
+        longest(
+            segments_near(unit.segments, hypotheses[:, 1:], config.place_radius + _CROP_MARGIN),
+            _VERIFY_SEGMENTS,
+        )
     )
-    own = longest(place.segments, _VERIFY_SEGMENTS)
+    own = place.segment_map.longest(_VERIFY_SEGMENTS)
     if len(crop) == 0:
         return []
     poses = target.view_poses
     near = _close_to_any(poses[:, :2], hypotheses[:, 1:], config.place_radius)
-    views = MapViews.of(crop, poses[near], config)
+    views = MapViews.of(crop.segments, poses[near], config)
     settings = place_config(config)
     sides = (_verify_views(views, config) or None, _verify_views(place.views, config) or None)
     best = integrate(
@@ -242,8 +246,8 @@ def match_place(
 
 
 def _best_rival(
-    crop: FloatArray,
-    own: FloatArray,
+    crop: SegmentMap,
+    own: SegmentMap,
     hypotheses: FloatArray,
     best_T: FloatArray,
     best_score: float,
@@ -294,9 +298,9 @@ def _fit(evidence: MatchEvidence) -> float:
 
 def _candidate(
     place: Place,
-    own: FloatArray,
+    own: SegmentMap,
     unit: MapUnit,
-    crop: FloatArray,
+    crop: SegmentMap,
     match: MatchResult,
     rank: int,
     config: MergeConfig,
@@ -311,7 +315,7 @@ def _candidate(
     T_keyframe_centre = se2.invert(T_target_keyframe) @ T_target_centre
     x, y, theta = se2.pose_from_matrix(T_keyframe_centre)
     information = match_information(
-        se2.transform_segments(se2.invert(T_target_keyframe), crop),
+        se2.transform_segments(se2.invert(T_target_keyframe), crop.segments),
         own,
         np.array([theta, x, y]),
         config.integrate,

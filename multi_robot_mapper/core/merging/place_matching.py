@@ -68,13 +68,14 @@ Places = OrderedDict[tuple[UnitKey, str, MergeConfig], list[Place]]
 
 def target_of(unit: MapUnit, config: MergeConfig, kept: Targets) -> Target:
     """``unit`` as a target of place matches, made once per content (``kept``)."""
-    key = (unit.key, MapSignature.of(unit.segments).digest, config)
+    key = (unit.key, unit.segment_map.digest, config)
     return cast(Target, cached(kept, key, lambda: Target.of(unit, config)))
 
 
 def content_digest(unit: MapUnit) -> str:
     """A digest of a map's keyframe poses and segments."""
-    return hashlib.sha1(unit.poses.tobytes() + unit.segments.tobytes()).hexdigest()
+    # The segments' digest is the map's own, made once per unit (its signature reads it too).
+    return hashlib.sha1(unit.poses.tobytes() + unit.segment_map.digest.encode()).hexdigest()
 
 
 def places_of_unit(unit: MapUnit, config: MergeConfig, kept: Places) -> list[Place]:
@@ -112,7 +113,7 @@ def match_places(
     keys = sorted(k for k, u in units.items() if u.length >= config.place_min_length)
     targets, kept_places = kept
     places = {key: places_of_unit(units[key], config, kept_places) for key in keys}
-    signatures = {key: MapSignature.of(units[key].segments) for key in keys}
+    signatures = {key: MapSignature.of(units[key].segment_map) for key in keys}
     records: dict[MatchKey, MatchRecord] = {}
     work: list[Work] = []
     for i, a in enumerate(keys):

@@ -19,6 +19,7 @@ and a bearing on which the map has no wall claims nothing (:func:`viewpoints`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 from collections.abc import Mapping, Sequence
 
@@ -26,12 +27,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.geometry import lines_of
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.matching.beams import Viewpoint
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.segment_map import SegmentMap
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -55,10 +56,15 @@ class MapUnit:
     def key(self) -> UnitKey:
         return (self.robot, self.piece)
 
+    @functools.cached_property
+    def segment_map(self) -> SegmentMap:
+        """``segments`` as a map, made once per unit: its lines, length and digest."""
+        return SegmentMap.of(self.segments)
+
     @property
     def length(self) -> float:
         """Total wall length (m)."""
-        return float(lines_of(self.segments).length.sum()) if len(self.segments) else 0.0
+        return self.segment_map.total_length
 
     def row(self, keyframe: int) -> int:
         """Row of keyframe index ``keyframe`` in this unit's arrays."""
@@ -116,6 +122,11 @@ class Place:
     views: MapViews  # the place's walls seen from the unit's keyframes near the centre
     length: float  # total wall length (m)
     digest: str  # content hash (segments and viewpoints): equal digests, same place
+
+    @functools.cached_property
+    def segment_map(self) -> SegmentMap:
+        """``segments`` as a map, made once per place (matched on every other map)."""
+        return SegmentMap.of(self.segments)
 
 
 def clip_to_disk(segments: FloatArray, centre: FloatArray, radius: float) -> FloatArray:
@@ -177,7 +188,7 @@ def places_of(unit: MapUnit, config: MergeConfig) -> list[Place]:
         T_centre_unit = se2.invert(se2.matrix_from_pose(*pose))
         inside = clip_to_disk(unit.segments, pose[:2], config.place_radius)
         segments = se2.transform_segments(T_centre_unit, inside)
-        length = float(lines_of(segments).length.sum()) if len(segments) else 0.0
+        length = SegmentMap.of(segments).total_length
         if length < config.place_min_length:
             continue
         near = np.hypot(*(unit.poses[:, :2] - pose[:2]).T) <= config.place_radius

@@ -506,7 +506,14 @@ def _match_in_two_pieces(
         judged=None,
         prior=None,
     ):  # type: ignore[no-untyped-def]
-        pose, confidence = matches[next(k for k, s in keyframes.items() if s is reference)]
+        # The reference is the map of the last scan or of a keyframe's scan.
+        last = references.last.segments
+        found = (
+            1
+            if reference is last
+            else next(k for k, s in references.scans.items() if s.segment_map is reference)
+        )
+        pose, confidence = matches[found]
         return fake_match(pose, confidence, judged)
 
     monkeypatch.setattr(attempts, "integrate", fake)

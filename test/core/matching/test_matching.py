@@ -31,6 +31,7 @@ from multi_robot_mapper.core.matching.hypotheses import (
 )
 from multi_robot_mapper.core.matching.integrate import _distinct_candidates
 from multi_robot_mapper.core.scan import LaserScanData
+from multi_robot_mapper.core.segment_map import SegmentMap
 from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
 from multi_robot_mapper.core.worlds import ROUTES, WORLDS
 
@@ -357,7 +358,7 @@ def test_candidate_pairs_are_every_pair_a_hypothesis_turns_parallel(
 
 
 def test_pair_scores_follow_a_segment_set_changed_in_place() -> None:
-    # The pair geometry is remembered by content: a set changed in place is a new set.
+    # An array is converted to a map at each call: a set changed in place is a new set.
     moved = se2.transform_segments(se2.matrix_from_pose(0.3, -0.2, 0.1), ROOM)
     T = np.array([[0.0, 0.0, 0.0], [-0.1, -0.3, 0.2]])
     edited = moved.copy()
@@ -373,9 +374,19 @@ def test_pair_scores_follow_a_segment_set_changed_in_place() -> None:
 def test_large_pair_geometries_are_not_kept() -> None:
     rng = np.random.default_rng(0)
     many = rng.uniform(-20.0, 20.0, (250, 4))  # 62 500 pairs, over the kept size
-    kept = scoring._kept_geometry.cache_info().currsize
-    scores = scoring.score_pairs(many, many, np.zeros((1, 3)), CONFIG)
-    assert scoring._kept_geometry.cache_info().currsize == kept
+    segment_map = SegmentMap.of(many)
+    with scoring.pair_kept(segment_map, segment_map):
+        scores = scoring.score_pairs(segment_map, segment_map, np.zeros((1, 3)), CONFIG)
+        assert scoring.pair_geometry(segment_map, segment_map) is not scoring.pair_geometry(
+            segment_map, segment_map
+        )
+    # A small pair's geometry is held on the first map, for the second, within the block only.
+    room, moved = SegmentMap.of(ROOM), SegmentMap.of(ROOM[::-1])
+    with scoring.pair_kept(room, moved):
+        kept = scoring.pair_geometry(room, moved)
+        assert scoring.pair_geometry(room, moved) is kept
+        assert scoring.pair_geometry(moved, room) is not scoring.pair_geometry(moved, room)
+    assert scoring.pair_geometry(room, moved) is not kept
     # identity: every segment matches itself fully (its own length, no penalty: it crosses)
     itself = scores.first == scores.second
     length = np.hypot(many[:, 2] - many[:, 0], many[:, 3] - many[:, 1])
