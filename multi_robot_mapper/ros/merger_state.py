@@ -24,6 +24,7 @@ from rclpy.subscription import Subscription
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging import MergeResult
+from multi_robot_mapper.io.map_updates import MapStream
 from multi_robot_mapper.io.messages import PartialMapContents
 from multi_robot_mapper.io.saved_map import SavedMap, SavedRobot
 from multi_robot_mapper.ros import diagnostics
@@ -56,6 +57,10 @@ class RobotState:
     session_of: str | None = None  # set for an earlier session: the robot it belonged to
     subscriptions: list[Subscription] = dataclasses.field(default_factory=list)
     pose_publisher: Publisher | None = None
+    # partial_map snapshots and partial_map_updates, applied in order (io/map_updates.py)
+    stream: MapStream = dataclasses.field(default_factory=MapStream)
+    request_publisher: Publisher | None = None  # asks the robot for a snapshot
+    requested_ns: int | None = None  # node clock when a snapshot was last asked for
 
     @property
     def keyframes(self) -> int:
