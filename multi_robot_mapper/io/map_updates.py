@@ -4,9 +4,10 @@ A robot's partial map goes out in two kinds of ``visualization_msgs/MarkerArray`
 keyframe markers exactly as :func:`multi_robot_mapper.io.messages.keyframe_marker` builds them:
 
 - a **snapshot** (topic ``partial_map``, transient local): every keyframe;
-- an **update** (topic ``partial_map_updates``, volatile): only the keyframes that are new, whose
-  segments changed (fusion; beyond :data:`SEGMENT_TOLERANCE_M`), whose piece or stamp changed, or whose pose moved beyond
-  :data:`POSE_TOLERANCE_M` / :data:`POSE_TOLERANCE_RAD` from the pose last sent.
+- an **update** (topic ``partial_map_updates``, volatile): only the keyframes that are new,
+  whose segments changed (fusion; beyond :data:`SEGMENT_TOLERANCE_M`), whose piece or stamp
+  changed, or whose pose moved beyond :data:`POSE_TOLERANCE_M` / :data:`POSE_TOLERANCE_RAD` from
+  the pose last sent.
 
 A marker is keyed by ``(ns, id)`` and an ``ADD`` replaces the marker of that key, so an update
 is already a correct incremental change for RViz and Foxglove. Each message also carries one
