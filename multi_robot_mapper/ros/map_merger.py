@@ -6,9 +6,8 @@ list: every ``<ns>/partial_map`` that appears is a robot named ``<ns>`` (no lead
 Topics (the merger's own are relative to its namespace):
   sub ``/<ns>/partial_map``   visualization_msgs/MarkerArray, reliable + transient local,
                               depth 1 (what robot_mapper offers: a late merger gets the map)
-  sub ``/<ns>/partial_map_updates``  MarkerArray, reliable, volatile: the keyframes changed
-                              since the robot's previous message, applied in sequence on top of
-                              the last snapshot (io/map_updates.py); a gap is refused and
+  sub ``/<ns>/partial_map_updates``  MarkerArray, reliable: what changed, applied in sequence
+                              (io/map_updates.py); on a gap the map held is kept and
   pub ``/<ns>/partial_map_request``   std_msgs/Empty asks the robot for a snapshot
   sub ``/<ns>/pose``          geometry_msgs/PoseStamped, the robot's current pose in its map
   pub ``global_map``          visualization_msgs/MarkerArray in ``map_frame``: a DELETEALL
@@ -79,19 +78,9 @@ from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.core.merging.occupancy import OccupancyGrid, merge_with_grid
-from multi_robot_mapper.io.inputs import (
-    InputError,
-    MapLimits,
-    partial_map_from_msg,
-    pose_from_checked_msg,
-)
+from multi_robot_mapper.io.inputs import InputError, MapLimits, pose_from_checked_msg
 from multi_robot_mapper.io.map_updates import SNAPSHOT, UPDATE
-from multi_robot_mapper.io.messages import (
-    partial_map_contents,
-    piece_frame,
-    piece_of_frame,
-    pose_stamped,
-)
+from multi_robot_mapper.io.messages import piece_frame, piece_of_frame, pose_stamped
 from multi_robot_mapper.io.saved_map import SavedMapError
 from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
@@ -112,6 +101,7 @@ from multi_robot_mapper.ros.merger_state import (
     RobotState,
     after_new_session,
     merge_inputs,
+    received_map,
     robot_statuses,
     store_partial_map,
 )
@@ -281,12 +271,7 @@ class MapMerger(SavedMapServices, Node):
         with self._lock:
             state = self.robots[name]
             try:
-                partial_map_from_msg(msg, self._limits())  # checked first: bounded, finite
-                applied = state.stream.apply(msg, kind)
-                whole = applied.whole_map()
-                if kind == UPDATE:  # the whole map it gives, within the limits too
-                    partial_map_from_msg(whole, self._limits())
-                contents = partial_map_contents(whole)
+                applied, contents = received_map(state, msg, kind, self._limits())
             except InputError as exc:  # the robot's last good map stays
                 self.rejections.reject(name, exc.kind, exc.field, exc.message, what)
                 if exc.kind in ("update_gap", "update_mismatch"):
@@ -307,14 +292,12 @@ class MapMerger(SavedMapServices, Node):
 
     def _ask_snapshot(self, state: RobotState) -> None:
         """Ask the robot for a snapshot (at most every REQUEST_INTERVAL_S)."""
-        now = self._clock_ns()
-        last = state.requested_ns
-        if state.request_publisher is None or (
-            last is not None and 0 <= now - last < REQUEST_INTERVAL_S * 1e9
+        now, last = self._clock_ns(), state.requested_ns
+        if state.request_publisher is not None and (
+            last is None or not 0 <= now - last < REQUEST_INTERVAL_S * 1e9
         ):
-            return
-        state.requested_ns = now
-        state.request_publisher.publish(Empty())
+            state.requested_ns = now
+            state.request_publisher.publish(Empty())
 
     def _on_pose(self, name: str, msg: PoseStamped) -> None:
         try:
