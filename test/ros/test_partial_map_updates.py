@@ -53,7 +53,8 @@ def test_a_late_merger_gets_the_whole_map_then_follows_the_updates(ros_context) 
     executor.add_node(driver)
     merger: MapMerger | None = None
     msgs = scans()
-    third = len(msgs) // 3
+    quarter = len(msgs) // 4
+    parts = [msgs[k * quarter : (k + 1) * quarter] for k in range(3)] + [msgs[3 * quarter :]]
 
     def send(part: list[LaserScan]) -> None:
         for msg in part:
@@ -63,9 +64,11 @@ def test_a_late_merger_gets_the_whole_map_then_follows_the_updates(ros_context) 
 
     try:
         assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, timeout=10.0)
-        send(msgs[:third])
+        send(parts[0])
+        assert spin_until(executor, lambda: mapper.partial_maps_published > 0, timeout=30.0)
+        send(parts[1])  # what changed now goes out as updates
         assert spin_until(
-            executor, lambda: mapper.map_published and mapper.updates_published > 0, timeout=20.0
+            executor, lambda: mapper.map_published and mapper.updates_published > 0, timeout=30.0
         )
         assert mapper.partial_maps_published == 1  # one snapshot, the rest updates
 
@@ -79,17 +82,17 @@ def test_a_late_merger_gets_the_whole_map_then_follows_the_updates(ros_context) 
         )
         executor.add_node(merger)
         state = merger.robots["robot1"]
-        send(msgs[third : 2 * third])
-        assert spin_until(executor, lambda: state.stream.snapshots >= 2, timeout=20.0)
+        send(parts[2])
+        assert spin_until(executor, lambda: state.stream.snapshots >= 2, timeout=30.0)
         assert mapper.snapshot_requests >= 1 and mapper.partial_maps_published >= 2
         assert merger.rejections.of("robot1").get("update_gap", 0) >= 1  # named, counted
 
         updates_before = state.stream.updates
-        send(msgs[2 * third :])
+        send(parts[3])
         assert spin_until(
             executor,
             lambda: mapper.map_published and state.stream.seq == mapper.planner.seq,
-            timeout=20.0,
+            timeout=30.0,
         )
         assert state.stream.updates > updates_before  # following the updates again
         assert state.stream.epoch == mapper.planner.epoch
