@@ -194,7 +194,12 @@ def _settled(merger: MapMerger, observer: Observer) -> bool:
         return False
     with merger._lock:
         stamps = {n: s.map_stamp for n, s in merger.robots.items()}
-    newest = {r: m.markers[0].header.stamp for r, m in observer.partial_maps.items() if m.markers}
+    # The newest marker stamp, as the merger takes it (an update restamps only what it sends).
+    newest = {
+        r: max((mk.header.stamp for mk in m.markers), key=lambda t: (t.sec, t.nanosec))
+        for r, m in observer.partial_maps.items()
+        if m.markers
+    }
     return merger.up_to_date() and all(stamps.get(r) == stamp for r, stamp in newest.items())
 
 

@@ -36,11 +36,23 @@ class RobotMapperConfig:
     partial_map_period: float = param(
         1.0,
         unit="s",
-        doc="the whole partial map is republished at most once per this period, when it changed",
+        doc="the partial map goes out at most once per this period, when it changed (only what "
+        "changed, between snapshots)",
         minimum=0.05,
         maximum=3600.0,
         tune="longer on a thin radio link (the map goes out less often); shorter to see the map "
         "sooner",
+    )
+    snapshot_period: float = param(
+        120.0,
+        unit="s",
+        doc="the whole partial map goes out on partial_map (transient local: what a late or "
+        "restarted merger and a viewer get first) at most once per this period, and when a "
+        "receiver asks on partial_map_request; between snapshots, partial_map_updates carries "
+        "only what changed (io/map_updates.py). A fixed constant: snapshots are most of the "
+        "bytes (docs/network.md) and a merger that misses an update asks for one at once",
+        minimum=0.05,
+        maximum=3600.0,
     )
     scan_max_queue_delay: float = param(
         0.5,

@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid as OccupancyGridMsg
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Float64
@@ -28,6 +28,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.io.bags import TimedScan
+from multi_robot_mapper.io.inputs import InputError
+from multi_robot_mapper.io.map_updates import SNAPSHOT, UPDATE, MapStream
 from multi_robot_mapper.io.messages import (
     partial_map_contents,
     pose_from_msg,
@@ -185,7 +187,8 @@ class Observer(Node):
         self.probabilities: dict[str, float] = {}
         self.frame_times: dict[str, float] = {}  # monotonic time of each robot's first frame
         self.poses: dict[str, list[tuple[float, FloatArray]]] = {r: [] for r in robots}
-        self.partial_maps: dict[str, MarkerArray] = {}
+        self.partial_maps: dict[str, MarkerArray] = {}  # the whole map, snapshots and updates
+        self._streams: dict[str, MapStream] = {}
         self.partial_map_times: dict[str, float] = {}  # monotonic time of the newest
         self.diagnostics: dict[str, DiagnosticStatus] = {}  # by status name, the newest
         self.diagnostic_stamps: list[Time] = []
@@ -217,11 +220,18 @@ class Observer(Node):
                     POSE_QOS,
                 )
             if partial_maps:
+                self._streams[robot] = MapStream()
                 self.create_subscription(
                     MarkerArray,
                     f"/{robot}/partial_map",
-                    lambda msg, r=robot: self._on_partial_map(r, msg),
+                    lambda msg, r=robot: self._on_partial_map(r, msg, SNAPSHOT),
                     LATCHED_QOS,
+                )
+                self.create_subscription(
+                    MarkerArray,
+                    f"/{robot}/partial_map_updates",
+                    lambda msg, r=robot: self._on_partial_map(r, msg, UPDATE),
+                    QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
                 )
 
     def _on_global_map(self, msg: MarkerArray) -> None:
@@ -230,8 +240,16 @@ class Observer(Node):
             self.global_maps.clear()
         self.global_maps.append(view)
 
-    def _on_partial_map(self, robot: str, msg: MarkerArray) -> None:
-        self.partial_maps[robot] = msg
+    def _on_partial_map(self, robot: str, msg: MarkerArray, kind: str) -> None:
+        """A snapshot or an update applied to the robot's stream: ``partial_maps`` holds the
+        whole map (an update that does not follow is left out until the next snapshot)."""
+        stream = self._streams[robot]
+        try:
+            applied = stream.apply(msg, kind)
+        except InputError:
+            return
+        stream.commit(applied)
+        self.partial_maps[robot] = applied.whole_map()
         self.partial_map_times[robot] = time.monotonic()
 
     def _on_grid(self, msg: OccupancyGridMsg) -> None:

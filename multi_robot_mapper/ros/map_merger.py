@@ -6,6 +6,9 @@ list: every ``<ns>/partial_map`` that appears is a robot named ``<ns>`` (no lead
 Topics (the merger's own are relative to its namespace):
   sub ``/<ns>/partial_map``   visualization_msgs/MarkerArray, reliable + transient local,
                               depth 1 (what robot_mapper offers: a late merger gets the map)
+  sub ``/<ns>/partial_map_updates``  MarkerArray, reliable: what changed, applied in sequence
+                              (io/map_updates.py); on a gap the map held is kept and
+  pub ``/<ns>/partial_map_request``   std_msgs/Empty asks the robot for a snapshot
   sub ``/<ns>/pose``          geometry_msgs/PoseStamped, the robot's current pose in its map
   pub ``global_map``          visualization_msgs/MarkerArray in ``map_frame``: a DELETEALL
                               marker, then the fused segments as one LINE_LIST per robot
@@ -66,7 +69,7 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.timer import Timer
-from std_msgs.msg import Float64
+from std_msgs.msg import Empty, Float64
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -75,18 +78,9 @@ from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.core.merging.occupancy import OccupancyGrid, merge_with_grid
-from multi_robot_mapper.io.inputs import (
-    InputError,
-    MapLimits,
-    partial_map_from_msg,
-    pose_from_checked_msg,
-)
-from multi_robot_mapper.io.messages import (
-    partial_map_contents,
-    piece_frame,
-    piece_of_frame,
-    pose_stamped,
-)
+from multi_robot_mapper.io.inputs import InputError, MapLimits, pose_from_checked_msg
+from multi_robot_mapper.io.map_updates import SNAPSHOT, UPDATE
+from multi_robot_mapper.io.messages import piece_frame, piece_of_frame, pose_stamped
 from multi_robot_mapper.io.saved_map import SavedMapError
 from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
@@ -107,6 +101,7 @@ from multi_robot_mapper.ros.merger_state import (
     RobotState,
     after_new_session,
     merge_inputs,
+    received_map,
     robot_statuses,
     store_partial_map,
 )
@@ -128,6 +123,11 @@ LATCHED_QOS = QoSProfile(
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 POSE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+UPDATES_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+REQUEST_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+# A robot that missed updates is asked for a snapshot at most this often: its answer comes at
+# its next partial_map_period (1 s by default), and updates refused meanwhile ask again.
+REQUEST_INTERVAL_S = 2.0
 PARTIAL_MAP_TYPE = "visualization_msgs/msg/MarkerArray"
 
 
@@ -223,6 +223,9 @@ class MapMerger(SavedMapServices, Node):
         with self._lock:
             state = self.robots.setdefault(name, RobotState(name))
         state.pose_publisher = self.create_publisher(PoseStamped, f"robot_poses/{name}", POSE_QOS)
+        state.request_publisher = self.create_publisher(
+            Empty, f"/{name}/partial_map_request", REQUEST_QOS
+        )
         state.subscriptions = [
             self.create_subscription(
                 MarkerArray,
@@ -238,6 +241,16 @@ class MapMerger(SavedMapServices, Node):
                 POSE_QOS,
                 callback_group=self._input_groups,
             ),
+            self.create_subscription(
+                MarkerArray,
+                f"/{name}/partial_map_updates",
+                self.guard(
+                    f"{name}/partial_map_updates",
+                    lambda msg, n=name: self._on_partial_map(n, msg, UPDATE),
+                ),
+                UPDATES_QOS,
+                callback_group=self._input_groups,
+            ),
         ]
         self.get_logger().info(f"merging robot '{name}' (/{name}/partial_map)")
 
@@ -250,14 +263,21 @@ class MapMerger(SavedMapServices, Node):
             config.max_keyframes_per_map, config.max_segments_per_map, config.max_map_extent
         )
 
-    def _on_partial_map(self, name: str, msg: MarkerArray) -> None:
-        try:
-            partial_map_from_msg(msg, self._limits())  # checked first: bounded, finite
-            contents = partial_map_contents(msg)
-        except InputError as exc:  # the robot's last good map stays
-            self.rejections.reject(name, exc.kind, exc.field, exc.message, "partial map")
-            return
+    def _on_partial_map(self, name: str, msg: MarkerArray, kind: str = SNAPSHOT) -> None:
+        """A snapshot (``partial_map``) or an update (``partial_map_updates``): applied to the
+        robot's stream, the whole map it gives checked, then stored; anything refused leaves
+        the map held as it was."""
+        what = "partial map" if kind == SNAPSHOT else "partial map update"
         with self._lock:
+            state = self.robots[name]
+            try:
+                applied, contents = received_map(state, msg, kind, self._limits())
+            except InputError as exc:  # the robot's last good map stays
+                self.rejections.reject(name, exc.kind, exc.field, exc.message, what)
+                if exc.kind in ("update_gap", "update_mismatch"):
+                    self._ask_snapshot(state)
+                return
+            state.stream.commit(applied)
             kept = store_partial_map(
                 self.robots, name, contents, self._clock_ns(), self.config.keep_sessions
             )
@@ -269,6 +289,15 @@ class MapMerger(SavedMapServices, Node):
                 f"robot '{name}' started a new map (another first keyframe): its earlier map "
                 f"is kept as '{kept}' and the new one will be merged again"
             )
+
+    def _ask_snapshot(self, state: RobotState) -> None:
+        """Ask the robot for a snapshot (at most every REQUEST_INTERVAL_S)."""
+        now, last = self._clock_ns(), state.requested_ns
+        if state.request_publisher is not None and (
+            last is None or not 0 <= now - last < REQUEST_INTERVAL_S * 1e9
+        ):
+            state.requested_ns = now
+            state.request_publisher.publish(Empty())
 
     def _on_pose(self, name: str, msg: PoseStamped) -> None:
         try:

@@ -20,11 +20,14 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from rclpy.publisher import Publisher
 from rclpy.subscription import Subscription
+from visualization_msgs.msg import MarkerArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging import MergeResult
-from multi_robot_mapper.io.messages import PartialMapContents
+from multi_robot_mapper.io.inputs import MapLimits, partial_map_from_msg
+from multi_robot_mapper.io.map_updates import UPDATE, Applied, MapStream
+from multi_robot_mapper.io.messages import PartialMapContents, partial_map_contents
 from multi_robot_mapper.io.saved_map import SavedMap, SavedRobot
 from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.diagnostics import RateMeter
@@ -56,6 +59,10 @@ class RobotState:
     session_of: str | None = None  # set for an earlier session: the robot it belonged to
     subscriptions: list[Subscription] = dataclasses.field(default_factory=list)
     pose_publisher: Publisher | None = None
+    # partial_map snapshots and partial_map_updates, applied in order (io/map_updates.py)
+    stream: MapStream = dataclasses.field(default_factory=MapStream)
+    request_publisher: Publisher | None = None  # asks the robot for a snapshot
+    requested_ns: int | None = None  # node clock when a snapshot was last asked for
 
     @property
     def keyframes(self) -> int:
@@ -109,6 +116,20 @@ def keyframes_of(segments: FloatArray, keyframe_poses: FloatArray) -> list[Keyfr
     own = se2.transform_segments(T_first_map, np.asarray(segments, dtype=np.float64))
     empty = np.zeros((0, 4))
     return [Keyframe(k, 0.0, pose, own if k == 0 else empty) for k, pose in enumerate(poses)]
+
+
+def received_map(
+    state: RobotState, msg: MarkerArray, kind: str, limits: MapLimits
+) -> tuple[Applied, PartialMapContents]:
+    """A snapshot or an update (``kind``) checked (bounded, finite), applied to the robot's
+    stream and the whole map it gives read; raises ``InputError`` (nothing changed). Commit
+    ``state.stream`` with the result once it is stored."""
+    partial_map_from_msg(msg, limits)  # checked first: bounded, finite
+    applied = state.stream.apply(msg, kind)
+    whole = applied.whole_map()
+    if kind == UPDATE:  # the whole map it gives, within the limits too
+        partial_map_from_msg(whole, limits)
+    return applied, partial_map_contents(whole)
 
 
 def store_partial_map(

@@ -9,9 +9,14 @@ Topics (relative, so ``-r __ns:=/robot1`` gives ``/robot1/scan`` -> ``/robot1/pa
                          the map frame, stamped with the scan's stamp (reliable, depth 10)
   pub ``partial_map``    visualization_msgs/MarkerArray, one LINE_LIST per keyframe (id = index,
                          pose = the keyframe in the map frame, points in the keyframe's frame),
-                         stamped with the newest keyframe's scan; the whole map every
-                         ``partial_map_period`` when it changed (reliable, transient local,
-                         depth 1: a late subscriber gets the map)
+                         stamped with the newest keyframe's scan: a snapshot, the whole map, at
+                         most every ``snapshot_period`` or when asked (reliable, transient
+                         local, depth 1: a late subscriber gets the map)
+  pub ``partial_map_updates``  MarkerArray of the keyframes changed since the last message,
+                         every ``partial_map_period`` when the map changed (reliable,
+                         volatile, depth 10); both carry a sequence tag (io/map_updates.py)
+  sub ``partial_map_request``  std_msgs/Empty: a receiver that missed an update asks for a
+                         snapshot, sent at the next ``partial_map_period``
   pub ``/diagnostics``   diagnostic_msgs/DiagnosticArray every ``diagnostics_period``: the
                          robot's status (ros/diagnostics.py), stamped with the newest scan
 Parameters: the fields of :class:`RobotMapperConfig` (``config/robot_mapper.yaml``).
@@ -23,6 +28,7 @@ import dataclasses
 import sys
 import time
 import traceback
+import uuid
 from collections import Counter
 from typing import Any
 
@@ -37,7 +43,7 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 from sensor_msgs.msg import LaserScan
-from std_msgs.msg import Header
+from std_msgs.msg import Empty, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core.extraction import SegmentScan, extract_scan
@@ -45,6 +51,7 @@ from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalUp
 from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import LaserScanData, ScanError, ScanPoints
 from multi_robot_mapper.core.scan_stream import REASON_FIELDS, ScanStreamGuard, StreamVerdict
+from multi_robot_mapper.io.map_updates import SNAPSHOT, UpdatePlanner, sequence_marker
 from multi_robot_mapper.io.messages import (
     keyframe_marker,
     piece_frame,
@@ -97,6 +104,10 @@ PARTIAL_MAP_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
+# Updates build on each other: reliable, and a queue for a slow link; volatile, since a late
+# subscriber starts from the latched snapshot and asks for a newer one if updates went by.
+UPDATES_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+REQUEST_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
 
 
 def default_map_frame(namespace: str) -> str:
@@ -156,9 +167,22 @@ class RobotMapper(Node):
         self.published_version = 0  # mapper version last published (the empty map never is)
         # Markers of unchanged keyframes are reused: building Points is the costly part.
         self._marker_cache: dict[int, tuple[bytes, Marker]] = {}
+        # What the receivers hold: snapshots now and then, updates of what changed between.
+        self.planner = UpdatePlanner(uuid.uuid4().hex[:12])
+        self.snapshot_requests = 0
+        self._snapshot_asked = False
+        self._snapshot_ns: int | None = None  # node clock at the last snapshot
+        self.updates_published = 0
         self._segments_pub = self.create_publisher(Marker, "scan_segments", 10)
         self._pose_pub = self.create_publisher(PoseStamped, "pose", POSE_QOS)
         self._map_pub = self.create_publisher(MarkerArray, "partial_map", PARTIAL_MAP_QOS)
+        self._updates_pub = self.create_publisher(MarkerArray, "partial_map_updates", UPDATES_QOS)
+        self._request_sub = self.create_subscription(
+            Empty,
+            "partial_map_request",
+            self.guard("partial_map_request", self._asked),
+            REQUEST_QOS,
+        )
         self._scan_sub = self.create_subscription(
             LaserScan, "scan", self.guard("scan", self._receive_scan), SCAN_QOS
         )
@@ -205,6 +229,7 @@ class RobotMapper(Node):
         ):
             self._marker_cache.clear()
             self.published_version = -1  # republish in the new frame / width
+            self._snapshot_asked = True
 
     def _receive_scan(self, msg: LaserScan, info: dict[str, Any]) -> None:
         """The scan subscription: scans lost on the way are counted, one that waited too long
@@ -365,15 +390,36 @@ class RobotMapper(Node):
         self._keyframe_stamps.clear()
         self._marker_cache.clear()
         self.published_version = -1  # the new map's first version is published
+        self.planner = UpdatePlanner(uuid.uuid4().hex[:12])  # a new stream: a snapshot first
+
+    def _asked(self, _msg: Empty) -> None:
+        """A receiver missed an update: the next period sends a snapshot."""
+        self.snapshot_requests += 1
+        self._snapshot_asked = True
+
+    def _snapshot_due(self) -> bool:
+        now = self.get_clock().now().nanoseconds
+        last = self._snapshot_ns
+        return (
+            self._snapshot_asked
+            or last is None
+            or now - last >= self.config.snapshot_period * 1e9
+            or now < last  # the clock went back (sim time restarted)
+        )
 
     def publish_map(self) -> bool:
-        """Publish the whole partial map if it changed since the last publication."""
+        """Publish what changed since the last publication (an update), or the whole map (a
+        snapshot) when one is due or asked for; True when something went out."""
         self._report_backend_errors()
         version = self.mapper.version
-        if version == self.published_version or version == 0:
+        if version == 0 or (version == self.published_version and not self._snapshot_asked):
             return False
         try:
             keyframes = self.mapper.keyframes()
+            plan = self.planner.plan(keyframes, snapshot=self._snapshot_due())
+            if plan is None:  # changed within the tolerance only: nothing to send
+                self.published_version = version
+                return False
             newest = max(kf.stamp for kf in keyframes)  # the newest scan in the map
             stamp = self._keyframe_stamps.get(newest)
             if stamp is None:
@@ -383,19 +429,29 @@ class RobotMapper(Node):
                 self._marker(
                     kf, Header(frame_id=piece_frame(self.map_frame, kf.piece), stamp=stamp)
                 )
-                for kf in keyframes
+                for kf in plan.keyframes
             ]
+            array.markers.append(
+                sequence_marker(plan.tag, Header(frame_id=self.map_frame, stamp=stamp))
+            )
         except Exception:
             self.warnings.warn(
                 "partial_map_error",
                 f"partial map not published after an internal error:\n{traceback.format_exc()}",
             )
             return False
-        self._map_pub.publish(array)
-        self.published_keyframes = len(array.markers)
+        if plan.tag.kind == SNAPSHOT:
+            self._map_pub.publish(array)
+            self._snapshot_ns = self.get_clock().now().nanoseconds
+            self._snapshot_asked = False
+            self.partial_maps_published += 1
+        else:
+            self._updates_pub.publish(array)
+            self.updates_published += 1
+        self.planner.commit(plan)
+        self.published_keyframes = plan.tag.keyframes
         self.published_stamp = stamp
         self.published_version = version
-        self.partial_maps_published += 1
         return True
 
     def publish_diagnostics(self) -> None:

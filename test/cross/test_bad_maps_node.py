@@ -16,13 +16,20 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import Point, PoseStamped
 from rclpy.parameter import Parameter
+from std_msgs.msg import Header
 from test_map_merger_node import _partial_map_message
 from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core.config import config_from_flat
 from multi_robot_mapper.core.merger_config import MapMergerConfig
-from multi_robot_mapper.io.messages import pose_stamped, stamp_from_seconds
+from multi_robot_mapper.io.map_updates import UpdatePlanner, sequence_marker
+from multi_robot_mapper.io.messages import (
+    keyframe_marker,
+    keyframes_from_markers,
+    pose_stamped,
+    stamp_from_seconds,
+)
 from multi_robot_mapper.ros.map_merger import MapMerger
 
 pytestmark = pytest.mark.ros
@@ -313,3 +320,44 @@ def test_garbage_from_one_robot_leaves_a_good_robots_map_unchanged(merger: MapMe
         deliver(merger, "charlie", junk)
     for name, segments in before.items():
         np.testing.assert_array_equal(merger.robots[name].segments, segments)
+
+
+def test_updates_out_of_sequence_are_refused_by_name_and_the_map_kept(merger: MapMerger) -> None:
+    """partial_map_updates (io/map_updates.py) through the merger's own callbacks: a snapshot,
+    an update applied, then a gap, a duplicate and a malformed tag each refused, counted and
+    named once, the map held kept; a new snapshot is taken."""
+    frames = keyframes_from_markers(message("charlie"))
+    planner = UpdatePlanner("run1")
+
+    def publication(count: int, snapshot: bool = False) -> MarkerArray:
+        plan = planner.plan(frames[:count], snapshot)
+        assert plan is not None
+        planner.commit(plan)
+        header = Header(frame_id="charlie/map", stamp=stamp_from_seconds(9.0))
+        markers = [keyframe_marker(kf, header, 0.03) for kf in plan.keyframes]
+        return MarkerArray(markers=[*markers, sequence_marker(plan.tag, header)])
+
+    def update(msg: MarkerArray) -> None:
+        merger.robots["charlie"].subscriptions[2].callback(msg)
+
+    deliver(merger, "charlie", publication(len(frames) - 3))
+    second = publication(len(frames) - 2)
+    update(second)
+    state = merger.robots["charlie"]
+    assert (state.stream.seq, state.keyframes) == (2, len(frames) - 2)
+    held = state.segments.copy()
+    publication(len(frames) - 1)  # update 3: lost
+    update(publication(len(frames)))  # update 4
+    update(second)  # a duplicate
+    bad = copy.deepcopy(second)
+    bad.markers[-1].text = "update run1 three"
+    update(bad)
+    counts = merger.rejections.of("charlie")
+    assert counts == {"update_gap": 1, "old_update": 1, "bad_sequence": 1}
+    logged = [line for line in merger.logged if line.startswith("charlie: partial map update")]
+    assert any("1 missed" in line for line in logged) and len(logged) == 3
+    np.testing.assert_array_equal(state.segments, held)  # the map held stays
+    assert state.requested_ns is not None  # a snapshot was asked for
+    deliver(merger, "charlie", publication(len(frames), snapshot=True))
+    assert (state.stream.seq, state.keyframes) == (5, len(frames))
+    assert merger.guard.errors == {}

@@ -368,7 +368,11 @@ def test_listed_robots_are_subscribed_without_discovery(ros_context) -> None:
     try:
         assert sorted(node.robots) == ["alpha", "beta"]
         topics = {s.topic_name for state in node.robots.values() for s in state.subscriptions}
-        assert topics == {"/alpha/partial_map", "/alpha/pose", "/beta/partial_map", "/beta/pose"}
+        assert topics == {
+            f"/{robot}/{topic}"
+            for robot in ("alpha", "beta")
+            for topic in ("partial_map", "partial_map_updates", "pose")
+        }
         assert node.merge_now() is False  # no map yet: nothing to merge, nothing published
         assert node.global_maps_published == 0
     finally:

@@ -24,6 +24,7 @@ from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, raycast, simulate_robots
 from multi_robot_mapper.core.worlds import polygon
+from multi_robot_mapper.io.map_updates import keyframe_markers, sequence_of
 from multi_robot_mapper.io.messages import (
     keyframes_from_markers,
     pose_from_msg,
@@ -323,8 +324,20 @@ def test_every_accepted_scan_gives_its_pose_stamped_and_in_the_robot_map_frame(
     assert len(h.received) == len(msgs)
 
 
-def test_late_subscriber_receives_the_whole_partial_map(fast_map_harness: Harness) -> None:
-    h = fast_map_harness
+@pytest.fixture
+def snapshot_harness(ros_context):
+    """Every publication a snapshot (snapshot_period below partial_map_period)."""
+    h = Harness(
+        ros_context,
+        config=RobotMapperConfig(snapshot_period=0.05),
+        parameter_overrides=[Parameter("partial_map_period", value=0.1)],
+    )
+    yield h
+    h.close()
+
+
+def test_late_subscriber_receives_the_whole_partial_map(snapshot_harness: Harness) -> None:
+    h = snapshot_harness
     msgs = send_drive(h)
     mapper = h.mapper.mapper
     assert spin_until(h.executor, lambda: h.mapper.map_published, timeout=10.0)
@@ -345,9 +358,12 @@ def test_late_subscriber_receives_the_whole_partial_map(fast_map_harness: Harnes
     finally:
         h.executor.remove_node(late)
         late.destroy_node()
-    array = maps[0]
+    assert h.mapper.updates_published == 0
+    tag = sequence_of(maps[0])
+    array = MarkerArray(markers=keyframe_markers(maps[0]))
     keyframes = mapper.keyframes()
     assert len(keyframes) >= 3
+    assert tag is not None and (tag.kind, tag.keyframes) == ("snapshot", len(keyframes))
     assert len(array.markers) == len(keyframes)
     assert [m.id for m in array.markers] == list(range(len(keyframes)))
     # Stamped with the newest scan in the map (the last keyframe's), exactly as that scan was.
