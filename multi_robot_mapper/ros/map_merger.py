@@ -6,9 +6,9 @@ list: every ``<ns>/partial_map`` that appears is a robot named ``<ns>`` (no lead
 Topics (the merger's own are relative to its namespace):
   sub ``/<ns>/partial_map``   visualization_msgs/MarkerArray, reliable + transient local,
                               depth 1 (what robot_mapper offers: a late merger gets the map)
-  sub ``/<ns>/partial_map_updates``  MarkerArray, reliable: what changed, applied in sequence
-                              (io/map_updates.py); on a gap the map held is kept and
-  pub ``/<ns>/partial_map_request``   std_msgs/Empty asks the robot for a snapshot
+  sub ``/<ns>/partial_map_updates``  MarkerArray, reliable: what changed, applied in order
+                              (io/map_updates.py); a gap keeps the map held and asks, on
+  pub ``/<ns>/partial_map_request``   std_msgs/Empty, the robot for a snapshot
   sub ``/<ns>/pose``          geometry_msgs/PoseStamped, the robot's current pose in its map
   pub ``global_map``          visualization_msgs/MarkerArray in ``map_frame``: a DELETEALL
                               marker, then the fused segments as one LINE_LIST per robot
