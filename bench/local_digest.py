@@ -48,8 +48,13 @@ def digest(name: str) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("logs", nargs="*", default=list(LOGS), choices=LOGS)
-    for name in parser.parse_args().logs:
+    # Checked here, not by ``choices``: argparse checks a ``nargs="*"`` default list as one
+    # value, so running with no log named (every log) was refused.
+    parser.add_argument("logs", nargs="*", help=f"default: all of {', '.join(LOGS)}")
+    logs = parser.parse_args().logs or list(LOGS)
+    if unknown := sorted(set(logs) - set(LOGS)):
+        parser.error(f"unknown logs {unknown}; choose from {', '.join(LOGS)}")
+    for name in logs:
         print(digest(name), flush=True)
 
 
