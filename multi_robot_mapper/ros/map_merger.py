@@ -73,14 +73,13 @@ from std_msgs.msg import Empty, Float64
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.core.merging.occupancy import OccupancyGrid, merge_with_grid
 from multi_robot_mapper.io.inputs import InputError, MapLimits, pose_from_checked_msg
 from multi_robot_mapper.io.map_updates import SNAPSHOT, UPDATE
-from multi_robot_mapper.io.messages import piece_frame, piece_of_frame, pose_stamped
+from multi_robot_mapper.io.messages import piece_of_frame, pose_stamped
 from multi_robot_mapper.io.saved_map import SavedMapError
 from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
@@ -88,11 +87,11 @@ from multi_robot_mapper.ros.entry import run_node
 from multi_robot_mapper.ros.markers import (
     MarkerCache,
     MarkerKey,
-    frame_matrix,
     frame_transform,
     global_map_markers,
     newest,
     occupancy_grid_msg,
+    piece_transforms,
     placed_poses,
     stamp_key,
 )
@@ -518,16 +517,7 @@ class MapMerger(SavedMapServices, Node):
             child = frames.get(robot) or f"{robot}/map"
             self._transforms[robot] = frame_transform(pose, stamp, map_frame, child)
         # The other pieces of robots' maps that the merge placed (their own frames).
-        self._piece_transforms = {}
-        for robot, pieces in result.frames.items():
-            base = frames.get(robot) or f"{robot}/map"
-            for piece in pieces:
-                T = frame_matrix(result, robot, piece)
-                if piece and T is not None:
-                    child = piece_frame(base, piece)
-                    placement = se2.pose_from_matrix(T)
-                    transform = frame_transform(placement, stamp, map_frame, child)
-                    self._piece_transforms[child] = transform
+        self._piece_transforms = piece_transforms(result, frames, stamp, map_frame)
         every = [*self._transforms.values(), *self._piece_transforms.values()]
         if self._tf is not None and every:
             self._tf.sendTransform(every)

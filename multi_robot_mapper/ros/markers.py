@@ -19,7 +19,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.core.merging.occupancy import OccupancyGrid
-from multi_robot_mapper.io.messages import pose_msg, segments_marker
+from multi_robot_mapper.io.messages import piece_frame, pose_msg, segments_marker
 
 FloatArray = np.typing.NDArray[np.float64]
 
@@ -243,3 +243,21 @@ def frame_transform(
     transform.transform.translation.y = placed.position.y
     transform.transform.rotation = placed.orientation
     return transform
+
+
+def piece_transforms(
+    result: MergeResult, frames: Mapping[str, str], stamp: Time, map_frame: str
+) -> dict[str, TransformStamped]:
+    """TF of every other piece of a robot's map the merge placed (piece 0, the robot's map
+    frame, is the robot's own transform), keyed by the piece's frame; ``frames``: each
+    robot's map frame (default ``<robot>/map``)."""
+    transforms = {}
+    for robot, pieces in result.frames.items():
+        base = frames.get(robot) or f"{robot}/map"
+        for piece in pieces:
+            T = frame_matrix(result, robot, piece)
+            if piece and T is not None:
+                child = piece_frame(base, piece)
+                placement = se2.pose_from_matrix(T)
+                transforms[child] = frame_transform(placement, stamp, map_frame, child)
+    return transforms

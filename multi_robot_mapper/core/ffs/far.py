@@ -25,7 +25,7 @@ logs' keyframes (docs/decisions.md, "FFS from afar"):
 Cooling (Sec. 3.2, Algorithm 1 line 14): σ shrinks geometrically from ``sigma_start`` to
 ``sigma_end`` by ``dt_factor`` per iteration (the paper's Δt factor 0.96: its σ 15 → 4 cm and
 Δt 5 → 1 both take about 40 iterations; a metre to 4 cm by 0.96 takes 79); the step's share
-(Δt / Δt_0)², Δt cooled by the same factor, never below _LAST_SHARE. While σ is wide the
+(Δt / Δt_0)², Δt cooled by the same factor, never below _FINAL_STEP_SHARE. While σ is wide the
 bodies are resampled coarser (one mass-weighted point per cell of at most σ, Sec. 3.3's
 optional resampling and 3.5.1's approximation) and at most _PULLED points are pulled per
 iteration, so that a wide field stays fast. The run ends
@@ -73,7 +73,7 @@ _PULLED = 1000
 _DAMPING = 1e-4
 # The step's share of the model's at the end of the cooling: the whole step cycles by about
 # half a millimetre at the end (the synthetic building of the tests), half of it settles.
-_LAST_SHARE = 0.5
+_FINAL_STEP_SHARE = 0.5
 # Absolute curvature floor (per unit weight): a body with no wall in reach does not move.
 _FLOOR = 1e-6
 
@@ -301,7 +301,7 @@ def run_ffs_far(
         potentials.append(-float(pulls.weight.sum()))
         centres, radii = _centres_and_radii(level, points)
         # Eq. 8-9: the step's share (Δt / Δt_0)², Δt cooling as the paper's (5 -> 1 there).
-        share = max(_LAST_SHARE, (dt / config.dt_start) ** 2)
+        share = max(_FINAL_STEP_SHARE, (dt / config.dt_start) ** 2)
         step = joint_step(pulls, points, centres, free) * share
         moved = bounded_move(poses, step, centres, radii, sigma)
         relocation = float(moved[free].max()) if free.any() else 0.0
