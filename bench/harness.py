@@ -202,6 +202,37 @@ def imported_bag(
     return bag
 
 
+def imported_dense_bag(name: str, robots: int, bag: Path, log: Path | None = None) -> Path:
+    """``bag``: the shared dense bag ``name`` (``BAGS/NAME.bag``, every scan) cut into
+    ``robots`` robots by ``mrm import-bag``, its truth file's reference poses attached and
+    CARMEN's beam geometry (the shared bags were converted from CARMEN logs: docs/bags.md),
+    imported once and reused after."""
+    if not bag.exists():
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        partial = bag.with_name(bag.name + ".partial")
+        shutil.rmtree(partial, ignore_errors=True)  # left by an interrupted import
+        source, truth = BAGS / f"{name}.bag", BAGS / f"{name}.truth.csv"
+        imported = [str(source), "--robots", str(robots), "--out", str(partial)]
+        imported += ["--beam-geometry", "carmen"]
+        if truth.is_file():
+            imported += ["--truth", str(truth)]
+        mrm(["import-bag", *imported], log)
+        partial.rename(bag)
+    return bag
+
+
+def present_bags(names: Iterable[str]) -> list[str]:
+    """The shared dense bags of ``names`` that are there; a note on stderr for each one
+    skipped."""
+    present = []
+    for name in names:
+        if (BAGS / f"{name}.bag").is_file():
+            present.append(name)
+        else:
+            print(f"{name}: skipped, {BAGS / f'{name}.bag'} not found", file=sys.stderr)
+    return present
+
+
 def reference_keyframes(scans: list[CarmenScan], spacing: float, turn: float) -> list[Keyframe]:
     """A run's keyframes as a robot's ``partial_map`` carries them, built at the reference
     poses: a keyframe where the laser moved ``spacing`` or turned ``turn`` since the last (the

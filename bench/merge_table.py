@@ -9,13 +9,17 @@ and ``mrm evaluate`` against the log's reference poses.
         [--jobs 1] [--work bench_output/merge_table] [--json PATH] [--overlap-scans 0]
         [--set NAME=VALUE ...] [--quick]
 
-Prints one Markdown table (ready for the README) on standard output, each row on standard
-error as soon as its run is done, and writes every figure (stats.json and metrics.json of each
-run, the wall time of each step) to ``--json`` (default WORK/merge_table.json). ``--jobs N``
-runs N (log, K) cases at once; every child is limited to one thread. ``--quick`` is intel,
-K = 2 only. A missing log is skipped with a note; a failing step is reported in its row.
-``--table`` prints the table of an earlier run's JSON without running anything; ``--summary``
-prints the README's summary of it (one row per log: bench/results.py renders both).
+``--bags intel aces fr079`` adds the shared dense bags (every scan, ``mrm import-bag`` with the
+truth file and CARMEN's beam geometry instead of ``mrm import-carmen``; ``--robots 1 2 4 8``);
+``--bag-table`` prints their table (issue 47: right / claimed / unmerged, worst own-frame ATE,
+unposed share). Prints one Markdown table (ready for the README) on standard output, each row
+on standard error as soon as its run is done, and writes every figure (stats.json and
+metrics.json of each run, the wall time of each step) to ``--json`` (default
+WORK/merge_table.json). ``--jobs N`` runs N (log, K) cases at once; every child is limited to
+one thread. ``--quick`` is intel, K = 2 only. A missing log is skipped with a note; a failing
+step is reported in its row. ``--table`` prints the table of an earlier run's JSON without
+running anything; ``--summary`` prints the README's summary of it (one row per log:
+bench/results.py renders both).
 
 Target (issue 5): every robot merged in every case, ATE <= 0.15 m.
 """
@@ -31,7 +35,14 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from bench.harness import OUTPUT, imported_bag, mrm, present_logs
+from bench.harness import (
+    OUTPUT,
+    imported_bag,
+    imported_dense_bag,
+    mrm,
+    present_bags,
+    present_logs,
+)
 from multi_robot_mapper.cli.evaluate import METRICS_FILE
 from multi_robot_mapper.io.results import read_results
 
@@ -42,11 +53,14 @@ COLUMNS = (
 )
 
 
-def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]:
+def run_case(
+    name: str, robots: int, args: argparse.Namespace, dense: bool = False
+) -> dict[str, Any]:
     """Import (or reuse) the bag, replay with ``--method``, evaluate; every figure as one
-    dict."""
-    row: dict[str, Any] = {"log": name, "robots": robots}
+    dict. ``dense``: ``name`` is a shared dense bag (every scan), cut by ``mrm import-bag``."""
+    row: dict[str, Any] = {"log": f"{name}.bag" if dense else name, "robots": robots}
     tag = f"{name}_{robots}" + (f"_o{args.overlap_scans}" if args.overlap_scans else "")
+    tag = f"bag_{tag}" if dense else tag
     bag, out = args.work / "bags" / tag, args.work / "runs" / tag
     # The log lies beside the run folder: replay refuses a folder that holds files unless
     # --overwrite, which replaces it as a whole at the end.
@@ -54,7 +68,10 @@ def run_case(name: str, robots: int, args: argparse.Namespace) -> dict[str, Any]
     log = out.parent / f"{tag}.log"
     log.write_text("")
     try:
-        imported_bag(name, robots, bag, args.overlap_scans, log)
+        if dense:
+            imported_dense_bag(name, robots, bag, log)
+        else:
+            imported_bag(name, robots, bag, args.overlap_scans, log)
         overrides = [item for pair in args.set for item in ("--set", pair)]
         replay = ["replay", str(bag), "--out", str(out), "--method", args.method]
         row["replay_wall_s"] = mrm([*replay, "--overwrite", *overrides], log)
@@ -114,6 +131,35 @@ def table_row(row: dict[str, Any]) -> str:
         fmt(s.get("total_s"), 1),
         fmt(m["pair_success"]),
         links,
+        "?" if wrong is None else f"{wrong[0]} ({wrong[1]})",
+    ]
+    return head + " | ".join(cells) + " |"
+
+
+# Issue 47's table of the dense bags: each bag cut into K robots, end to end.
+BAG_COLUMNS = (
+    "bag | robots | right / claimed / unmerged | worst own-frame ATE (m) | unposed | "
+    "ATE merged (m) | replay (s) | wrong links (wrong only by the reference)"
+)
+
+
+def bag_row(row: dict[str, Any]) -> str:
+    """One row of :data:`BAG_COLUMNS`: "right" are the robots one rigid alignment of the map
+    confirms, "claimed" those the merger placed, "unmerged" those it reported unmerged."""
+    head = f"| {row['log']} | {row['robots']} | "
+    if "error" in row:
+        return head + f"failed: {row['error'][:90]} |" + " |" * 5
+    m = row["metrics"]
+    robots = m["robots"].values()
+    claimed = sum(not r["reported_unmerged"] for r in robots)
+    own = [r["ate_own_frame_m"] for r in robots if r.get("ate_own_frame_m") is not None]
+    wrong = row.get("links_wrong")
+    cells = [
+        f"{m['robots_merged']} / {claimed} / {m['robots_total'] - claimed}",
+        fmt(max(own), 3) if own else "—",
+        _unposed(m),
+        fmt(m["ate_rmse_m"], 3),
+        fmt(row["stats"].get("total_s"), 0),
         "?" if wrong is None else f"{wrong[0]} ({wrong[1]})",
     ]
     return head + " | ".join(cells) + " |"
@@ -187,17 +233,27 @@ def _summary_row(log: str, cuts: dict[int, dict[str, Any]]) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
-def print_table(path: Path, summary: bool) -> None:
-    """The table (or with ``summary`` the README's summary) of the runs saved at ``path``."""
+def print_table(path: Path, summary: bool, bags: bool = False) -> None:
+    """The table (with ``summary`` the README's summary; with ``bags`` issue 47's table of the
+    dense bags) of the runs saved at ``path``."""
     rows = json.loads(path.read_text())["rows"]
-    columns = SUMMARY_COLUMNS if summary else COLUMNS
+    if bags:
+        rows = [row for row in rows if row["log"].endswith(".bag")]
+        lines = [bag_row(row) for row in rows]
+        columns = BAG_COLUMNS
+    else:
+        lines = summary_rows(rows) if summary else [table_row(row) for row in rows]
+        columns = SUMMARY_COLUMNS if summary else COLUMNS
     print(f"| {columns} |\n|" + " --- |" * (columns.count("|") + 1))
-    print("\n".join(summary_rows(rows) if summary else (table_row(row) for row in rows)))
+    print("\n".join(lines))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--logs", nargs="+", default=["intel", "aces", "fhw", "csail"])
+    parser.add_argument(
+        "--logs", nargs="+", help="default intel aces fhw csail, or none with --bags"
+    )
+    parser.add_argument("--bags", nargs="+", default=[], help="shared dense bags (intel aces ...)")
     parser.add_argument("--robots", type=int, nargs="+", default=[2, 4, 8])
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--work", type=Path, default=OUTPUT / "merge_table")
@@ -208,26 +264,31 @@ def main() -> None:
     parser.add_argument("--method", choices=("pivot", "ffs"), default="pivot")
     parser.add_argument("--table", action="store_true", help="print the saved run's table")
     parser.add_argument("--summary", action="store_true", help="print the saved run's summary")
+    parser.add_argument("--bag-table", action="store_true", help="print the saved bags' table")
     args = parser.parse_args()
-    if args.table or args.summary:
-        print_table(args.json or args.work / "merge_table.json", args.summary)
+    if args.table or args.summary or args.bag_table:
+        print_table(args.json or args.work / "merge_table.json", args.summary, args.bag_table)
         return
+    if args.logs is None:
+        args.logs = [] if args.bags else ["intel", "aces", "fhw", "csail"]
     if args.quick:
         args.logs, args.robots = ["intel"], [2]
     args.work = args.work.resolve()
-    cases = [(name, k) for name in present_logs(args.logs) for k in args.robots]
+    cases = [(name, k, False) for name in present_logs(args.logs) for k in args.robots]
+    cases += [(name, k, True) for name in present_bags(args.bags) for k in args.robots]
     started = time.perf_counter()
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:  # the work is in the mrm children
-        futures = [pool.submit(run_case, name, k, args) for name, k in cases]
+        futures = [pool.submit(run_case, name, k, args, dense) for name, k, dense in cases]
         for future in as_completed(futures):
-            print(table_row(future.result()), file=sys.stderr, flush=True)
+            row = future.result()
+            print((bag_row if row["log"].endswith(".bag") else table_row)(row), file=sys.stderr)
     rows = [future.result() for future in futures]  # in grid order
     wall = time.perf_counter() - started
     path = args.json or args.work / "merge_table.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     report = {"wall_s": wall, "jobs": args.jobs, "overrides": args.set, "rows": rows}
     path.write_text(json.dumps(report, indent=1) + "\n")
-    print_table(path, summary=False)
+    print_table(path, summary=False, bags=bool(args.bags) and not args.logs)
     print(
         f"{len(rows)} runs, wall {wall / 60:.1f} min, --jobs {args.jobs} -> {path}", file=sys.stderr
     )
