@@ -29,8 +29,8 @@ def _row(robots: int) -> dict[str, object]:
 
 
 def test_a_bag_row_counts_right_claimed_and_unmerged_and_the_worst_own_frame_ate() -> None:
-    row = merge_table.bag_row({**_row(3), "links_wrong": (1, 0)})
-    assert row == "| aces.bag | 3 | 1 / 2 / 1 | 0.120 | 2.5 % | 0.091 | 123 | 1 (0) |"
+    row = merge_table.bag_row({**_row(3), "links_judged": (1, 0, 4, 30)})
+    assert row == "| aces.bag | 3 | 1 / 2 / 1 | 0.120 | 2.5 % | 0.091 | 123 | 1 (0) / 4 / 30 |"
 
 
 def test_a_failed_bag_run_says_why_in_its_row() -> None:
