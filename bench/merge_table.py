@@ -18,7 +18,8 @@ metrics.json of each run, the wall time of each step) to ``--json`` (default
 WORK/merge_table.json). ``--jobs N`` runs N (log, K) cases at once; every child is limited to
 one thread. ``--quick`` is intel, K = 2 only. A missing log is skipped with a note; a failing
 step is reported in its row. ``--table`` prints the table of an earlier run's JSON without
-running anything; ``--summary`` prints the README's summary of it (one row per log:
+running anything (``--collect`` first saves it from every run evaluated in WORK, as after runs
+of several invocations); ``--summary`` prints the README's summary of it (one row per log:
 bench/results.py renders both).
 
 Target (issue 5): every robot merged in every case, ATE <= 0.15 m.
@@ -76,15 +77,35 @@ def run_case(
         replay = ["replay", str(bag), "--out", str(out), "--method", args.method]
         row["replay_wall_s"] = mrm([*replay, "--overwrite", *overrides], log)
         row["evaluate_wall_s"] = mrm(["evaluate", str(out), "--bag", str(bag), "--json"], log)
-        row["stats"] = read_results(out).stats
-        row["metrics"] = json.loads((out / METRICS_FILE).read_text())
-        links = row["stats"].get("merge_graph_links", [])
-        row["links_wrong"] = wrong_links(links, bag)
-        if dense:  # few keyframes have a reference pose: judge those that do
-            row["links_judged"] = judged_links(links, bag)
+        row.update(scored(out, bag, dense))
     except Exception as exc:  # one failing case must not stop the table
         row["error"] = str(exc)
     return row
+
+
+def scored(out: Path, bag: Path, dense: bool) -> dict[str, Any]:
+    """The figures of a run evaluated in ``out`` (of the cut ``bag``)."""
+    figures: dict[str, Any] = {"stats": read_results(out).stats}
+    figures["metrics"] = json.loads((out / METRICS_FILE).read_text())
+    links = figures["stats"].get("merge_graph_links", [])
+    figures["links_wrong"] = wrong_links(links, bag)
+    if dense:  # few keyframes have a reference pose: judge those that do
+        figures["links_judged"] = judged_links(links, bag)
+    return figures
+
+
+def collected(work: Path) -> list[dict[str, Any]]:
+    """The rows of every run evaluated under ``work`` (runs of several invocations, or of one
+    stopped before it wrote its JSON), named by their folders (``NAME_K``, ``bag_NAME_K``)."""
+    rows = []
+    for out in sorted((work / "runs").iterdir()):
+        if not (out / METRICS_FILE).is_file() or "_o" in out.name:
+            continue
+        dense = out.name.startswith("bag_")
+        name, _, robots = out.name.removeprefix("bag_").rpartition("_")
+        row = {"log": f"{name}.bag" if dense else name, "robots": int(robots)}
+        rows.append(row | scored(out, work / "bags" / out.name, dense))
+    return sorted(rows, key=lambda row: (row["log"], row["robots"]))
 
 
 def wrong_links(links: list[list[Any]], bag: Path) -> tuple[int, int] | None:
@@ -283,9 +304,17 @@ def main() -> None:
     parser.add_argument("--table", action="store_true", help="print the saved run's table")
     parser.add_argument("--summary", action="store_true", help="print the saved run's summary")
     parser.add_argument("--bag-table", action="store_true", help="print the saved bags' table")
+    parser.add_argument(
+        "--collect", action="store_true", help="save the JSON of every run evaluated in WORK"
+    )
     args = parser.parse_args()
-    if args.table or args.summary or args.bag_table:
+    if (args.table or args.summary or args.bag_table) and not args.collect:
         print_table(args.json or args.work / "merge_table.json", args.summary, args.bag_table)
+        return
+    if args.collect:
+        path = args.json or args.work / "merge_table.json"
+        path.write_text(json.dumps({"rows": collected(args.work)}, indent=1) + "\n")
+        print_table(path, summary=False, bags=args.bag_table)
         return
     if args.logs is None:
         args.logs = [] if args.bags else ["intel", "aces", "fhw", "csail"]
