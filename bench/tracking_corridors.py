@@ -95,6 +95,22 @@ def run_bag(name: str, settings: dict[str, Any], show_pieces: bool = False) -> d
     }
 
 
+# A bent piece's drift: its error along the way, fitted on its first scans with a reference pose.
+_DRIFT_FIT = 30
+
+
+def _drift(scans: np.ndarray, poses: np.ndarray, truth: np.ndarray) -> str:
+    """Every 10th reference-posed scan's error (m) once the piece is fitted onto the reference
+    by its first :data:`_DRIFT_FIT` of them: a slow slide, or a step."""
+    fit = _DRIFT_FIT
+    T = se2.pose_from_matrix(se2.fit_points(poses[:fit, :2], truth[:fit, :2]))
+    moved = se2.compose_each(np.tile(T, (len(poses), 1)), poses)
+    errors = np.hypot(*(moved[:, :2] - truth[:, :2]).T)
+    return "drift: " + ", ".join(
+        f"{s} {e:.2f}" for s, e in zip(scans[::10], errors[::10], strict=True)
+    )
+
+
 def _print_pieces(
     mapper: LocalMapper, stamps: np.ndarray, index: np.ndarray, reference: np.ndarray
 ) -> None:
@@ -118,6 +134,8 @@ def _print_pieces(
             T_reference_piece[piece] = T
             line += f", own rigid fit RMSE {np.sqrt(np.mean(errors**2)):.3f} m"
             line += f" (worst {errors.max():.2f} m, {posed.sum()} posed)"
+            if errors.max() > BREAK_M and posed.sum() > _DRIFT_FIT:
+                line += "\n  " + _drift(scans[posed], poses[posed], truth)
         print(line)
     assert isinstance(mapper.backend, Backend)  # in line: the bench's mapper has no worker
     for weighed in mapper.backend.closer.weighed:
