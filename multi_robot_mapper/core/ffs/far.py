@@ -28,7 +28,8 @@ Cooling (Sec. 3.2, Algorithm 1 line 14): σ shrinks geometrically from ``sigma_s
 (Δt / Δt_0)², Δt cooled by the same factor, never below _FINAL_STEP_SHARE. While σ is wide the
 bodies are resampled coarser (one mass-weighted point per cell of at most σ, Sec. 3.3's
 optional resampling and 3.5.1's approximation) and at most _PULLED points are pulled per
-iteration, so that a wide field stays fast. The run ends
+iteration, fewer where bodies overlap so that about _PAIRS point pairs are examined (the
+budget follows the last iteration's count), so that a wide field stays fast. The run ends
 (line 15, read with ``<``) once σ has cooled and the largest relocation of a moving body is
 below ``stop_relocation`` (the largest, not the average: a chain's end still creeping while the
 rest stands still is not settled).
@@ -67,6 +68,9 @@ _OCTANTS = 8
 # keyframes see one room a point has a pull from each, and all of them would be 5-20 times
 # the 20 ms an iteration may take.
 _PULLED = 1000
+# Point pairs examined per iteration at most (about): where dozens of keyframes overlap
+# (freiburg-079: 225 000 pairs for 1 000 points at the widest σ) fewer points are pulled.
+_PAIRS = 60000
 # Levenberg damping, relative to each pose parameter's own curvature: small enough that a
 # chain's soft modes (a corridor's length) converge in a few steps. It does not hold a body
 # whose walls all run one way (aces's corridors slid metres: docs/decisions.md).
@@ -89,6 +93,7 @@ class _Pulls:
     normal: FloatArray  # (M, 2)
     foot: FloatArray  # (M, 2) the soft-nearest point of the other body
     weight: FloatArray
+    pairs: int  # point pairs examined (within the cut-off)
 
 
 def coarser(bodies: Bodies, cell: float) -> Bodies:
@@ -136,11 +141,12 @@ def wall_pulls(
     sigma: float,
     cell: float,
     cutoff: float,
+    pulled: int = _PULLED,
 ) -> _Pulls:
     """Every point's pull towards each other body's nearest wall in reach (module doc);
     ``points``, ``directions`` placed in ``map``, ``cell`` the points' spacing."""
     # Every point is a wall to pull towards; every stride-th one is pulled (module doc).
-    sources = np.arange(0, len(points), max(1, -(-len(points) // _PULLED)))
+    sources = np.arange(0, len(points), max(1, -(-len(points) // pulled)))
     pairs = cKDTree(points[sources]).sparse_distance_matrix(
         cKDTree(points), cutoff * sigma, output_type="ndarray"
     )
@@ -169,7 +175,7 @@ def wall_pulls(
     distance = np.einsum("ij,ij->i", normal, points[point] - foot)
     face = np.einsum("ij,ij->i", directions[point], tangent)
     weight = bodies.masses[point] * face * np.exp(-(distance**2) / (2.0 * sigma**2))
-    return _Pulls(point, bodies.body[point], keys % bodies.count, normal, foot, weight)
+    return _Pulls(point, bodies.body[point], keys % bodies.count, normal, foot, weight, len(pairs))
 
 
 def _jacobians(pulls: _Pulls, points: FloatArray, centres: FloatArray) -> FloatArray:
@@ -226,7 +232,7 @@ def joint_step(
     return step.reshape(count, 3)
 
 
-def _centres_and_radii(bodies: Bodies, points: FloatArray) -> tuple[FloatArray, FloatArray]:
+def centres_and_radii(bodies: Bodies, points: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Each body's centre of mass in ``map`` (K, 2) and radius of gyration about it (K,)."""
     count = bodies.count
     mass = np.maximum(np.bincount(bodies.body, bodies.masses, count), 1e-12)
@@ -265,7 +271,7 @@ def start_width(translation: float, rotation: float, bodies: Bodies) -> float:
     / 2``. The paper's ratio: σ from 15 cm for its ±30 cm (Sec. 4.2), half the shift (its
     scans, a few metres across, are not turned far in its σ). For ±0.30 m / ±20° and
     r ≈ 3 m: about 0.55 m."""
-    _, radii = _centres_and_radii(bodies, bodies.points)
+    _, radii = centres_and_radii(bodies, bodies.points)
     owned = np.bincount(bodies.body, minlength=bodies.count) > 0
     radius = float(np.median(radii[owned])) if owned.any() else 0.0
     return 0.5 * float(np.hypot(translation, rotation * radius))
@@ -288,7 +294,7 @@ def run_ffs_far(
     sigma, dt = config.sigma_start, config.dt_start
     potentials: list[float] = []
     relocations: list[float] = []
-    converged, iteration = False, 0
+    converged, iteration, pulled = False, 0, _PULLED
     while iteration < config.max_iterations:
         if config.time_budget > 0.0 and time.perf_counter() - started > config.time_budget:
             break
@@ -297,9 +303,12 @@ def run_ffs_far(
             rung for rung in ladder if rung[0] <= max(sigma / _CELLS_PER_SIGMA, config.spacing)
         ][-1]
         points, directions = placed(level, poses)
-        pulls = wall_pulls(points, directions, level, sigma, cell, config.cutoff)
+        pulls = wall_pulls(points, directions, level, sigma, cell, config.cutoff, pulled)
+        # Sec. 3.5.1: a budget of pairs, the pulled points thinned where bodies overlap.
+        sources = -(-len(points) // max(1, -(-len(points) // pulled)))
+        pulled = int(np.clip(sources * _PAIRS / max(pulls.pairs, 1), 100, _PULLED))
         potentials.append(-float(pulls.weight.sum()))
-        centres, radii = _centres_and_radii(level, points)
+        centres, radii = centres_and_radii(level, points)
         # Eq. 8-9: the step's share (Δt / Δt_0)², Δt cooling as the paper's (5 -> 1 there).
         share = max(_FINAL_STEP_SHARE, (dt / config.dt_start) ** 2)
         step = joint_step(pulls, points, centres, free) * share
