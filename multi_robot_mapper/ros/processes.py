@@ -91,7 +91,7 @@ class NodeProcesses:
                     list(command),
                     env=env,
                     stdout=output,
-                    stderr=None if inherit_output else subprocess.STDOUT,
+                    stderr=None if inherit_output and log_dir is None else subprocess.STDOUT,
                     preexec_fn=_new_process_group if sys.platform == "linux" else None,
                 )
                 if log_dir is not None:

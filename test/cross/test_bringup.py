@@ -155,7 +155,12 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(
     # test_merging's SIMULATED_WORLD_JOIN_PROBABILITY (-p reaches the merger).
     command += ["-p", f"merge.join_probability:={SIMULATED_WORLD_JOIN_PROBABILITY}"]
     command += ["--in-process"] if in_process else []
-    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    # A session of its own, so that the signal can go to its whole process group, as a
+    # terminal's Ctrl-C does: each node process, in a group of its own, gets one SIGINT, from
+    # mrm run.
+    process = subprocess.Popen(
+        command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True
+    )
     try:
         with isolated_context() as context:
             observer = Observer(robots, context=context)
@@ -179,7 +184,7 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(
                 executor.shutdown()
                 observer.destroy_node()
                 driver.destroy_node()
-        process.send_signal(stop)
+        os.killpg(process.pid, stop)
         out, err = _communicate_or_dump(process, timeout=20.0)
     finally:
         if process.poll() is None:
