@@ -159,9 +159,7 @@ def play(args: argparse.Namespace, nodes: NodeProcesses, robots: list[str]) -> d
         deadline = begun + 60.0 * args.wall_limit if args.wall_limit else float("inf")
         waited = 0
         try:
-            while any(p.get_subscription_count() == 0 for p in scans.values()):
-                time.sleep(0.1)
-            time.sleep(2.0)  # both ends matched: the first scans are not lost to discovery
+            _matched(scans.values())
             ticks = int(args.minutes * 60.0 * RATE_HZ)
             for tick in range(ticks):
                 stamp = SIM_START_S + tick / RATE_HZ
@@ -180,11 +178,7 @@ def play(args: argparse.Namespace, nodes: NodeProcesses, robots: list[str]) -> d
                 if time.monotonic() > deadline:
                     break
             sent = (tick + 1) * len(robots)
-            # The last scans mapped, the last maps merged; a last clock tick moves the timers.
-            _wait(lambda: watch.slowest() >= stamp - 1e-6, 10.0)
-            for extra in range(1, 51):
-                clock.publish(Clock(clock=stamp_from_seconds(stamp + extra / RATE_HZ)))
-                time.sleep(0.1)
+            _drain(watch, clock, stamp)
             samples.append(sample(nodes, watch.clock, time.monotonic() - begun))
         finally:
             executor.shutdown()
@@ -202,6 +196,22 @@ def play(args: argparse.Namespace, nodes: NodeProcesses, robots: list[str]) -> d
         "sim_min": watch.clock,
         "merger_status": dict(watch.merger),
     }
+
+
+def _matched(publishers: Any) -> None:
+    """Every scan topic has its mapper; then a little longer, so that both ends have matched
+    and the first scans are not lost to discovery."""
+    while any(p.get_subscription_count() == 0 for p in publishers):
+        time.sleep(0.1)
+    time.sleep(2.0)
+
+
+def _drain(watch: Watch, clock: Any, stamp: float) -> None:
+    """The last scans mapped, the last maps merged: the clock moves on 5 s more."""
+    _wait(lambda: watch.slowest() >= stamp - 1e-6, 10.0)
+    for extra in range(1, 51):
+        clock.publish(Clock(clock=stamp_from_seconds(stamp + extra / RATE_HZ)))
+        time.sleep(0.1)
 
 
 def _wait(condition: Any, timeout: float) -> bool:
