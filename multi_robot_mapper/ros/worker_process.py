@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import threading
 import time
 from collections.abc import Callable
@@ -40,6 +41,10 @@ def _serve(jobs: Connection, parent: int | None = None) -> None:
     worker's own state first (a dict it may keep things in between jobs, e.g. the back end
     it hosts), a local of this loop, not a module global. ``parent``: the node's process id;
     the worker ends as soon as that process is gone."""
+    # A terminal's Ctrl-C reaches every process of its group, this one too when its node runs
+    # in the foreground (mrm run --in-process): it would interrupt the job with a traceback.
+    # The node ends its worker itself (shutdown), and a dead node's worker ends below.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if parent is not None:
         threading.Thread(target=_end_with, args=(parent,), name="parent watch", daemon=True).start()
     state: dict[str, Any] = {}
