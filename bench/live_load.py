@@ -10,7 +10,7 @@ by the wall clock, stamped on a simulated clock that advances with it, for ``--m
 The nodes run as a user runs them (``--layout``):
   processes    one ``robot_mapper`` process per robot (what runs on each robot) and one
                ``map_merger`` process (the default)
-  one-process  ``mrm run``: every node in one process, one Python interpreter lock
+  one-process  ``mrm run --in-process``: every node in one process, one Python interpreter lock
 
 Sampled every ``--sample`` seconds, per window and in total:
   scans       published / received by each robot_mapper (its /diagnostics "scans received");
@@ -68,6 +68,7 @@ from multi_robot_mapper.io.messages import stamp_from_seconds  # noqa: E402
 from multi_robot_mapper.ros.live import Observer, ScanPlayer  # noqa: E402
 from multi_robot_mapper.ros.processes import (  # noqa: E402
     NodeProcesses,
+    map_merger_command,
     process_usage,
     robot_mapper_command,
 )
@@ -203,15 +204,15 @@ def main() -> int:
     if args.layout == "processes":
         rate = ["-p", f"max_scan_rate:={args.max_scan_rate}"]
         commands = {r: robot_mapper_command(r, rate) for r in robots}
-        commands["merger"] = [
-            *(sys.executable, "-m", "multi_robot_mapper.ros.map_merger", "--ros-args"),
-            *("-p", f"robots:={names}", "-p", "save_on_shutdown:=true"),
-            *("-p", f"map_file:={args.logs.resolve() / 'merged_map.json'}"),
-        ]
+        commands["merger"] = map_merger_command(
+            [
+                *("-p", f"robots:={names}", "-p", "save_on_shutdown:=true"),
+                *("-p", f"map_file:={args.logs.resolve() / 'merged_map.json'}"),
+            ]
+        )
     else:
-        commands = {
-            "all": [sys.executable, "-m", "multi_robot_mapper.cli.main", "run", "--robots", names]
-        }
+        run = [sys.executable, "-m", "multi_robot_mapper.cli.main", "run", "--in-process"]
+        commands = {"all": [*run, "--robots", names]}
     nodes = NodeProcesses(commands, domain, log_dir=args.logs)
     samples: list[dict[str, Any]] = []
     try:

@@ -4,8 +4,9 @@ The scenario: three robots drive partly overlapping stretches of the built-in of
 (``core/worlds.py``, ray cast by ``core/simulation.py``), each with a simulated Hokuyo UTM-30LX
 (40 Hz, 1081 beams, 270°), starting ``stagger`` seconds apart, none knowing where the others
 are. Their scans are published live on ``/robotK/scan`` at the laser's own rate (``--speed``
-plays faster or slower) into real ``robot_mapper`` nodes and a real ``map_merger`` spun in this
-process over real DDS topics, with the shipped default parameters. Everything drawn and scored
+plays faster or slower) into real ``robot_mapper`` nodes and a real ``map_merger``, each a
+process of its own as on a team's computers, over real DDS topics, with the shipped default
+parameters. Everything drawn and scored
 comes back over the nodes' topics (``/global_map``, ``/robot_frames/<robot>``,
 ``/<robot>/pose``, ``/<robot>/partial_map``, ``/global_grid``, ``/diagnostics``).
 
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import threading
 import time
 from collections.abc import Sequence
@@ -28,9 +30,8 @@ from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 
 from multi_robot_mapper.cli.recordings import read_as_usual
 from multi_robot_mapper.core import se2
@@ -39,13 +40,17 @@ from multi_robot_mapper.core.worlds import WORLDS
 from multi_robot_mapper.evaluation.metrics import Metrics, evaluate
 from multi_robot_mapper.io import pictures
 from multi_robot_mapper.io.bags import RobotRecording, recording_of, write_recordings
+from multi_robot_mapper.io.messages import partial_map_contents
 from multi_robot_mapper.io.output_bag import OutputBag
 from multi_robot_mapper.io.outputs import atomic_write_text, staged_entries
 from multi_robot_mapper.io.results import ReplayResult, write_results
 from multi_robot_mapper.ros.live import GlobalMapView, Observer, PlayStats, ScanPlayer, timeline
-from multi_robot_mapper.ros.map_merger import MapMerger
 from multi_robot_mapper.ros.markers import grid_from_msg
-from multi_robot_mapper.ros.processes import NodeProcesses
+from multi_robot_mapper.ros.processes import (
+    NodeProcesses,
+    map_merger_command,
+    robot_mapper_command,
+)
 from multi_robot_mapper.ros.recording import LiveRecorder
 from multi_robot_mapper.ros.testing import default_domain_id, isolated_context
 
@@ -82,6 +87,9 @@ class LiveOutcome:
     play_started: float  # time.monotonic() of the first scan
     scans_received: dict[str, int]  # as each robot_mapper's last /diagnostics said
     settled: bool  # every final partial map was merged before settle_timeout
+    # received, then dropped for waiting longer than scan_max_queue_delay (the mapper was
+    # behind): as lost as a scan dropped in transit
+    scans_stale: dict[str, int]
 
 
 @dataclasses.dataclass
@@ -121,12 +129,25 @@ def play_live(
     record: Path | None = None,
 ) -> LiveOutcome:
     """Play the recordings live into a robot_mapper process per robot (as on the robots) and
-    a map_merger in this process, watch their topics; the merger saves its map to
-    ``saved_map`` at the end. ``record``: an MCAP file of the merger's outputs as they
-    arrived (:class:`~multi_robot_mapper.ros.recording.LiveRecorder`)."""
+    a map_merger process, watch their topics; the merger saves its map to ``saved_map`` as it
+    stops. ``record``: an MCAP file of the merger's outputs as they arrived
+    (:class:`~multi_robot_mapper.ros.recording.LiveRecorder`)."""
     with contextlib.ExitStack() as stack:
         bag = None if record is None else stack.enter_context(OutputBag(record))
         return _play_live(recordings, scenario, saved_map, log_dir, bag)
+
+
+def _node_processes(robots: list[str], saved_map: Path, log_dir: Path | None) -> NodeProcesses:
+    """A robot_mapper per robot and the map_merger, with the shipped defaults; the merger
+    saves its map on shutdown."""
+    commands = {robot: robot_mapper_command(robot) for robot in robots}
+    commands["map_merger"] = map_merger_command(
+        [
+            *("-p", f"robots:={','.join(robots)}", "-p", "save_on_shutdown:=true"),
+            *("-p", f"map_file:={json.dumps(str(saved_map.resolve()))}"),
+        ]
+    )
+    return NodeProcesses(commands, default_domain_id(), log_dir=log_dir)
 
 
 def _play_live(
@@ -137,70 +158,75 @@ def _play_live(
     bag: OutputBag | None,
 ) -> LiveOutcome:
     robots = list(recordings)
-    domain = default_domain_id()
-    mappers = NodeProcesses.robot_mappers(robots, domain, log_dir=log_dir)
+    nodes = _node_processes(robots, saved_map, log_dir)
     try:
-        with isolated_context(domain) as context:
-            merger = MapMerger(
-                context=context, parameter_overrides=[Parameter("robots", value=",".join(robots))]
-            )
+        with isolated_context(default_domain_id()) as context:
             observer = Observer(robots, context=context)
             driver = Node("demo_player", context=context)
             player = ScanPlayer(driver, robots, scenario.speed)
-            executor = MultiThreadedExecutor(num_threads=3, context=context)
-            nodes: list[Node] = [merger, observer, driver]
+            # One thread: the callbacks here are short, and rclpy's multi-threaded executor
+            # spends more CPU waking than they take (the mappers need those cores).
+            executor = SingleThreadedExecutor(context=context)
+            watchers: list[Node] = [observer, driver]
             if bag is not None:
-                nodes.append(LiveRecorder(robots, bag, context=context))
-            for node in nodes:
+                watchers.append(LiveRecorder(robots, bag, context=context))
+            for node in watchers:
                 executor.add_node(node)
             spinner = threading.Thread(target=executor.spin, daemon=True)
             spinner.start()
             try:
-                if not _wait(player.subscribed, 30.0):
+                if not _wait(lambda: player.subscribed() and _merger_up(driver), 30.0):
                     raise RuntimeError(
-                        "the robot_mapper processes did not subscribe to their scans within "
-                        f"30 s (running: {mappers.running()}; logs: {log_dir})"
+                        "the node processes did not subscribe to their inputs within 30 s "
+                        f"(running: {nodes.running()}; logs: {log_dir})"
                     )
                 started = time.monotonic()
                 scans = {r: rec.scans for r, rec in recordings.items()}
                 stats = player.play(timeline(scans, 0.025))
-                done = _wait(lambda: _settled(merger, observer), scenario.settle_timeout)
+                done = _wait(lambda: _settled(observer), scenario.settle_timeout)
                 time.sleep(1.5)  # the last global map, frames and diagnostics arrive
-                merger.save_map(str(saved_map))
+                codes = nodes.stop()  # the merger saves its map as it stops
             finally:
                 executor.shutdown()
                 spinner.join(timeout=10.0)
-                for node in nodes:
+                for node in watchers:
                     node.destroy_node()
     finally:
-        mappers.stop()
-    received = {
-        robot: int(observer.status_value(f"{robot}/robot_mapper", "scans received") or 0)
-        for robot in robots
-    }
-    return LiveOutcome(observer, stats, started, received, done)
+        nodes.stop()
+    if codes.get("map_merger") != 0:
+        raise RuntimeError(f"the map_merger did not stop cleanly: {codes} (logs: {log_dir})")
+
+    def count(robot: str, key: str) -> int:
+        return int(observer.status_value(f"{robot}/robot_mapper", key) or 0)
+
+    received = {robot: count(robot, "scans received") for robot in robots}
+    stale = {robot: count(robot, "rejected: stale_in_queue") for robot in robots}
+    return LiveOutcome(observer, stats, started, received, done, stale)
 
 
 QUIET_S = 2.5  # no partial map for this long after the last scan: every final map is out
 
 
-def _settled(merger: MapMerger, observer: Observer) -> bool:
-    """Every robot's newest partial map (as the observer saw it) is in the merger's last
-    merge, and no robot has published a map for QUIET_S."""
+def _merger_up(node: Node) -> bool:
+    """The merger process offers its global map (it is subscribed to the robots by then)."""
+    return node.count_publishers("/global_map") > 0
+
+
+def _settled(observer: Observer) -> bool:
+    """No robot has published a map for QUIET_S, and the merger's last /diagnostics says it
+    holds every robot's newest partial map (as many keyframes as the observer's) and has
+    merged everything it received."""
     now = time.monotonic()
     if not observer.partial_maps or any(
         now - observer.partial_map_times[r] < QUIET_S for r in observer.partial_maps
     ):
         return False
-    with merger._lock:
-        stamps = {n: s.map_stamp for n, s in merger.robots.items()}
-    # The newest marker stamp, as the merger takes it (an update restamps only what it sends).
+    held = {r: observer.status_value(f"map_merger/{r}", "keyframes") for r in observer.partial_maps}
     newest = {
-        r: max((mk.header.stamp for mk in m.markers), key=lambda t: (t.sec, t.nanosec))
+        r: str(len(partial_map_contents(m).keyframe_poses))
         for r, m in observer.partial_maps.items()
-        if m.markers
     }
-    return merger.up_to_date() and all(stamps.get(r) == stamp for r, stamp in newest.items())
+    return held == newest and observer.status_value("map_merger", "up to date") == "yes"
 
 
 def _wait(condition: object, timeout: float) -> bool:

@@ -74,11 +74,14 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         + ", ".join(f"{r} {n}" for r, n in live.scans_received.items())
         + ")"
     )
-    if received < sent:
+    stale = sum(live.scans_stale.values())
+    if received < sent or stale:
         print(
-            f"  {sent - received} scans dropped in transit (a mapper keeps the newest "
-            f"{SCAN_QUEUE_DEPTH} while it is busy: the machine could not keep up; they count as "
-            "unposed below; --speed 0.5 plays at half the pace)"
+            f"  {sent - received + stale} scans dropped: {sent - received} in transit, {stale} "
+            f"received but older than scan_max_queue_delay when their turn came (a mapper keeps "
+            f"the newest {SCAN_QUEUE_DEPTH} while it is busy and maps the fresh ones first: the "
+            "machine could not keep up; they count as unposed below; --speed 0.5 plays at half "
+            "the pace)"
         )
     print()
     print(result.table)

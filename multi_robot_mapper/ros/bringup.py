@@ -1,9 +1,10 @@
 """Every node of a multi-robot mapping system in one process, without launch files.
 
 One ``robot_mapper`` per robot namespace and one ``map_merger`` that merges exactly those
-robots: what ``mrm run`` spins on a multi-threaded executor (as a component container would),
-and what tests build in their own contexts. (``mrm demo`` and ``bench/live_load.py`` run the
-robots' mappers in processes of their own instead: ``ros/processes.py``.)
+robots: what ``mrm run --in-process`` spins on a multi-threaded executor (as a component
+container would), and what tests build in their own contexts. (``mrm run``, ``mrm demo`` and
+``bench/live_load.py`` run the robots' mappers in processes of their own instead:
+``ros/processes.py``.)
 """
 
 from __future__ import annotations

@@ -190,9 +190,12 @@ def merge_status(
     errors: int,
     last_merge_s: float | None,
     robots: int,
+    up_to_date: bool | None = None,
 ) -> DiagnosticStatus:
     """The merger's own status, named ``map_merger``: OK when every robot is merged, WARN
-    when some are not (or the last merge failed), STALE before the first merge."""
+    when some are not (or the last merge failed), STALE before the first merge.
+    ``up_to_date``: every partial map received is in the last merge (None: not known), what
+    a watcher in another process waits for before it reads the final map (``mrm demo``)."""
     placed = 0 if result is None else sum(p is not None for p in result.placements.values())
     if result is None:
         level, message = STALE, "no merge yet"
@@ -207,6 +210,7 @@ def merge_status(
         ("merges", str(merges)),
         ("merge errors", str(errors)),
         ("last merge (s)", _number(last_merge_s)),
+        ("up to date", "-" if up_to_date is None else ("yes" if up_to_date else "no")),
         ("global map segments", "0" if result is None else str(len(result.segments))),
     ]
     return _status("map_merger", "map_merger", level, message, values)

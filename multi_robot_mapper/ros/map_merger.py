@@ -530,12 +530,9 @@ class MapMerger(SavedMapServices, Node):
             stamps = [s.map_stamp for s in states if s.map_stamp is not None]
             stamps += [s.pose_stamp for s in states if s.pose_stamp is not None]
             statuses = robot_statuses(states, result, self._clock_ns(), self.config.stale_timeout)
-        statuses.insert(
-            0,
-            diagnostics.merge_status(
-                result, self.merges, self.merge_errors, self.last_merge_s, len(statuses)
-            ),
-        )
+        # Asked after the robots' statuses were taken: a map arriving in between says "no".
+        merged = (self.merges, self.merge_errors, self.last_merge_s, len(statuses))
+        statuses.insert(0, diagnostics.merge_status(result, *merged, self.up_to_date()))
         if statuses:
             self._diagnostics_pub.publish(diagnostics.diagnostic_array(statuses, newest(stamps)))
 

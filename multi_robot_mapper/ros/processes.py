@@ -1,8 +1,8 @@
 """Nodes in processes of their own, as ``ros2 run`` starts them (a robot's mapper runs on its
 robot): started on one DDS domain, stopped with SIGINT, their CPU time and memory read from
-``/proc`` (Linux). ``mrm demo`` and ``bench/live_load.py`` run one ``robot_mapper`` process
-per robot so that the robots' scans are processed on every core, not under one interpreter
-lock.
+``/proc`` (Linux). ``mrm run``, ``mrm demo`` and ``bench/live_load.py`` run one
+``robot_mapper`` process per robot (``mrm run`` the ``map_merger`` in one more) so that the
+robots' scans are processed on every core, not under one interpreter lock.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -31,6 +32,15 @@ def _ended_with_parent() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
+def _new_process_group() -> None:
+    """In a child, before its command runs: a process group of its own, so that a terminal's
+    Ctrl-C (sent to the whole foreground group) reaches only the parent, which passes exactly
+    one SIGINT on. A node that gets a second SIGINT takes it for a shutdown that hangs and
+    raises KeyboardInterrupt wherever it is (ros/entry.py), with a traceback."""
+    os.setpgid(0, 0)
+    _ended_with_parent()
+
+
 def robot_mapper_command(robot: str, ros_args: Sequence[str] = ()) -> list[str]:
     """The command that runs ``robot_mapper`` in ``/<robot>`` with this interpreter."""
     return [
@@ -44,17 +54,27 @@ def robot_mapper_command(robot: str, ros_args: Sequence[str] = ()) -> list[str]:
     ]
 
 
+def map_merger_command(ros_args: Sequence[str] = ()) -> list[str]:
+    """The command that runs ``map_merger`` with this interpreter."""
+    return [sys.executable, "-m", "multi_robot_mapper.ros.map_merger", "--ros-args", *ros_args]
+
+
 class NodeProcesses:
-    """Named node processes on one ROS domain (their output to ``log_dir/<name>.log``)."""
+    """Named node processes on one ROS domain (``domain_id``, or the caller's
+    ``ROS_DOMAIN_ID`` when None), each in a process group of its own. Their output goes to
+    ``log_dir/<name>.log``, to this process's own stdout and stderr with ``inherit_output``,
+    else nowhere."""
 
     def __init__(
         self,
         commands: Mapping[str, Sequence[str]],
-        domain_id: int,
+        domain_id: int | None,
         log_dir: Path | None = None,
+        inherit_output: bool = False,
     ) -> None:
         env = dict(os.environ)
-        env["ROS_DOMAIN_ID"] = str(domain_id)
+        if domain_id is not None:
+            env["ROS_DOMAIN_ID"] = str(domain_id)
         env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         env.pop("ROS_LOCALHOST_ONLY", None)  # deprecated; conflicts with the discovery range
         env["PYTHONUNBUFFERED"] = "1"
@@ -62,7 +82,7 @@ class NodeProcesses:
         self.processes: dict[str, subprocess.Popen[bytes]] = {}
         try:
             for name, command in commands.items():
-                output: int | object = subprocess.DEVNULL
+                output: int | object | None = None if inherit_output else subprocess.DEVNULL
                 if log_dir is not None:
                     log_dir.mkdir(parents=True, exist_ok=True)
                     self.logs[name] = log_dir / f"{name}.log"
@@ -71,8 +91,8 @@ class NodeProcesses:
                     list(command),
                     env=env,
                     stdout=output,
-                    stderr=subprocess.STDOUT,
-                    preexec_fn=_ended_with_parent if sys.platform == "linux" else None,
+                    stderr=None if inherit_output and log_dir is None else subprocess.STDOUT,
+                    preexec_fn=_new_process_group if sys.platform == "linux" else None,
                 )
                 if log_dir is not None:
                     output.close()  # type: ignore[attr-defined]  # the child holds its copy
@@ -95,6 +115,14 @@ class NodeProcesses:
 
     def running(self) -> dict[str, bool]:
         return {name: p.poll() is None for name, p in self.processes.items()}
+
+    def first_exit(self, stop: threading.Event, poll: float = 0.2) -> str | None:
+        """Wait until some process exits (its name) or ``stop`` is set (None)."""
+        while not stop.wait(poll):
+            for name, process in self.processes.items():
+                if process.poll() is not None:
+                    return name
+        return None
 
     def stop(self, timeout: float = 10.0) -> dict[str, int | None]:
         """SIGINT to every process (a clean shutdown), SIGKILL to those still running after

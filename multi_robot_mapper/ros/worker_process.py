@@ -4,7 +4,10 @@ that the node's own threads keep Python's interpreter lock while it runs."""
 from __future__ import annotations
 
 import multiprocessing
+import os
+import signal
 import threading
+import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
@@ -22,11 +25,28 @@ class WorkerClosedError(WorkerDiedError):
     that would try again, or fall back to other jobs, stops instead."""
 
 
-def _serve(jobs: Connection) -> None:
+def _end_with(parent: int, poll: float = 0.5) -> None:
+    """End this process at once when ``parent`` is no longer its parent (it died). A node
+    killed (SIGKILL, out of memory) cannot stop its worker, which would otherwise run its job
+    to the end, minutes of a merge, beside the node started again in its place (a merger
+    restarted mid-run, issue 50), and only then find its pipe closed."""
+    while os.getppid() == parent:
+        time.sleep(poll)
+    os._exit(1)
+
+
+def _serve(jobs: Connection, parent: int | None = None) -> None:
     """The worker's loop: a job ``(function, args, with_state)`` in, ``(True, result)`` or
     ``(False, exception)`` out, until the pipe closes. ``with_state``: the function gets the
     worker's own state first (a dict it may keep things in between jobs, e.g. the back end
-    it hosts), a local of this loop, not a module global."""
+    it hosts), a local of this loop, not a module global. ``parent``: the node's process id;
+    the worker ends as soon as that process is gone."""
+    # A terminal's Ctrl-C reaches every process of its group, this one too when its node runs
+    # in the foreground (mrm run --in-process): it would interrupt the job with a traceback.
+    # The node ends its worker itself (shutdown), and a dead node's worker ends below.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if parent is not None:
+        threading.Thread(target=_end_with, args=(parent,), name="parent watch", daemon=True).start()
     state: dict[str, Any] = {}
     while True:
         try:
@@ -100,7 +120,9 @@ class WorkerProcess:
             # spawn, not fork: forking a process that runs DDS threads is unsafe.
             context = multiprocessing.get_context("spawn")
             ours, theirs = context.Pipe()
-            process = context.Process(target=_serve, args=(theirs,), name=self.name, daemon=True)
+            process = context.Process(
+                target=_serve, args=(theirs, os.getpid()), name=self.name, daemon=True
+            )
             process.start()
             theirs.close()  # the worker's end lives in the worker: its death closes ours
             self._process, self._pipe = process, ours

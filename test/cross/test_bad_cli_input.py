@@ -395,7 +395,7 @@ def _quick_demo(monkeypatch: pytest.MonkeyPatch) -> None:
         atomic_write_text(record, "an MCAP file")
         observer = type("Observer", (), {"diagnostics": {}})()
         sent = {r: len(rec.scans) for r, rec in recordings.items()}
-        return demo.LiveOutcome(observer, PlayStats(sent, [], 1.0), 0.0, sent, True)
+        return demo.LiveOutcome(observer, PlayStats(sent, [], 1.0), 0.0, sent, True, {})
 
     def truth(observer: object) -> ReplayResult:
         robots = sorted(recorded)

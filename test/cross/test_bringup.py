@@ -137,10 +137,15 @@ def _communicate_or_dump(process: subprocess.Popen[bytes], timeout: float) -> tu
 
 
 @pytest.mark.ros
+@pytest.mark.parametrize("in_process", [False, True], ids=["a process per node", "in-process"])
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
-def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) -> None:
-    """``mrm run`` in a process of its own: two simulated robots' scans go in on their topics,
-    the merged global map comes out; SIGINT and SIGTERM end it with exit code 0."""
+def test_mrm_run_maps_and_merges_live_and_stops_cleanly(
+    stop: signal.Signals, in_process: bool
+) -> None:
+    """``mrm run`` in a process of its own (by default its nodes in processes of their own,
+    or with ``--in-process`` all in it): two simulated robots' scans go in on their topics,
+    the merged global map comes out; SIGINT and SIGTERM end it, and every node, with exit
+    code 0."""
     robots = ["robot1", "robot2"]
     env = dict(os.environ, ROS_DOMAIN_ID=str(default_domain_id()))
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -149,7 +154,13 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) ->
     # The simulated office's right join gets P 0.95-0.99 from 30 s of driving: merged at
     # test_merging's SIMULATED_WORLD_JOIN_PROBABILITY (-p reaches the merger).
     command += ["-p", f"merge.join_probability:={SIMULATED_WORLD_JOIN_PROBABILITY}"]
-    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    command += ["--in-process"] if in_process else []
+    # A session of its own, so that the signal can go to its whole process group, as a
+    # terminal's Ctrl-C does: each node process, in a group of its own, gets one SIGINT, from
+    # mrm run.
+    process = subprocess.Popen(
+        command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True
+    )
     try:
         with isolated_context() as context:
             observer = Observer(robots, context=context)
@@ -159,37 +170,21 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) ->
             executor.add_node(observer)
             executor.add_node(driver)
             try:
-                assert spin_until(executor, player.subscribed, 30.0), process.poll()
+                # Every node up (the mappers take their scans, the merger offers its map)
+                # before the signal: a node still starting is not what this test stops.
+                assert spin_until(
+                    executor,
+                    lambda: player.subscribed() and driver.count_publishers("/global_map") > 0,
+                    30.0,
+                ), process.poll()
                 if stop == signal.SIGINT:
-                    # The office: two robots, 30 s each sharing 45 % of their stretches (as
-                    # the demo), every 4th scan (10 Hz), played live.
-                    runs = simulate_robots(
-                        "office", 2, LaserModel(), seed=1, duration=30.0, overlap=0.45
-                    )
-                    scans = {
-                        r: recording_of(r, run).scans[::4]
-                        for r, run in zip(robots, runs, strict=True)
-                    }
-                    player.start(timeline(scans))
-                    # Both robots' frames, and a global map holding both (the frames and the
-                    # map are two topics: either may arrive first).
-                    assert spin_until(
-                        executor,
-                        lambda: (
-                            len(observer.merged()) == 2
-                            and not player.running()
-                            and bool(observer.global_maps)
-                            and len(observer.global_maps[-1].segments) == 2
-                        ),
-                        90.0,
-                    ), (observer.merged(), player.stats.published)
-                    assert spin_until(executor, lambda: observer.grid is not None, 10.0)
+                    _drive_two_robots(executor, observer, player, robots)
             finally:
                 player.stop()
                 executor.shutdown()
                 observer.destroy_node()
                 driver.destroy_node()
-        process.send_signal(stop)
+        os.killpg(process.pid, stop)
         out, err = _communicate_or_dump(process, timeout=20.0)
     finally:
         if process.poll() is None:
@@ -198,6 +193,50 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(stop: signal.Signals) ->
     assert process.returncode == 0, err.decode()
     assert b"Traceback" not in err, err.decode()
     assert b"robot1, robot2 and a map_merger" in out
+    assert (b"in one process" in out) == in_process
+
+
+def _drive_two_robots(executor, observer: Observer, player: ScanPlayer, robots: list[str]) -> None:
+    """The office: two robots, 30 s each sharing 45 % of their stretches (as the demo), every
+    4th scan (10 Hz), played live; both robots' frames and a global map holding both come back
+    (the frames and the map are two topics: either may arrive first)."""
+    runs = simulate_robots("office", 2, LaserModel(), seed=1, duration=30.0, overlap=0.45)
+    scans = {r: recording_of(r, run).scans[::4] for r, run in zip(robots, runs, strict=True)}
+    player.start(timeline(scans))
+    assert spin_until(
+        executor,
+        lambda: (
+            len(observer.merged()) == 2
+            and not player.running()
+            and bool(observer.global_maps)
+            and len(observer.global_maps[-1].segments) == 2
+        ),
+        90.0,
+    ), (observer.merged(), player.stats.published)
+    assert spin_until(executor, lambda: observer.grid is not None, 10.0)
+
+
+@pytest.mark.ros
+def test_mrm_run_ends_with_exit_2_when_a_node_process_refuses_its_parameters(mrm, capsys) -> None:
+    """A value out of its range passes ``mrm run``'s own checks (names only) and is refused by
+    the node that has it: every other node process is stopped and the exit code is 2."""
+    os.environ.setdefault("ROS_DOMAIN_ID", str(default_domain_id()))
+    assert mrm(["run", "--robots", "robot1", "-p", "max_scan_rate:=-5"]) == 2
+    assert "robot1 ended with exit code 2" in capsys.readouterr().err
+
+
+def test_mrm_run_gives_each_node_process_its_own_parameters_typed() -> None:
+    from multi_robot_mapper.cli.run import node_commands, node_parameters
+
+    items = ["max_scan_rate:=10", "merge_period:=2", "map_file:=/tmp/m.json"]
+    mapper, merger = node_parameters(items)
+    commands = node_commands(["r1", "r2"], ["--params-file", "p.yaml"], mapper, merger)
+    assert list(commands) == ["r1", "r2", "map_merger"]
+    shared = ["--params-file", "p.yaml"]
+    assert commands["r2"][-6:] == ["-r", "__ns:=/r2", *shared, "-p", "max_scan_rate:=10.0"]
+    merger_args = commands["map_merger"][commands["map_merger"].index("--ros-args") :]
+    own = ["-p", "merge_period:=2.0", "-p", 'map_file:="/tmp/m.json"']
+    assert merger_args == ["--ros-args", *shared, *own]
 
 
 def test_the_launch_file_parses_and_is_installed() -> None:

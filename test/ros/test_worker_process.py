@@ -54,3 +54,44 @@ def test_a_shutdown_abandons_the_job_and_the_caller_hears_it() -> None:
     with pytest.raises(WorkerClosedError):
         worker.run(os.getpid)
     assert time.monotonic() - started < 0.5 and worker._process is None
+
+
+PARENT = """
+import os, sys, threading, time
+from multi_robot_mapper.ros.worker_process import WorkerProcess
+worker = WorkerProcess()
+print(worker.run(os.getpid), flush=True)
+threading.Thread(target=worker.run, args=(time.sleep, 120.0), daemon=True).start()
+time.sleep(120)
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "getppid"), reason="needs os.getppid")
+def test_a_worker_ends_with_its_killed_node_even_mid_job() -> None:
+    """A node killed with SIGKILL (a merger restarted mid-run) cannot stop its worker: the
+    worker sees its parent gone and ends within a second, not at the end of its job."""
+    import subprocess
+    import sys
+
+    parent = subprocess.Popen([sys.executable, "-c", PARENT], stdout=subprocess.PIPE, text=True)
+    assert parent.stdout is not None
+    worker = int(parent.stdout.readline())
+    time.sleep(0.5)  # the long job has started
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 10.0
+    while _alive(worker) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _alive(worker), "the worker outlived its killed node"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return True  # no /proc: kill(0) said it lives
