@@ -95,8 +95,8 @@ def test_every_path_a_page_names_exists(page: Path) -> None:
 
 def names_code_that_exists(name: str) -> bool:
     """A path (``bench/x.py``, ``core/local_mapping/``), or a module path with what it defines
-    (``core/merging/ffs.merge_ffs``, ``core/pose_graph.ReachBound``: the first name defined in
-    that file, a method defined somewhere in the package)."""
+    (``core/merging/ffs/method.merge_ffs``, ``core/pose_graph.ReachBound``: the first name
+    defined in that file, a method defined somewhere in the package)."""
     path = f"multi_robot_mapper/{name}" if name.startswith(PACKAGE_ROOTS) else name
     if (REPO / path).exists() or path in PENDING:
         return True

@@ -13,7 +13,7 @@ front end (scan -> segments), then a placement method. Methods:
   searched on the others, consistent links only, every keyframe optimised together); a robot
   whose map was linked to no other stays ``"unmerged"``.
 - ``ffs``: ``pivot``, then Force Field Simulation moves every merged keyframe at once
-  (:func:`multi_robot_mapper.core.merging.ffs.merge_ffs`).
+  (:func:`multi_robot_mapper.core.merging.ffs.method.merge_ffs`).
 """
 
 from __future__ import annotations

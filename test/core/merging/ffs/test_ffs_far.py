@@ -1,5 +1,5 @@
-"""FFS from afar (core/ffs/far.py, issue 51): the coarse point sets, the wall pulls, the joint
-step and the paper's experiment 4.2 on synthetic geometry with a known answer."""
+"""FFS from afar (core/merging/ffs/far.py, issue 51): the coarse point sets, the wall pulls, the
+joint step and the paper's experiment 4.2 on synthetic geometry with a known answer."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.ffs import FfsConfig, make_bodies
-from multi_robot_mapper.core.ffs.bodies import placed
-from multi_robot_mapper.core.ffs.far import (
+from multi_robot_mapper.core.merging.ffs import FfsConfig, make_bodies
+from multi_robot_mapper.core.merging.ffs.bodies import placed
+from multi_robot_mapper.core.merging.ffs.far import (
     coarser,
     joint_step,
     levels,

@@ -42,8 +42,8 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.ffs.bodies import Bodies, placed
-from multi_robot_mapper.core.ffs.config import FfsConfig
+from multi_robot_mapper.core.merging.ffs.bodies import Bodies, placed
+from multi_robot_mapper.core.merging.ffs.config import FfsConfig
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
