@@ -96,7 +96,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from multi_robot_mapper.core.pipeline import MethodNotImplementedError, require_method
+    from multi_robot_mapper.core.pipeline import require_method
 
     config = load_mapper_config(args)
     merger = load_merger_config(args)
@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     check_limits(args, "record_period")
     try:
         require_method(args.method)  # before reading a large bag
-    except MethodNotImplementedError as exc:
+    except ValueError as exc:
         raise CliError(str(exc)) from exc
     record = _record_path(args)
     recordings, report = load_recordings(args, args.bags, salvage=args.salvage)

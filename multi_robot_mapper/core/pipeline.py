@@ -57,12 +57,9 @@ from multi_robot_mapper.core.snapshots import (
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-METHODS = ("reference", "local", "pivot", "ffs")
-IMPLEMENTED_METHODS = ("reference", "local", "pivot", "ffs")
-
-
-class MethodNotImplementedError(NotImplementedError):
-    """The requested placement method is not built yet."""
+# The replay's methods: the two that merge nothing, then the merging registry's (the one list
+# of merging methods, core/merging/methods.py).
+METHODS = ("reference", "local", *MERGE_METHODS)
 
 
 # (stage, done, total): stage "mapping <robot>" with scans done of every robot's scans,
@@ -139,14 +136,9 @@ class _FrontEnd:
 
 
 def require_method(method: str) -> None:
-    """Raise unless ``method`` exists and is built (MethodNotImplementedError if not built yet)."""
+    """Raise ValueError unless ``method`` is one of :data:`METHODS`."""
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    if method not in IMPLEMENTED_METHODS:
-        raise MethodNotImplementedError(
-            f"method '{method}' is not implemented yet (it arrives with the local-mapping and "
-            f"merging issues); available: {', '.join(IMPLEMENTED_METHODS)}"
-        )
 
 
 def run_offline(
@@ -178,7 +170,7 @@ def run_offline(
     )
     if snapshots is not None and method not in MERGE_METHODS:
         raise ValueError(f"snapshots need a merging method ({', '.join(MERGE_METHODS)})")
-    if method in ("local", "pivot", "ffs"):
+    if method == "local" or method in MERGE_METHODS:
         config = merging or MergeConfig()
         timeline = None
         if snapshots is not None:
