@@ -11,9 +11,10 @@ import pytest
 
 from multi_robot_mapper.cli.main import build_parser
 from multi_robot_mapper.core.config import field_specs
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.merger_config import MapMergerConfig
-from multi_robot_mapper.io.config_files import default_text, parameters_markdown
+from multi_robot_mapper.io.config_files import default_text
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
+from multi_robot_mapper.ros.params_files import parameters_markdown
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"

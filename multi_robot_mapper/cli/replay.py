@@ -38,10 +38,10 @@ from multi_robot_mapper.cli.recordings import (
     load_recordings,
     replayed_bags,
 )
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.pipeline import METHODS, OfflineMap, TimedLaserScan
 from multi_robot_mapper.io.outputs import staged_folder
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 
 RECORD_PERIOD_S = 10.0
 
@@ -191,6 +191,7 @@ def _replay(
         progress=bar,
         local_mapping=config.local_mapping,
         merging=merger.merge,
+        stream=config.stream_config(),
     )
     try:
         if record is None:

@@ -37,7 +37,6 @@ from multi_robot_mapper.core.local_mapping import (
     LocalMapperConfig,
 )
 from multi_robot_mapper.core.local_mapping.backend import Backend
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.merge_stage import merged as merged_map
 from multi_robot_mapper.core.merging import MergeConfig
 from multi_robot_mapper.core.merging.methods import MERGE_METHODS
@@ -162,12 +161,10 @@ def run_offline(
     ``snapshots`` (the result never depends on whether snapshots were taken).
     ``recordings``: each robot's scans in the order they arrived (a node's subscription
     order), checked against their own stream by ``stream`` (default: the node's rules,
-    ``RobotMapperConfig().stream_config()``) before anything is mapped."""
+    ``ScanStreamConfig()``) before anything is mapped."""
     require_method(method)
     total = sum(len(scans) for scans in recordings.values())
-    front_end = _FrontEnd(
-        extraction, stream or RobotMapperConfig().stream_config(), progress, total
-    )
+    front_end = _FrontEnd(extraction, stream or ScanStreamConfig(), progress, total)
     if snapshots is not None and method not in MERGE_METHODS:
         raise ValueError(f"snapshots need a merging method ({', '.join(MERGE_METHODS)})")
     if method == "local" or method in MERGE_METHODS:
