@@ -50,7 +50,7 @@ bench: $(STAMP)
 
 # Rewrite config/*.yaml and docs/parameters.md from the documented dataclass defaults.
 config: $(STAMP)
-	$(BIN)/python -m multi_robot_mapper.io.config_files config
+	$(BIN)/python -m multi_robot_mapper.ros.params_files config
 
 clean:
 	rm -rf $(VENV) build install log demo_output bench_output .pytest_cache .mypy_cache .ruff_cache

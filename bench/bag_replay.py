@@ -43,7 +43,6 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bench.harness import BAGS  # noqa: E402
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig  # noqa: E402
 from multi_robot_mapper.core.pipeline import TimedLaserScan, run_offline  # noqa: E402
 from multi_robot_mapper.evaluation.metrics import aligned_rmse  # noqa: E402
 from multi_robot_mapper.evaluation.relations import (  # noqa: E402
@@ -60,6 +59,7 @@ from multi_robot_mapper.io.recordings import (  # noqa: E402
     read_truth_csv,
     with_beam_geometry,
 )
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig  # noqa: E402
 
 ALL_BAGS = ("intel", "aces", "fr079", "mit-csail", "mit-killian", "fr-clinic_robotlaser")
 RELATIONS = {"fr-clinic_robotlaser": "fr-clinic"}  # bag -> relations file name, if not its own

@@ -42,7 +42,7 @@ from bench.harness import CARMEN, OUTPUT, carmen_log, imported_bag  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult  # noqa: E402
-from multi_robot_mapper.core.merging.ffs import refine_with_ffs, with_keyframes_moved  # noqa: E402
+from multi_robot_mapper.core.merging.ffs.method import refine_with_ffs, with_keyframes_moved  # noqa: E402
 from multi_robot_mapper.core.merging.joint import merge_joint, place_scans  # noqa: E402
 from multi_robot_mapper.core.pipeline import OfflineMap, TimedLaserScan, run_offline  # noqa: E402
 

@@ -53,20 +53,20 @@ from bench.harness import CARMEN, FIGURES, carmen_log  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
-from multi_robot_mapper.core.ffs import (  # noqa: E402
+from multi_robot_mapper.core.merging.ffs import (  # noqa: E402
     FfsConfig,
     FfsResult,
     facing_sensor,
     make_bodies,
     run_ffs,
 )
-from multi_robot_mapper.core.ffs.far import run_ffs_far, start_width  # noqa: E402
-from multi_robot_mapper.core.ffs.reseat import run_ffs_reseated  # noqa: E402
-from multi_robot_mapper.core.merging.ffs import (  # noqa: E402
+from multi_robot_mapper.core.merging.ffs.far import run_ffs_far, start_width  # noqa: E402
+from multi_robot_mapper.core.merging.ffs.method import (  # noqa: E402
     body_chunks,
     body_segments,
     moved_with_bodies,
 )
+from multi_robot_mapper.core.merging.ffs.reseat import run_ffs_reseated  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
 

@@ -1,4 +1,4 @@
-"""A probe for issue 51, not the method in ``core/ffs``: the re-convergence experiment of
+"""A probe for issue 51, not the method in ``core/merging/ffs``: the re-convergence experiment of
 ``bench/ffs_bench.py`` (FFS Sec. 4.2) with every body moved at once by a joint Newton step on
 the paper's potential, to tell apart what the optimiser misses from what the field itself allows.
 
@@ -35,9 +35,9 @@ from scipy.spatial import cKDTree  # noqa: E402
 
 from bench.ffs_bench import keyframe_scans  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.ffs import Bodies, make_bodies  # noqa: E402
-from multi_robot_mapper.core.ffs.bodies import placed  # noqa: E402
-from multi_robot_mapper.core.merging.ffs import body_chunks, body_segments  # noqa: E402
+from multi_robot_mapper.core.merging.ffs import Bodies, make_bodies  # noqa: E402
+from multi_robot_mapper.core.merging.ffs.bodies import placed  # noqa: E402
+from multi_robot_mapper.core.merging.ffs.method import body_chunks, body_segments  # noqa: E402
 
 FloatArray = NDArray[np.float64]
 SIGMA_END = 0.04

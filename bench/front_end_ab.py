@@ -42,8 +42,8 @@ def measure(log: str, path: Path, robots: int, robot: int, scans: int | None) ->
     from multi_robot_mapper.cli.import_carmen import split_runs
     from multi_robot_mapper.core.extraction import extract_scan
     from multi_robot_mapper.core.local_mapping.mapper import LocalMapper
-    from multi_robot_mapper.core.mapper_config import RobotMapperConfig
     from multi_robot_mapper.io.carmen import carmen_scan_data, monotonic_stamps, read_carmen
+    from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 
     records = list(read_carmen(path))
     start, stop = split_runs(len(records), robots, 0)[robot - 1]

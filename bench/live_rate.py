@@ -65,12 +65,12 @@ from sensor_msgs.msg import LaserScan  # noqa: E402
 from bench.harness import carmen_log  # noqa: E402
 from multi_robot_mapper.cli.import_carmen import split_runs  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig  # noqa: E402
 from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, simulate_robots  # noqa: E402
 from multi_robot_mapper.core.worlds import ROUTES  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, monotonic_stamps, read_carmen  # noqa: E402
 from multi_robot_mapper.io.config_files import load_config  # noqa: E402
 from multi_robot_mapper.io.messages import scan_to_msg, stamp_from_seconds  # noqa: E402
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig  # noqa: E402
 from multi_robot_mapper.ros.robot_mapper import RobotMapper  # noqa: E402
 from multi_robot_mapper.ros.testing import isolated_context, spin_until  # noqa: E402
 

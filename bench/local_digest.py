@@ -18,9 +18,9 @@ import numpy as np
 from bench.harness import CARMEN
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.local_mapping import LocalMapper
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.evaluation.metrics import aligned_rmse
 from multi_robot_mapper.io.carmen import carmen_scan_data, monotonic_stamps, read_carmen
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 
 LOGS = ("intel", "aces", "fhw", "csail", "freiburg-079", "edmonton")
 

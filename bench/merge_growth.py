@@ -45,7 +45,7 @@ import numpy as np  # noqa: E402
 from bench.harness import add_merge_overrides, apart, carmen_log, joint_cut, merge_config_of  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult  # noqa: E402
-from multi_robot_mapper.core.merging.methods import merge_method  # noqa: E402
+from multi_robot_mapper.core.merging.methods import MERGE_METHODS, merge_method  # noqa: E402
 from multi_robot_mapper.io.carmen import read_carmen  # noqa: E402
 
 
@@ -137,7 +137,7 @@ def main() -> None:
     parser.add_argument(
         "--budget", type=float, default=0.0, help="seconds of place matching per update (0: all)"
     )
-    parser.add_argument("--method", choices=("pivot", "ffs"), default="pivot")
+    parser.add_argument("--method", choices=tuple(MERGE_METHODS), default="pivot")
     parser.add_argument("--cold", action="store_true", help="ffs: no warm start (module doc)")
     add_merge_overrides(parser)
     args = parser.parse_args()

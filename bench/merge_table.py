@@ -45,6 +45,7 @@ from bench.harness import (
     present_logs,
 )
 from multi_robot_mapper.cli.evaluate import METRICS_FILE
+from multi_robot_mapper.core.merging.methods import MERGE_METHODS
 from multi_robot_mapper.io.results import read_results
 
 COLUMNS = (
@@ -300,7 +301,7 @@ def main() -> None:
     parser.add_argument("--overlap-scans", type=int, default=0)
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     parser.add_argument("--quick", action="store_true", help="intel, 2 robots only")
-    parser.add_argument("--method", choices=("pivot", "ffs"), default="pivot")
+    parser.add_argument("--method", choices=tuple(MERGE_METHODS), default="pivot")
     parser.add_argument("--table", action="store_true", help="print the saved run's table")
     parser.add_argument("--summary", action="store_true", help="print the saved run's summary")
     parser.add_argument("--bag-table", action="store_true", help="print the saved bags' table")

@@ -26,7 +26,6 @@ from scipy.spatial import cKDTree
 from bench.harness import BAGS
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.local_mapping import LocalMapper
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import scan_points
 from multi_robot_mapper.evaluation.relations import Relations, read_relations, relation_errors
 from multi_robot_mapper.io.carmen import read_carmen
@@ -36,6 +35,7 @@ from multi_robot_mapper.io.recordings import (
     read_truth_csv,
     with_beam_geometry,
 )
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 
 FloatArray = NDArray[np.float64]
 SAMPLE_STEP = 0.02  # m: the map's segments as points this far apart, for nearest-line search

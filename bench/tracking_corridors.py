@@ -39,7 +39,6 @@ from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.local_mapping import LocalMapper
 from multi_robot_mapper.core.local_mapping.backend import Backend
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
 from multi_robot_mapper.evaluation.metrics import aligned_rmse
 from multi_robot_mapper.io.recordings import (
@@ -48,6 +47,7 @@ from multi_robot_mapper.io.recordings import (
     read_truth_csv,
     with_beam_geometry,
 )
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 
 
 def _setting(text: str) -> tuple[str, Any]:

@@ -39,8 +39,6 @@ from visualization_msgs.msg import MarkerArray
 from bench.harness import cut_log, present_logs, reference_keyframes
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping import Keyframe
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeConfig
 from multi_robot_mapper.core.merging.occupancy import occupancy_grid
 from multi_robot_mapper.core.scan import LaserScanData
@@ -51,7 +49,9 @@ from multi_robot_mapper.io.messages import (
     stamp_from_seconds,
 )
 from multi_robot_mapper.ros import diagnostics
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 from multi_robot_mapper.ros.markers import occupancy_grid_msg
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 
 FRAME = "robot1/map"
 DEFAULT_LOGS = ("intel", "aces", "fhw", "csail", "edmonton")

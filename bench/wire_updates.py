@@ -35,12 +35,12 @@ from bench.harness import BAGS, CARMEN
 from bench.wire_size import marker_costs
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.local_mapping import LocalMapper
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.io.carmen import carmen_scan_data, monotonic_stamps, read_carmen
 from multi_robot_mapper.io.map_updates import SNAPSHOT, UpdatePlanner, sequence_marker
 from multi_robot_mapper.io.messages import keyframe_marker, piece_frame, stamp_from_seconds
 from multi_robot_mapper.io.recordings import read_bags
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 
 FRAME = "robot1/map"
 TARGET_KBPS = 20.0

@@ -11,9 +11,10 @@ import pytest
 
 from multi_robot_mapper.cli.main import build_parser
 from multi_robot_mapper.core.config import field_specs
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.merger_config import MapMergerConfig
-from multi_robot_mapper.io.config_files import default_text, parameters_markdown
+from multi_robot_mapper.io.config_files import default_text
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
+from multi_robot_mapper.ros.params_files import parameters_markdown
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
@@ -95,8 +96,8 @@ def test_every_path_a_page_names_exists(page: Path) -> None:
 
 def names_code_that_exists(name: str) -> bool:
     """A path (``bench/x.py``, ``core/local_mapping/``), or a module path with what it defines
-    (``core/merging/ffs.merge_ffs``, ``core/pose_graph.ReachBound``: the first name defined in
-    that file, a method defined somewhere in the package)."""
+    (``core/merging/ffs/method.merge_ffs``, ``core/pose_graph.ReachBound``: the first name
+    defined in that file, a method defined somewhere in the package)."""
     path = f"multi_robot_mapper/{name}" if name.startswith(PACKAGE_ROOTS) else name
     if (REPO / path).exists() or path in PENDING:
         return True

@@ -11,8 +11,8 @@ from types import MappingProxyType
 from typing import Any
 
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.merger_config import MapMergerConfig
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 
 MERGER_PREFIX = "merge."  # --set names of the merging parameters (map_merger's merge.*)
 

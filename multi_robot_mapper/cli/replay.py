@@ -38,10 +38,10 @@ from multi_robot_mapper.cli.recordings import (
     load_recordings,
     replayed_bags,
 )
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.pipeline import METHODS, OfflineMap, TimedLaserScan
 from multi_robot_mapper.io.outputs import staged_folder
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 
 RECORD_PERIOD_S = 10.0
 
@@ -96,7 +96,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from multi_robot_mapper.core.pipeline import MethodNotImplementedError, require_method
+    from multi_robot_mapper.core.pipeline import require_method
 
     config = load_mapper_config(args)
     merger = load_merger_config(args)
@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     check_limits(args, "record_period")
     try:
         require_method(args.method)  # before reading a large bag
-    except MethodNotImplementedError as exc:
+    except ValueError as exc:
         raise CliError(str(exc)) from exc
     record = _record_path(args)
     recordings, report = load_recordings(args, args.bags, salvage=args.salvage)
@@ -191,6 +191,7 @@ def _replay(
         progress=bar,
         local_mapping=config.local_mapping,
         merging=merger.merge,
+        stream=config.stream_config(),
     )
     try:
         if record is None:

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from multi_robot_mapper.cli.common import CliError, missing_input
-from multi_robot_mapper.core.merger_config import METHODS
+from multi_robot_mapper.ros.merger_config import METHODS
 
 
 def register(subparsers: Any) -> None:
@@ -104,8 +104,8 @@ def node_parameters(items: list[str]) -> tuple[list[Any], list[Any]]:
         parse_override,
         user_specs,
     )
-    from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-    from multi_robot_mapper.core.merger_config import MapMergerConfig
+    from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
+    from multi_robot_mapper.ros.merger_config import MapMergerConfig
 
     kinds = {s.name: s.kind for c in (MapMergerConfig, RobotMapperConfig) for s in field_specs(c)}
     mapper_fields = {spec.name for spec in field_specs(RobotMapperConfig)}

@@ -47,7 +47,8 @@ def merged(local: OfflineMap, config: MergeConfig, method: str = "pivot") -> Off
     # Both robot lists are sorted names: merge's owner indices are ours (asserted, not assumed).
     assert result.robots == local.robots
     segment_robot = np.asarray(result.segment_robot, dtype=np.int64)
-    stats = _merge_stats(local, result, time.perf_counter() - started, result.stats["links_valid"])
+    seconds = time.perf_counter() - started
+    stats = _merge_stats(local, result, seconds, result.stats["links_valid"], method)
     return OfflineMap(
         local.robots,
         result.segments,
@@ -76,7 +77,7 @@ def _merged_joint(local: OfflineMap, config: MergeConfig, method: str = "pivot")
     update_s = time.perf_counter() - again
     frames, trajectories = _placed_trajectories(local, result)
     assert result.robots == local.robots
-    stats = _joint_merge_stats(local, result, frames, first_s, update_s)
+    stats = _joint_merge_stats(local, result, frames, (first_s, update_s), method)
     believed = {
         robot: result.frame_probabilities[robot][_main_piece(local, robot)]
         for robot in local.robots
@@ -127,15 +128,16 @@ def _joint_merge_stats(
     local: OfflineMap,
     result: MergeResult,
     frames: dict[str, Pose | None],
-    first_s: float,
-    update_s: float,
+    seconds: tuple[float, float],
+    method: str,
 ) -> dict[str, object]:
-    """The ``local`` run's stats with the joint merge's (``first_s`` it took, ``update_s``
-    an update with nothing changed took): the robots unmerged, every link in the graph, the
-    merge's timings and counts."""
+    """The ``local`` run's stats with the joint merge's by ``method`` (``seconds``: the first
+    merge's and an update's with nothing changed): the robots unmerged, every link in the
+    graph, the merge's timings and counts."""
+    first_s, update_s = seconds
     stamp = {(r, kf.index): kf.stamp for r, frames in local.keyframes.items() for kf in frames}
     graph_links = result.state.links if isinstance(result.state, JointState) else []
-    stats = _merge_stats(local, result, first_s, result.stats["links_accepted"])
+    stats = _merge_stats(local, result, first_s, result.stats["links_accepted"], method)
     stats.update(
         {
             "robots_unmerged": [robot for robot in local.robots if frames.get(robot) is None],
@@ -190,13 +192,14 @@ def _main_piece(local: OfflineMap, robot: str) -> int:
 
 
 def _merge_stats(
-    local: OfflineMap, result: MergeResult, seconds: float, links: int
+    local: OfflineMap, result: MergeResult, seconds: float, links: int, method: str
 ) -> dict[str, object]:
-    """The ``local`` run's stats with the merge's (``seconds`` it took, ``links`` it used)."""
+    """The ``local`` run's stats with the merge's by ``method`` (``seconds`` it took, ``links``
+    it used)."""
     stats = dict(local.stats)
     stats.update(
         {
-            "method": "pivot",
+            "method": method,
             "segments": len(result.segments),
             "merge_reference": result.reference,
             "merge_links": [

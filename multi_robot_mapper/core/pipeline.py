@@ -13,7 +13,7 @@ front end (scan -> segments), then a placement method. Methods:
   searched on the others, consistent links only, every keyframe optimised together); a robot
   whose map was linked to no other stays ``"unmerged"``.
 - ``ffs``: ``pivot``, then Force Field Simulation moves every merged keyframe at once
-  (:func:`multi_robot_mapper.core.merging.ffs.merge_ffs`).
+  (:func:`multi_robot_mapper.core.merging.ffs.method.merge_ffs`).
 """
 
 from __future__ import annotations
@@ -37,7 +37,6 @@ from multi_robot_mapper.core.local_mapping import (
     LocalMapperConfig,
 )
 from multi_robot_mapper.core.local_mapping.backend import Backend
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.merge_stage import merged as merged_map
 from multi_robot_mapper.core.merging import MergeConfig
 from multi_robot_mapper.core.merging.methods import MERGE_METHODS
@@ -57,12 +56,9 @@ from multi_robot_mapper.core.snapshots import (
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-METHODS = ("reference", "local", "pivot", "ffs")
-IMPLEMENTED_METHODS = ("reference", "local", "pivot", "ffs")
-
-
-class MethodNotImplementedError(NotImplementedError):
-    """The requested placement method is not built yet."""
+# The replay's methods: the two that merge nothing, then the merging registry's (the one list
+# of merging methods, core/merging/methods.py).
+METHODS = ("reference", "local", *MERGE_METHODS)
 
 
 # (stage, done, total): stage "mapping <robot>" with scans done of every robot's scans,
@@ -139,14 +135,9 @@ class _FrontEnd:
 
 
 def require_method(method: str) -> None:
-    """Raise unless ``method`` exists and is built (MethodNotImplementedError if not built yet)."""
+    """Raise ValueError unless ``method`` is one of :data:`METHODS`."""
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    if method not in IMPLEMENTED_METHODS:
-        raise MethodNotImplementedError(
-            f"method '{method}' is not implemented yet (it arrives with the local-mapping and "
-            f"merging issues); available: {', '.join(IMPLEMENTED_METHODS)}"
-        )
 
 
 def run_offline(
@@ -170,15 +161,13 @@ def run_offline(
     ``snapshots`` (the result never depends on whether snapshots were taken).
     ``recordings``: each robot's scans in the order they arrived (a node's subscription
     order), checked against their own stream by ``stream`` (default: the node's rules,
-    ``RobotMapperConfig().stream_config()``) before anything is mapped."""
+    ``ScanStreamConfig()``) before anything is mapped."""
     require_method(method)
     total = sum(len(scans) for scans in recordings.values())
-    front_end = _FrontEnd(
-        extraction, stream or RobotMapperConfig().stream_config(), progress, total
-    )
+    front_end = _FrontEnd(extraction, stream or ScanStreamConfig(), progress, total)
     if snapshots is not None and method not in MERGE_METHODS:
         raise ValueError(f"snapshots need a merging method ({', '.join(MERGE_METHODS)})")
-    if method in ("local", "pivot", "ffs"):
+    if method == "local" or method in MERGE_METHODS:
         config = merging or MergeConfig()
         timeline = None
         if snapshots is not None:

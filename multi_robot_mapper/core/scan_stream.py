@@ -78,14 +78,15 @@ _ANGLE_TOLERANCE = 1e-6  # rad
 
 @dataclasses.dataclass(frozen=True)
 class ScanStreamConfig:
-    """The stream rules' settings (``RobotMapperConfig.stream_config()`` documents each)."""
+    """The stream rules' settings, at the robot mapper node's defaults (its parameters
+    ``stamp_reset_jump`` ... ``copy_window``, ros/mapper_config.py, document each)."""
 
-    reset_jump: float  # s
-    max_lead: float  # s
-    gap_periods: float  # intervals of the stream's cadence
-    confirm_scans: int
-    geometry_scans: int
-    copy_window: int  # scans
+    reset_jump: float = 5.0  # s
+    max_lead: float = 10.0  # s
+    gap_periods: float = 10.0  # intervals of the stream's cadence
+    confirm_scans: int = 3
+    geometry_scans: int = 10
+    copy_window: int = 200  # scans
 
 
 @dataclasses.dataclass(frozen=True)

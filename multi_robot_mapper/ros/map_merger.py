@@ -74,7 +74,6 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core.local_mapping import Keyframe
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.core.merging.occupancy import OccupancyGrid, merge_with_grid
 from multi_robot_mapper.io.inputs import InputError, MapLimits, pose_from_checked_msg
@@ -95,6 +94,7 @@ from multi_robot_mapper.ros.markers import (
     placed_poses,
     stamp_key,
 )
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 from multi_robot_mapper.ros.merger_state import (
     MergeInputs,
     RobotState,

@@ -37,7 +37,6 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core.geometry import stamp_seconds
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging.occupancy import global_grid
 from multi_robot_mapper.core.snapshots import Snapshot
 from multi_robot_mapper.io.messages import (
@@ -56,6 +55,7 @@ from multi_robot_mapper.ros.markers import (
     global_map_markers,
     occupancy_grid_msg,
 )
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 
 MAX_PATH_POSES = 1000  # poses of a recorded trajectory (its scans thinned evenly)
 GLOBAL_MAP = ("/global_map", "visualization_msgs/msg/MarkerArray")

@@ -48,7 +48,6 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core.extraction import SegmentScan, extract_scan
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalUpdate
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import LaserScanData, ScanError, ScanPoints
 from multi_robot_mapper.core.scan_stream import REASON_FIELDS, ScanStreamGuard, StreamVerdict
 from multi_robot_mapper.io.map_updates import SNAPSHOT, UpdatePlanner, sequence_marker
@@ -64,6 +63,7 @@ from multi_robot_mapper.io.messages import (
 from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
 from multi_robot_mapper.ros.entry import run_node
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 from multi_robot_mapper.ros.parameters import declare_config, on_config_change
 from multi_robot_mapper.ros.throttle import ThrottledWarnings
 from multi_robot_mapper.ros.worker_process import WorkerProcess

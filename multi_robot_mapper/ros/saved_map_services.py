@@ -9,9 +9,9 @@ from typing import Any
 
 from std_srvs.srv import Trigger
 
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.io.saved_map import SavedMapError, read_saved_map, write_saved_map
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 from multi_robot_mapper.ros.merger_state import (
     RobotState,
     restore_saved_map,

@@ -14,12 +14,12 @@ from multi_robot_mapper.core.config import (
     user_specs,
 )
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.io.config_files import (
     default_params_file,
     load_config,
     parameters_from_yaml,
 )
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 

@@ -18,9 +18,9 @@ import pytest
 
 from multi_robot_mapper.cli.main import main
 from multi_robot_mapper.core.config import field_specs
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.io.outputs import atomic_write_text, staged_folder
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 
 REPO = Path(__file__).resolve().parents[2]
 

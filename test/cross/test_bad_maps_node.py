@@ -22,7 +22,6 @@ from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core.config import config_from_flat
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.io.map_updates import UpdatePlanner, sequence_marker
 from multi_robot_mapper.io.messages import (
     keyframe_marker,
@@ -31,6 +30,7 @@ from multi_robot_mapper.io.messages import (
     stamp_from_seconds,
 )
 from multi_robot_mapper.ros.map_merger import MapMerger
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 
 pytestmark = pytest.mark.ros
 

@@ -32,7 +32,6 @@ from test_robot_mapper_node import (
 from visualization_msgs.msg import Marker
 
 from multi_robot_mapper.core.config import ConfigError
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import raycast
 from multi_robot_mapper.io.messages import (
@@ -41,6 +40,7 @@ from multi_robot_mapper.io.messages import (
     segments_from_marker,
     stamp_from_seconds,
 )
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 from multi_robot_mapper.ros.robot_mapper import RobotMapper
 from multi_robot_mapper.ros.testing import default_domain_id, spin_until
 from multi_robot_mapper.ros.throttle import ThrottledWarnings

@@ -18,17 +18,14 @@ from rclpy.node import Node
 from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.core.config import ConfigError, config_to_flat, user_specs
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.simulation import LaserModel, simulate_robots
 from multi_robot_mapper.io.bags import recording_of
-from multi_robot_mapper.io.config_files import (
-    SYSTEM_PARAMS_FILE,
-    parameters_from_yaml,
-    system_params_file,
-)
+from multi_robot_mapper.io.config_files import parameters_from_yaml
 from multi_robot_mapper.ros.bringup import build_system, robot_names
 from multi_robot_mapper.ros.live import Observer, ScanPlayer, timeline
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
+from multi_robot_mapper.ros.params_files import SYSTEM_PARAMS_FILE, system_params_file
 from multi_robot_mapper.ros.testing import default_domain_id, isolated_context, spin_until
 
 REPO = Path(__file__).resolve().parents[2]

@@ -44,9 +44,9 @@ from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 from test_robot_mapper_node import room_scan
 from visualization_msgs.msg import Marker, MarkerArray
 
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.io.messages import scan_to_msg, stamp_from_seconds
 from multi_robot_mapper.ros.map_merger import MapMerger
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 from multi_robot_mapper.ros.robot_mapper import RobotMapper
 from multi_robot_mapper.ros.testing import isolated_context, spin_until
 
@@ -503,8 +503,8 @@ def test_fuzzed_params_files_give_a_config_or_one_config_error(
     tmp_path_factory, mutation: tuple[str, int, int], noise: bytes
 ) -> None:
     from multi_robot_mapper.core.config import ConfigError
-    from multi_robot_mapper.core.mapper_config import RobotMapperConfig
     from multi_robot_mapper.io.config_files import load_config
+    from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 
     shipped = (Path(__file__).resolve().parents[2] / "config" / "robot_mapper.yaml").read_bytes()
     path = tmp_path_factory.mktemp("yaml") / "params.yaml"

@@ -27,7 +27,6 @@ from test_robot_mapper_node import truth_in_robot_map as truth_at
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.local_mapping import LocalMapper
 from multi_robot_mapper.core.local_mapping.held import OUTLIER
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.pipeline import TimedLaserScan, run_offline
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.scan_stream import ScanStreamGuard
@@ -39,6 +38,7 @@ from multi_robot_mapper.io.messages import (
     seconds_from_stamp,
     stamp_from_seconds,
 )
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 from multi_robot_mapper.ros.testing import spin_until
 
 RULES = RobotMapperConfig().stream_config()  # the shipped rules

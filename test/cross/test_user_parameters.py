@@ -16,9 +16,9 @@ from rclpy.parameter import Parameter
 
 from multi_robot_mapper.cli.common import CliError
 from multi_robot_mapper.core.config import ConfigError, config_from_flat, field_specs, user_specs
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.io.config_files import load_config, parameters_from_yaml
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 from multi_robot_mapper.ros.testing import default_domain_id
 
 MAX_USER_PARAMETERS = 30  # per node (issue 49 item 5)

@@ -25,11 +25,11 @@ from sensor_msgs.msg import LaserScan
 from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, simulate_robots
 from multi_robot_mapper.io.messages import scan_to_msg, stamp_from_seconds
 from multi_robot_mapper.io.saved_map import read_saved_map
 from multi_robot_mapper.ros.map_merger import MapMerger
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 from multi_robot_mapper.ros.robot_mapper import RobotMapper
 from multi_robot_mapper.ros.testing import spin_until
 

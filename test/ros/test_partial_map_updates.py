@@ -14,10 +14,10 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, simulate_robots
 from multi_robot_mapper.io.messages import scan_to_msg, stamp_from_seconds
 from multi_robot_mapper.ros.map_merger import MapMerger
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 from multi_robot_mapper.ros.robot_mapper import RobotMapper
 from multi_robot_mapper.ros.testing import spin_until
 

@@ -20,7 +20,6 @@ from visualization_msgs.msg import Marker, MarkerArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError, config_from_flat
 from multi_robot_mapper.core.local_mapping import attempts as front_end_attempts
-from multi_robot_mapper.core.mapper_config import RobotMapperConfig
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, raycast, simulate_robots
 from multi_robot_mapper.core.worlds import polygon
@@ -33,6 +32,7 @@ from multi_robot_mapper.io.messages import (
     segments_from_marker,
     stamp_from_seconds,
 )
+from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
 from multi_robot_mapper.ros.robot_mapper import RobotMapper, default_map_frame, main
 from multi_robot_mapper.ros.testing import default_domain_id, spin_until
 

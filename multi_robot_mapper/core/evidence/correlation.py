@@ -378,45 +378,32 @@ class ScoringRasters:
 
 
 def scorer_rasters(
-    drawing: Drawing, config: CorrelationConfig, walls: bool = True
+    drawing: Drawing, cell: float, blur: float, walls: bool = True
 ) -> ScoringRasters:
-    """The rasters :func:`score_placements` reads of a drawing (``walls``: its wall channels
-    too, for the drawing others are placed on)."""
-    grid = _Grid.around(drawing, config.cell)
+    """The rasters :func:`score_parts` reads of a drawing, ``cell`` (m) wide, the walls
+    blurred by ``blur`` cells (``walls``: its wall channels too, for the drawing others are
+    placed on)."""
+    grid = _Grid.around(drawing, cell)
     channels = (
-        np.ascontiguousarray(np.moveaxis(_walls(drawing, grid, config.blur), 0, -1))
-        if walls
-        else None
+        np.ascontiguousarray(np.moveaxis(_walls(drawing, grid, blur), 0, -1)) if walls else None
     )
     return ScoringRasters(grid, channels, grid.mark(drawing.free))
-
-
-def score_placements(
-    a: Drawing,
-    b: Drawing,
-    transforms: FloatArray,
-    config: CorrelationConfig,
-    rasters_a: ScoringRasters,
-    rasters_b: ScoringRasters,
-) -> FloatArray:
-    """:func:`placement_scores` from rasters made once, every placement in one pass."""
-    matched, through = score_parts(a, b, transforms, config, rasters_a, rasters_b)
-    return np.asarray(matched - config.free_space_weight * through)
 
 
 def score_parts(
     a: Drawing,
     b: Drawing,
     transforms: FloatArray,
-    config: CorrelationConfig,
     rasters_a: ScoringRasters,
     rasters_b: ScoringRasters,
+    blur_cell: tuple[float, float],
     walls_a: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """The two parts of each placement's score: (N,) metres of wall matched and (N,) metres
     of wall in the other's free space, either way (b's points under every transform sampled
-    together). ``walls_a``: the (points, weights) of a's walls that can reach b's free space
-    under these placements (default all of them)."""
+    together), on rasters of ``blur_cell``: (the walls' blur in cells, the cell in metres).
+    ``walls_a``: the (points, weights) of a's walls that can reach b's free space under these
+    placements (default all of them)."""
     rows = np.asarray(transforms, dtype=np.float64).reshape(-1, 3)
     if len(rows) == 0:
         return np.zeros(0), np.zeros(0)
@@ -424,7 +411,7 @@ def score_parts(
     # A wall point on a drawn wall of its direction reads 1 / sqrt(2 pi (blur^2 + 1/12 +
     # 1/6)) of the wall's metres per cell (blur, drawing, reading): that, times the channels'
     # 1/2, is one metre per metre.
-    blur, cell = config.blur, config.cell
+    blur, cell = blur_cell
     scale = np.sqrt(2.0 * np.pi * (blur**2 + _DRAWN + _READ)) / (0.5 * cell)
     T = se2.matrices_from_poses(rows[:, [1, 2, 0]])  # (N, 3, 3) T_a_b
     on_a = np.matmul(b.walls[None, :, :], T[:, :2, :2].transpose(0, 2, 1)) + T[:, None, :2, 2]
@@ -443,7 +430,7 @@ def score_parts(
 
 
 def weakest_direction(
-    a: Drawing, b: Drawing, row: FloatArray, rasters_a: ScoringRasters, config: CorrelationConfig
+    a: Drawing, b: Drawing, row: FloatArray, rasters_a: ScoringRasters
 ) -> FloatArray:
     """The unit vector (in a's frame) along which b's walls matched on a at the placement
     ``row`` (theta, tx, ty) hold it least: the eigenvector of the smaller eigenvalue of
@@ -493,14 +480,11 @@ def placement_scores(
     """The correlation score (metres) of each ``(theta, tx, ty)`` placement of b on a,
     evaluated directly (b's wall points looked up in a's blurred walls and free space, a's
     wall points in b's free space): for placements found elsewhere, e.g. refined ones."""
-    return score_placements(
-        a,
-        b,
-        transforms,
-        config,
-        scorer_rasters(a, config),
-        scorer_rasters(b, config, walls=False),
-    )
+    rasters_a = scorer_rasters(a, config.cell, config.blur)
+    rasters_b = scorer_rasters(b, config.cell, config.blur, walls=False)
+    blur_cell = (config.blur, config.cell)
+    matched, through = score_parts(a, b, transforms, rasters_a, rasters_b, blur_cell)
+    return np.asarray(matched - config.free_space_weight * through)
 
 
 def rotation_candidates_of_drawings(a: Drawing, b: Drawing, count: int) -> FloatArray:

@@ -148,8 +148,10 @@ class PlacementScorer:
         rasters: ScoringRasters | None = None,
     ) -> None:
         self.a, self.b, self.config = a, b, config
-        self.rasters_a = rasters if rasters is not None else scorer_rasters(a, config)
-        self.rasters_b = scorer_rasters(b, config, walls=False)
+        self.rasters_a = (
+            rasters if rasters is not None else scorer_rasters(a, config.cell, config.blur)
+        )
+        self.rasters_b = scorer_rasters(b, config.cell, config.blur, walls=False)
         # a's walls that can land in b's free space lie within b's reach of where b's middle
         # lands: looked up per placement instead of moving all of a's walls every time.
         self.middle = b.centre() if len(b.walls) or len(b.free) else np.zeros(2)
@@ -173,16 +175,15 @@ class PlacementScorer:
             spread = float(np.hypot(*(landed - landed[0]).T).max())
             near = np.asarray(self.tree.query_ball_point(landed[0], self.reach + spread), np.int64)
         walls_a = (self.a.walls[near], self.a.weight[near])
-        return score_parts(
-            self.a, self.b, rows, self.config, self.rasters_a, self.rasters_b, walls_a
-        )
+        blur_cell = (self.config.blur, self.config.cell)
+        return score_parts(self.a, self.b, rows, self.rasters_a, self.rasters_b, blur_cell, walls_a)
 
     def slides(self, row: FloatArray) -> FloatArray:
         """(N, 3) placements: ``row`` slid each way along its weakest direction
         (:func:`~.correlation.weakest_direction`), a cell apart, from DISTINCT_SHIFT to as
         far as a's walls reach that way."""
         row = np.asarray(row, dtype=np.float64)
-        along = weakest_direction(self.a, self.b, row, self.rasters_a, self.config)
+        along = weakest_direction(self.a, self.b, row, self.rasters_a)
         span = np.ptp(self.a.walls @ along) if len(self.a.walls) else 0.0
         far = min(float(span), _MAX_SLIDE)
         if far <= DISTINCT_SHIFT:

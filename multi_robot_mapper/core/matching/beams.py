@@ -291,14 +291,12 @@ def beam_agreement(
     )
 
 
-def _segment_points(
-    segment_map: SegmentMap, config: IntegrateConfig
-) -> tuple[FloatArray, FloatArray]:
-    """Points every 5 cm along the segments of at least ``free_space_min_length``."""
+def _segment_points(segment_map: SegmentMap, min_length: float) -> tuple[FloatArray, FloatArray]:
+    """Points every 5 cm along the segments of at least ``min_length`` (m)."""
     spacing = 0.05
     if len(segment_map) == 0:
         return np.zeros((0, 2)), np.zeros(0)
-    long = segment_map.segments[segment_map.length >= config.free_space_min_length]
+    long = segment_map.segments[segment_map.length >= min_length]
     if len(long) == 0:
         return np.zeros((0, 2)), np.zeros(0)
     points, _ = sample_segments(long, spacing)
@@ -319,15 +317,27 @@ def viewpoints_of(views: Views) -> list[Viewpoint] | None:
     return list(views) or None
 
 
+def beam_limits(config: IntegrateConfig) -> tuple[float, int, float, float]:
+    """What :func:`seen_through_many` reads of ``config`` (its ``limits``)."""
+    return (
+        config.free_space_margin,
+        config.free_space_spread,
+        config.view_point_length,
+        config.free_space_min_length,
+    )
+
+
 def seen_through_many(
     map1: MapLike,
     map2: MapLike,
     transforms: FloatArray,
     views: tuple[Views, Views],
-    config: IntegrateConfig,
+    limits: tuple[float, int, float, float],
 ) -> tuple[FloatArray, FloatArray]:
     """Per transform: the length of each set lying in the other's observed free space, and
-    the length the other's beams confirm (ending within ``free_space_margin`` of it).
+    the length the other's beams confirm (ending within ``margin`` of it). ``limits``:
+    ``(margin, spread, cap, min_length)``, IntegrateConfig's ``free_space_margin``,
+    ``free_space_spread`` (beams), ``view_point_length`` and ``free_space_min_length``.
 
     With both sides' views the tested points are the views' own returns (a corridor's far end
     is a few sparse returns, too few for a segment, and it is what fixes the offset along the
@@ -340,17 +350,16 @@ def seen_through_many(
     confirmed = np.zeros(len(transforms))
     if (views1 is None and views2 is None) or len(transforms) == 0:
         return through, confirmed
-    cap = config.view_point_length
+    margin, spread, cap, min_length = limits
     if views1 is not None and views2 is not None:
         returns1, returns2 = ViewReturns.of(views1, cap), ViewReturns.of(views2, cap)
         points1, weight1 = returns1.points, returns1.weights
         points2, weight2 = returns2.points, returns2.weights
     else:
-        points2, weight2 = _segment_points(SegmentMap.of(map2), config)
-        points1, weight1 = _segment_points(SegmentMap.of(map1), config)
+        points2, weight2 = _segment_points(SegmentMap.of(map2), min_length)
+        points1, weight1 = _segment_points(SegmentMap.of(map1), min_length)
     c, s = np.cos(transforms[:, 0])[:, None], np.sin(transforms[:, 0])[:, None]
     tx, ty = transforms[:, 1, None], transforms[:, 2, None]
-    margin, spread = config.free_space_margin, config.free_space_spread
     if views1 is not None and len(points2):
         # S2 points in S1's frame: q = R p + t, for every transform.
         qx = c * points2[None, :, 0] - s * points2[None, :, 1] + tx

@@ -29,9 +29,10 @@ class Landmarks:
 
 
 def landmarks_from_pairs(
-    segments: MapLike, first: IntArray, second: IntArray, config: IntegrateConfig
+    segments: MapLike, first: IntArray, second: IntArray, min_angle: float
 ) -> Landmarks:
-    """Landmarks of the given (i, j) pairs, both orders, dropping near-parallel pairs."""
+    """Landmarks of the given (i, j) pairs, both orders, dropping pairs nearer parallel than
+    ``min_angle`` (rad)."""
     i = np.concatenate((first, second)).astype(np.int64)
     j = np.concatenate((second, first)).astype(np.int64)
     keep = i != j
@@ -40,7 +41,7 @@ def landmarks_from_pairs(
     lines = segment_map.lines
     ui, uj = lines.direction[i], lines.direction[j]
     sine = ui[:, 0] * uj[:, 1] - ui[:, 1] * uj[:, 0]
-    ok = np.abs(sine) >= np.sin(config.min_landmark_angle)
+    ok = np.abs(sine) >= np.sin(min_angle)
     i, j, ui, uj, sine = i[ok], j[ok], ui[ok], uj[ok], sine[ok]
     # Intersection of p_i + s u_i and p_j + r u_j.
     pi, pj = segment_map.segments[i, :2], segment_map.segments[j, :2]
@@ -53,32 +54,29 @@ def landmarks_from_pairs(
 
 
 def consecutive_pairs(
-    segments: MapLike, ordered: bool, config: IntegrateConfig
+    segments: MapLike, ordered: bool, min_length: float, length_percentage: float
 ) -> tuple[IntArray, IntArray]:
-    """Heuristic 1: consecutive segments of an ordered scan, both long enough (III-A-1)."""
+    """Heuristic 1: consecutive segments of an ordered scan, both long enough (III-A-1): at
+    least ``min_length`` (m) and ``length_percentage`` % of the longest."""
     n = len(segments)
     if not ordered or n < 2:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     length = SegmentMap.of(segments).length
-    long_enough = length >= max(
-        config.min_segment_length, config.segment_length_percentage / 100.0 * length.max()
-    )
+    long_enough = length >= max(min_length, length_percentage / 100.0 * length.max())
     idx = np.flatnonzero(long_enough)
     # Consecutive among the long ones, even without a shared end point (the paper's improvement).
     return idx[:-1], idx[1:]
 
 
 def random_pairs(
-    segments: MapLike, config: IntegrateConfig, rng: np.random.Generator
+    segments: MapLike, rounds: int, min_length: float, factor: float, rng: np.random.Generator
 ) -> tuple[IntArray, IntArray]:
-    """Heuristic 2 (Alg. 3): N_k = 20 * 2^k random pairs of segments longer than f^k x longest."""
+    """Heuristic 2 (Alg. 3): for k = 1 .. ``rounds``, N_k = 20 * 2^k random pairs of segments
+    longer than ``factor``^k x longest (and than ``min_length``)."""
     length = SegmentMap.of(segments).length
     firsts, seconds = [], []
-    for k in range(1, config.random_rounds + 1):
-        pool = np.flatnonzero(
-            length
-            >= max(config.min_segment_length, config.segment_division_factor**k * length.max())
-        )
+    for k in range(1, rounds + 1):
+        pool = np.flatnonzero(length >= max(min_length, factor**k * length.max()))
         if pool.size < 2:
             continue
         count = 20 * 2**k
@@ -92,11 +90,11 @@ def random_pairs(
     return np.concatenate(firsts), np.concatenate(seconds)
 
 
-def histogram_pairs(segments: MapLike, config: IntegrateConfig) -> tuple[IntArray, IntArray]:
-    """Heuristic 3: principal-direction segments x normal-direction segments (III-A-3)."""
+def histogram_pairs(segments: MapLike, min_length: float, slots: int) -> tuple[IntArray, IntArray]:
+    """Heuristic 3: principal-direction segments x normal-direction segments (III-A-3), of the
+    segments at least ``min_length`` long, directions in ``slots`` buckets."""
     lines = SegmentMap.of(segments).lines
-    usable = lines.length >= config.min_segment_length
-    slots = config.histogram_slots
+    usable = lines.length >= min_length
     bucket = (np.mod(lines.angle, np.pi) / np.pi * slots).astype(np.int64) % slots
     weight = np.bincount(bucket[usable], weights=lines.length[usable], minlength=slots)
     principal = int(np.argmax(weight))
@@ -112,9 +110,9 @@ def histogram_pairs(segments: MapLike, config: IntegrateConfig) -> tuple[IntArra
     return grid_p.ravel(), grid_q.ravel()
 
 
-def all_pairs(segments: MapLike, config: IntegrateConfig) -> tuple[IntArray, IntArray]:
-    """Every pair of usable segments (Alg. 2 as written), for small sets."""
-    idx = np.flatnonzero(SegmentMap.of(segments).length >= config.min_segment_length)
+def all_pairs(segments: MapLike, min_length: float) -> tuple[IntArray, IntArray]:
+    """Every pair of segments at least ``min_length`` long (Alg. 2 as written), for small sets."""
+    idx = np.flatnonzero(SegmentMap.of(segments).length >= min_length)
     a, b = np.triu_indices(idx.size, k=1)
     return idx[a], idx[b]
 
@@ -126,21 +124,26 @@ def landmarks(
     ordered: bool,
     rng: np.random.Generator,
 ) -> Landmarks:
-    """The landmarks of one segment set under the chosen heuristics (their union)."""
+    """The landmarks of one segment set under the chosen heuristics (their union); ``config``
+    unpacked into each heuristic's own settings."""
     segments = SegmentMap.of(segments)
+    min_length = config.min_segment_length
     firsts: list[IntArray] = []
     seconds: list[IntArray] = []
     for name in heuristics:
         if name == "consecutive":
-            a, b = consecutive_pairs(segments, ordered, config)
+            a, b = consecutive_pairs(
+                segments, ordered, min_length, config.segment_length_percentage
+            )
         elif name == "random":
-            a, b = random_pairs(segments, config, rng)
+            factor = config.segment_division_factor
+            a, b = random_pairs(segments, config.random_rounds, min_length, factor, rng)
         elif name == "histogram":
-            a, b = histogram_pairs(segments, config)
+            a, b = histogram_pairs(segments, min_length, config.histogram_slots)
         elif name == "all":
             if len(segments) > config.all_pairs_below:
                 continue
-            a, b = all_pairs(segments, config)
+            a, b = all_pairs(segments, min_length)
         elif name == "endpoints":
             continue  # pairs of segments across the two sets, see endpoint_hypotheses
         else:
@@ -149,7 +152,7 @@ def landmarks(
         seconds.append(b)
     first = np.concatenate(firsts) if firsts else np.zeros(0, dtype=np.int64)
     second = np.concatenate(seconds) if seconds else np.zeros(0, dtype=np.int64)
-    return landmarks_from_pairs(segments, first, second, config)
+    return landmarks_from_pairs(segments, first, second, config.min_landmark_angle)
 
 
 def hypotheses(
@@ -228,8 +231,9 @@ def _strongest(segments: MapLike, marks: Landmarks, keep: int) -> Landmarks:
     )
 
 
-def endpoint_hypotheses(map1: MapLike, map2: MapLike, config: IntegrateConfig) -> FloatArray:
-    """Hypotheses that lay a long S2 segment on a long S1 segment, end points superimposed.
+def endpoint_hypotheses(map1: MapLike, map2: MapLike, min_length: float) -> FloatArray:
+    """Hypotheses that lay a long S2 segment on a long S1 segment (at least ``min_length`` and
+    0.3 of the longest), end points superimposed.
 
     Angles need two non-parallel segments; in a corridor every long segment is parallel and
     the angle heuristics find nothing. Aligning one wall with another fixes the rotation (two
@@ -239,12 +243,8 @@ def endpoint_hypotheses(map1: MapLike, map2: MapLike, config: IntegrateConfig) -
     first, second = SegmentMap.of(map1), SegmentMap.of(map2)
     segments1, segments2 = first.segments, second.segments
     l1, l2 = first.lines, second.lines
-    long1 = np.flatnonzero(
-        l1.length >= max(config.min_segment_length, 0.3 * l1.length.max(initial=0.0))
-    )
-    long2 = np.flatnonzero(
-        l2.length >= max(config.min_segment_length, 0.3 * l2.length.max(initial=0.0))
-    )
+    long1 = np.flatnonzero(l1.length >= max(min_length, 0.3 * l1.length.max(initial=0.0)))
+    long2 = np.flatnonzero(l2.length >= max(min_length, 0.3 * l2.length.max(initial=0.0)))
     if long1.size == 0 or long2.size == 0:
         return np.zeros((0, 3))
     grid_a, grid_b = np.meshgrid(long1, long2, indexing="ij")

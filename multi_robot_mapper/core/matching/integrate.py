@@ -17,6 +17,7 @@ from multi_robot_mapper.core.matching.beams import (
     ViewReturns,
     Views,
     beam_agreement,
+    beam_limits,
     seen_through_many,
     viewpoints_of,
 )
@@ -45,6 +46,7 @@ from multi_robot_mapper.core.matching.scoring import (
     information,
     pair_kept,
     pruned_values,
+    refusal,
     refused,
     score_pairs,
     transform_values,
@@ -194,8 +196,7 @@ def _integrate(
 
 
 def _no_match(hypotheses: int, evaluated: int, clock: _StageClock) -> MatchResult:
-    """No placement: of ``hypotheses`` hypotheses, ``evaluated`` were evaluated in full and
-    none was kept."""
+    """No placement: ``hypotheses`` made, ``evaluated`` of them in full, none kept."""
     return MatchResult(np.zeros(3), 0.0, 0.0, False, hypotheses, evaluated, seconds=clock.seconds)
 
 
@@ -219,7 +220,7 @@ def _all_hypotheses(
         else np.zeros((0, 3))
     )
     if "endpoints" in heuristics and len(source1) and len(source2):
-        raw = np.vstack((raw, endpoint_hypotheses(source1, source2, config)))
+        raw = np.vstack((raw, endpoint_hypotheses(source1, source2, config.min_segment_length)))
     transforms, _ = distinct_hypotheses(
         raw, config.hypothesis_angle_cell, config.hypothesis_distance_cell, config.max_hypotheses
     )
@@ -261,7 +262,7 @@ def _ranked(
     if config.refine_iterations > 0:
         # A refinement that slid into a crossing (or lost its overlap) falls back to the
         # unrefined hypothesis, which passed the refusal test.
-        bad = refused(map1, map2, refined, config) | (refined_values <= 0.0)
+        bad = refused(map1, map2, refined, *refusal(config)) | (refined_values <= 0.0)
         if bad.any():
             refined[bad] = transforms[candidates[bad]]
             refined_values[bad], scores[bad], support[bad], slide[bad] = _net_scores(
@@ -283,7 +284,7 @@ def _ranked(
         polished_value, polished_score, _, _ = _net_scores(map1, map2, polished, views, config)
         if (
             polished_score[0] >= scores[pick] - _POLISH_TOLERANCE
-            and not refused(map1, map2, polished, config)[0]
+            and not refused(map1, map2, polished, *refusal(config))[0]
         ):
             refined[pick], refined_values[pick] = polished[0], polished_value[0]
     return _Ranked(refined, refined_values, scores, pick)
@@ -308,7 +309,7 @@ def _judged_result(
     best_T, best_value = refined[pick], float(ranked.values[pick])
     # Validity on the net value: overlap that the other scan's free space contradicts counts
     # against it (two unrelated rectilinear places easily overlap by a third).
-    through, _ = seen_through_many(map1, map2, best_T[None, :], views, config)
+    through, _ = seen_through_many(map1, map2, best_T[None, :], views, beam_limits(config))
     best_score = best_value - config.free_space_weight * float(through[0])
     fraction = best_score / max(min(map1.total_length, map2.total_length), 1e-9)
     best_support, slide, total = _support_and_slide(map1, map2, best_T, config)
@@ -362,7 +363,7 @@ def _evidence_of(
         map2,
         best_T,
         views,
-        config,
+        (config.confirm_margin, config.free_space_spread, config.view_point_length),
         score=float(scores[pick]),
         rival_score=float(scores[rivals].max()) if rivals.any() else 0.0,
         rival_T=refined[rivals][int(np.argmax(scores[rivals]))] if rivals.any() else None,
@@ -425,7 +426,7 @@ def match_evidence(
     map2: MapLike,
     T_1_2: FloatArray,
     views: tuple[Views, Views],
-    config: IntegrateConfig,
+    beams: tuple[float, int, float],
     *,
     score: float,
     rival_score: float,
@@ -441,8 +442,9 @@ def match_evidence(
     rival placement: ``rival_T``, or the placement slid by :data:`SLIDE_PROBE` either way
     along ``slide`` (the least constrained direction) where the beams like that better. A
     slide along a bare corridor explains the beams as well as the best placement, and the
-    hypotheses need not contain it (they come from where segments end)."""
-    cap = config.view_point_length
+    hypotheses need not contain it (they come from where segments end). ``beams``: the
+    ``confirm_margin``, ``free_space_spread`` and ``view_point_length`` the beams judge by."""
+    margin, spread, cap = beams
     sides = [viewpoints_of(v) for v in views]
     returns = [
         ViewReturns.of(viewpoints, cap)
@@ -450,7 +452,6 @@ def match_evidence(
         else ViewReturns(*_segment_returns(SegmentMap.of(segments).segments, cap))
         for viewpoints, segments in zip(sides, (map1, map2), strict=True)
     ]
-    margin, spread = config.confirm_margin, config.free_space_spread
 
     def judge(row: FloatArray) -> list[BeamAgreement]:
         """S2's returns judged by S1's beams, and S1's by S2's (unjudged: every return
@@ -523,7 +524,7 @@ def _slide(
     step = np.tile(offsets, top.size)
     shifted[:, 1] += step * np.repeat(direction[top, 0], offsets.size)
     shifted[:, 2] += step * np.repeat(direction[top, 1], offsets.size)
-    keep = ~refused(map1, map2, shifted, config)
+    keep = ~refused(map1, map2, shifted, *refusal(config))
     shifted = shifted[keep]
     values, net, _, _ = _net_scores(map1, map2, shifted, views, config)
     return shifted, values, net
@@ -548,7 +549,7 @@ def _net_scores(
     count = len(transforms)
     values = transform_values(scores, count)
     support, direction = information(map1, scores, count)
-    through, confirmed = seen_through_many(map1, map2, transforms, views, config)
+    through, confirmed = seen_through_many(map1, map2, transforms, views, beam_limits(config))
     net = (
         values
         - config.free_space_weight * through
@@ -587,7 +588,7 @@ def _distinct_candidates(
         k = int(np.argmax(free))  # best remaining, the pool being sorted
         if k >= checked:
             end = min(len(order), k + chunk)
-            allowed[k:end] = ~refused(map1, map2, pool[k:end], config)
+            allowed[k:end] = ~refused(map1, map2, pool[k:end], *refusal(config))
             checked, chunk = end, 2 * chunk
         if not allowed[k]:
             free[k] = False

@@ -54,7 +54,7 @@ def refine_many(
         live = np.flatnonzero(active)
         if live.size == 0:
             break
-        system = _normal_equations(geometry, T[live], config)
+        system = _normal_equations(geometry, T[live], *_tolerances(config))
         if system is None:
             break
         H, g = system if prior is None else add_prior(*system, T[live], prior)
@@ -84,14 +84,24 @@ def normal_equations(
     per pair integrate the normal equations exactly (before weighting): ``w`` is metres of
     overlapping segment, times a Cauchy weight (scale ``point_distance_tolerance``).
     """
-    return _normal_equations(pair_geometry(map1, map2), transforms, config)
+    return _normal_equations(pair_geometry(map1, map2), transforms, *_tolerances(config))
+
+
+def _tolerances(config: IntegrateConfig) -> tuple[float, float, float]:
+    """What the least squares read of ``config``: the pairs' direction and distance
+    tolerances, and the Cauchy weight's scale."""
+    return config.max_match_angle, config.match_distance, config.point_distance_tolerance
 
 
 def _normal_equations(
-    geometry: PairGeometry, transforms: FloatArray, config: IntegrateConfig
+    geometry: PairGeometry,
+    transforms: FloatArray,
+    max_angle: float,
+    match_distance: float,
+    tolerance: float,
 ) -> tuple[FloatArray, FloatArray] | None:
     count = len(transforms)
-    scores = geometry_scores(geometry, transforms, config)
+    scores = geometry_scores(geometry, transforms, max_angle, match_distance, tolerance)
     if scores.first.size == 0:
         return None
     lines1, lines2 = geometry.lines1, geometry.lines2
@@ -118,7 +128,7 @@ def _normal_equations(
     qy = ss * px + cc * py + np.repeat(ty, 2)
     nx, ny = -np.repeat(uy, 2), np.repeat(ux, 2)
     r = nx * qx + ny * qy - np.repeat(lines1.normal_offset[a], 2)
-    w = np.repeat(weight, 2) / (1.0 + (r / config.point_distance_tolerance) ** 2)
+    w = np.repeat(weight, 2) / (1.0 + (r / tolerance) ** 2)
     # d q / d theta = (-(s px + c py), c px - s py)
     j0 = nx * -(ss * px + cc * py) + ny * (cc * px - ss * py)
     J = (j0, nx, ny)

@@ -161,27 +161,39 @@ def score_pairs(
     segments of the max distance of the other's end points to its line) exceeds
     ``match_distance`` score 0; pairs that do not intersect are penalised by 0.95^(d/tol).
     """
-    return geometry_scores(pair_geometry(map1, map2), transforms, config)
+    return geometry_scores(
+        pair_geometry(map1, map2),
+        transforms,
+        config.max_match_angle,
+        config.match_distance,
+        config.point_distance_tolerance,
+    )
 
 
 def geometry_scores(
-    geometry: PairGeometry, transforms: FloatArray, config: IntegrateConfig
+    geometry: PairGeometry,
+    transforms: FloatArray,
+    max_angle: float,
+    match_distance: float,
+    tolerance: float,
 ) -> PairScores:
-    """:func:`score_pairs` of the two sets whose :func:`pair_geometry` is given."""
+    """:func:`score_pairs` of the two sets whose :func:`pair_geometry` is given: directions
+    within ``max_angle`` (rad), pairs within ``match_distance`` (m), the penalty of a pair
+    that does not intersect on the scale ``tolerance`` (m)."""
     empty = PairScores(*(np.zeros(0, dtype=np.int64),) * 3, np.zeros(0), np.zeros(0, dtype=bool))
     if len(transforms) == 0 or geometry.first.size == 0:
         return empty
-    h, a, b = _candidate_triples(geometry, transforms[:, 0], config.max_match_angle)
+    h, a, b = _candidate_triples(geometry, transforms[:, 0], max_angle)
     if h.size == 0:
         return empty
     cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
     c, s = cos_h[h], sin_h[h]
     tx, ty = np.ascontiguousarray(transforms[:, 1])[h], np.ascontiguousarray(transforms[:, 2])[h]
     triples = _Triples(h, a, b, c, s, tx, ty)
-    triples = triples.take(_within_reach(geometry, triples, config))
+    triples = triples.take(_within_reach(geometry, triples, max_angle, match_distance))
     placed, d = _placed_pairs(geometry, triples)
     # Most candidate triples are far apart: drop them before the overlap arithmetic.
-    near = np.flatnonzero(d <= config.match_distance)
+    near = np.flatnonzero(d <= match_distance)
     h, a, b, d = triples.h[near], triples.a[near], triples.b[near], d[near]
     placed = placed.take(near)
     l1, l2 = _overlaps(placed, geometry.lines1.length[a], geometry.lines2.length[b])
@@ -195,7 +207,7 @@ def geometry_scores(
         placed.q2x,
         placed.q2y,
     )
-    penalty = np.where(crossing, 1.0, 0.95 ** (d / config.point_distance_tolerance))
+    penalty = np.where(crossing, 1.0, 0.95 ** (d / tolerance))
     value = 0.5 * (l1 + l2) * penalty
     keep = value > 0.0
     return PairScores(h[keep], a[keep], b[keep], value[keep], crossing[keep])
@@ -220,8 +232,11 @@ class _Triples(NamedTuple):
         return _Triples(h[index], a[index], b[index], c[index], s[index], tx[index], ty[index])
 
 
-def _within_reach(geometry: PairGeometry, triples: _Triples, config: IntegrateConfig) -> IntArray:
-    """The candidate triples whose midpoints are close enough for the pair to score."""
+def _within_reach(
+    geometry: PairGeometry, triples: _Triples, angle: float, match_distance: float
+) -> IntArray:
+    """The candidate triples whose midpoints are close enough for the pair to score (their
+    directions within ``angle``, their lines within ``match_distance``)."""
     _, a, b, c, s, tx, ty = triples
     lines1, lines2 = geometry.lines1, geometry.lines2
     # A pair scores only if it overlaps along one of its lines (l1 or l2 > 0 below) while one
@@ -232,9 +247,8 @@ def _within_reach(geometry: PairGeometry, triples: _Triples, config: IntegrateCo
     # (match_distance + half the lengths x sin a) / cos a, the other line being turned by a
     # <= max_match_angle. Nine in ten candidates are farther: dropping them first gives the
     # same scores with a fraction of the arithmetic.
-    angle = config.max_match_angle
     reach = (lines1.length[a] + lines2.length[b]) * (0.5 * (1.0 + np.tan(angle)))
-    reach += config.match_distance / np.cos(angle) + 1e-6  # 1e-6 m: rounding, never a score
+    reach += match_distance / np.cos(angle) + 1e-6  # 1e-6 m: rounding, never a score
     m2x, m2y = (column[b] for column in geometry.second_centres)
     gap_x = c * m2x - s * m2y + tx - geometry.first_centres[0][a]
     gap_y = s * m2x + c * m2y + ty - geometry.first_centres[1][a]
@@ -342,21 +356,33 @@ def _segments_cross(
     return np.asarray((o1 * o2 <= 0.0) & (o3 * o4 <= 0.0))
 
 
-def refused(
-    map1: MapLike, map2: MapLike, transforms: FloatArray, config: IntegrateConfig
-) -> BoolArray:
-    """Hypotheses that make a long S1 segment cross a long S2 segment (Alg. 4 l. 6-7).
+def refusal(config: IntegrateConfig) -> tuple[float, float, float]:
+    """What :func:`refused` reads of ``config``: the long segments' length, the shallowest
+    crossing angle and the crossing's margin inside both segments."""
+    return config.segment_length_refuse, config.min_landmark_angle, config.crossing_margin
 
-    Only a proper crossing counts: the crossing point must lie at least ``crossing_margin``
-    inside both segments, since walls that meet at a corner or a T-junction touch without
-    contradicting each other, and two walls crossing at a shallow angle are one wall slightly
-    misaligned.
+
+def refused(
+    map1: MapLike,
+    map2: MapLike,
+    transforms: FloatArray,
+    long: float,
+    min_angle: float,
+    margin: float,
+) -> BoolArray:
+    """Hypotheses that make an S1 segment longer than ``long`` (m) cross such an S2 segment
+    (Alg. 4 l. 6-7).
+
+    Only a proper crossing counts: the crossing point must lie at least ``margin`` (m) inside
+    both segments, since walls that meet at a corner or a T-junction touch without
+    contradicting each other, and two walls crossing at a shallow angle (under ``min_angle``,
+    rad) are one wall slightly misaligned.
     """
     first, second = SegmentMap.of(map1), SegmentMap.of(map2)
     segments1, segments2 = first.segments, second.segments
     lines1, lines2 = first.lines, second.lines
-    long1 = np.flatnonzero(lines1.length > config.segment_length_refuse)
-    long2 = np.flatnonzero(lines2.length > config.segment_length_refuse)
+    long1 = np.flatnonzero(lines1.length > long)
+    long2 = np.flatnonzero(lines2.length > long)
     out = np.zeros(len(transforms), dtype=bool)
     if long1.size == 0 or long2.size == 0 or len(transforms) == 0:
         return out
@@ -370,12 +396,11 @@ def refused(
     vy = s * lines2.direction[b, 0] + c * lines2.direction[b, 1]
     ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
     sine = ux * vy - uy * vx
-    steep = np.abs(sine) > np.sin(config.min_landmark_angle)
+    steep = np.abs(sine) > np.sin(min_angle)
     safe = np.where(steep, sine, 1.0)
     dx, dy = qx - segments1[a, 0], qy - segments1[a, 1]
     along_a = (dx * vy - dy * vx) / safe  # distance from s1's start to the crossing
     along_b = (dx * uy - dy * ux) / safe  # distance from s2's start to the crossing
-    margin = config.crossing_margin
     inside = (
         (along_a > margin)
         & (along_a < lines1.length[a] - margin)
@@ -426,27 +451,33 @@ def best_prescreened(
     transforms: FloatArray,
     keep: int,
     segments_used: int,
-    config: IntegrateConfig,
+    tolerances: tuple[float, float, float],
 ) -> IntArray:
     """Indices of the ``keep`` hypotheses (all when fewer) with the best rough value
-    (:func:`_prescreen_values`) on the ``segments_used`` longest segments of each set."""
+    (:func:`_prescreen_values`, its ``tolerances``) on the ``segments_used`` longest segments
+    of each set."""
     if len(transforms) <= keep:
         return np.arange(len(transforms), dtype=np.int64)
     first, second = SegmentMap.of(map1), SegmentMap.of(map2)
     rough = _prescreen_values(
-        first.longest(segments_used), second.longest(segments_used), transforms, config
+        first.longest(segments_used), second.longest(segments_used), transforms, *tolerances
     )
     return np.asarray(np.argpartition(-rough, keep - 1)[:keep], dtype=np.int64)
 
 
 def _prescreen_values(
-    map1: SegmentMap, map2: SegmentMap, transforms: FloatArray, config: IntegrateConfig
+    map1: SegmentMap,
+    map2: SegmentMap,
+    transforms: FloatArray,
+    match_angle: float,
+    match_distance: float,
+    tolerance: float,
 ) -> FloatArray:
     """A cheap lower-fidelity value of every hypothesis, for ranking only.
 
     Alg. 4's matching value with half the arithmetic: the S2 segment's end points' distance
-    to the S1 line (not the symmetric distance), the overlap along the S1 line only, and no
-    crossing test; directions must agree within ``prescreen_match_angle``.
+    to the S1 line (not the symmetric distance, within ``match_distance``), the overlap along
+    the S1 line only, and no crossing test; directions must agree within ``match_angle``.
     """
     count = len(transforms)
     if count == 0 or len(map1) == 0 or len(map2) == 0:
@@ -454,7 +485,7 @@ def _prescreen_values(
     segments1, segments2 = map1.segments, map2.segments
     geometry = pair_geometry(map1, map2)
     lines1 = geometry.lines1
-    h, a, b = _candidate_triples(geometry, transforms[:, 0], config.prescreen_match_angle)
+    h, a, b = _candidate_triples(geometry, transforms[:, 0], match_angle)
     if h.size == 0:
         return np.zeros(count)
     cos_h, sin_h = np.cos(transforms[:, 0]), np.sin(transforms[:, 0])
@@ -467,7 +498,7 @@ def _prescreen_values(
     ux, uy = lines1.direction[a, 0], lines1.direction[a, 1]
     ca = lines1.normal_offset[a]
     d = np.maximum(np.abs(-uy * q1x + ux * q1y - ca), np.abs(-uy * q2x + ux * q2y - ca))
-    near = np.flatnonzero(d <= config.match_distance)
+    near = np.flatnonzero(d <= match_distance)
     h, a, d = h[near], a[near], d[near]
     ux, uy = ux[near], uy[near]
     sa1 = ux * segments1[a, 0] + uy * segments1[a, 1]
@@ -479,7 +510,7 @@ def _prescreen_values(
         0.0,
         None,
     )
-    value = overlap * 0.95 ** (d / config.point_distance_tolerance)
+    value = overlap * 0.95 ** (d / tolerance)
     return np.bincount(h, weights=value, minlength=count).astype(np.float64)
 
 
@@ -502,11 +533,17 @@ def pruned_values(
     first, second = SegmentMap.of(map1), SegmentMap.of(map2)
     count = len(transforms)
     pool = np.arange(forced, count)
+    tolerances = (
+        config.prescreen_match_angle,
+        config.match_distance,
+        config.point_distance_tolerance,
+    )
     for segments_used, keep in (
         (max(1, config.prescreen_segments // 2), _ROUGH_CUT * config.candidate_pool),
         (config.prescreen_segments, config.candidate_pool),
     ):
-        pool = pool[best_prescreened(first, second, transforms[pool], keep, segments_used, config)]
+        best = best_prescreened(first, second, transforms[pool], keep, segments_used, tolerances)
+        pool = pool[best]
     pool = np.concatenate((np.arange(forced), pool))
     values = np.zeros(count)
     values[pool] = transform_values(score_pairs(first, second, transforms[pool], config), pool.size)

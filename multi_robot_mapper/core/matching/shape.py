@@ -343,12 +343,13 @@ def align(
     perceived: Shape,
     matched: list[tuple[tuple[int, int], tuple[int, int]]],
     T_start: Pose,
-    config: ShapeConfig,
+    spacing: float,
+    iterations: int,
 ) -> tuple[Pose, float]:
-    """Wolter 5.1 (after Cox): the perceived polylines of the correspondences, sampled every
-    ``align_spacing`` (at least one point per segment), fitted to their nearest points on the
-    corresponding reference polylines; nearest points and closed-form fit in turn, from
-    ``T_start``. Returns the alignment and the final RMS distance."""
+    """Wolter 5.1 (after Cox): the matched perceived polylines, a point every ``spacing`` m
+    (one per segment at least), fitted to their nearest points on the reference ones: nearest
+    points and closed-form fit in turn from ``T_start``, ``iterations`` times (once at least).
+    Returns the fit and its RMS distance."""
     ref_segments, ref_owner = _polyline_segments(reference)
     per_segments, per_owner = _polyline_segments(perceived)
     allowed = np.zeros((len(perceived), len(reference)), dtype=bool)
@@ -358,9 +359,8 @@ def align(
     per_segments, per_owner = per_segments[use], per_owner[use]
     if len(per_segments) == 0:
         return T_start, float("inf")
-    samples, owner = _samples(per_segments, config.align_spacing)
-    polyline = per_owner[owner]
-    mask = allowed[polyline][:, ref_owner]  # (S, segments of the reference)
+    samples, owner = _samples(per_segments, spacing)
+    mask = allowed[per_owner[owner]][:, ref_owner]  # (S, segments of the reference)
     a, b = ref_segments[:, :2], ref_segments[:, 2:]
     ab = b - a
     # A polyline's first and last segments, whose outer ends are the polyline's ends.
@@ -369,7 +369,7 @@ def align(
     ab_square = np.maximum((ab * ab).sum(axis=1), 1e-18)
     T = se2.matrix_from_pose(*T_start)
     rms = float("inf")
-    for _ in range(max(config.align_iterations, 1)):
+    for _ in range(max(iterations, 1)):
         moved = se2.transform_points(T, samples)
         t = ((moved[:, None, 0] - a[None, :, 0]) * ab[None, :, 0]) + (
             (moved[:, None, 1] - a[None, :, 1]) * ab[None, :, 1]
@@ -466,7 +466,8 @@ def match_shapes(reference: Shape, perceived: Shape, config: ShapeConfig) -> Sha
         _, pairs = second_pass(estimate)
         if not pairs:
             continue
-        T_1_2, rms = align(reference, perceived, as_polylines(pairs), estimate, config)
+        fit = (config.align_spacing, config.align_iterations)
+        T_1_2, rms = align(reference, perceived, as_polylines(pairs), estimate, *fit)
         total, final = second_pass(T_1_2)
         if final:
             results.append(ShapeMatch(T_1_2, True, tuple(as_polylines(final)), total, rms))

@@ -34,8 +34,8 @@ Modules: ``config`` (MergeConfig), ``correlation`` (every placement of one map o
 ``free_space`` (what a robot saw), ``pairwise`` (one pair of maps), ``link_graph`` (every
 pair, the spanning tree, placement: :func:`merge`), ``compose`` (the fused global map),
 ``ordered`` (the paper's three methods on a known order), ``joint`` (method ``pivot``), ``ffs``
-(method ``ffs``: Force Field Simulation of :mod:`multi_robot_mapper.core.ffs` after ``joint``),
-``methods`` (the registry of both).
+(Force Field Simulation; ``ffs.method`` is method ``ffs``: FFS after ``joint``), ``methods``
+(the registry of both).
 """
 
 from multi_robot_mapper.core.merging.config import MergeConfig

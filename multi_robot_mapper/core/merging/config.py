@@ -9,8 +9,8 @@ import numpy as np
 
 from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig
-from multi_robot_mapper.core.ffs.config import FfsConfig
 from multi_robot_mapper.core.matching import IntegrateConfig
+from multi_robot_mapper.core.merging.ffs.config import FfsConfig
 
 
 @dataclasses.dataclass(frozen=True)

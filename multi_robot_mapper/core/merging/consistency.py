@@ -113,10 +113,14 @@ def _poses(unit: MapUnit, keyframes: Sequence[int]) -> FloatArray:
 
 
 def consistency_matrix(
-    links: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit], config: MergeConfig
+    links: Sequence[OrientedLink],
+    units: Mapping[UnitKey, MapUnit],
+    slack: float,
+    angle_slack: float,
 ) -> BoolArray:
     """(n, n) which links of one pair of maps agree with each other (all read from the same
-    map ``first``). Two placements of the same place never agree (they are rivals)."""
+    map ``first``), within ``slack`` m and ``angle_slack`` rad per metre run inside the maps.
+    Two placements of the same place never agree (they are rivals)."""
     n = len(links)
     if n == 0:
         return np.zeros((0, 0), dtype=bool)
@@ -138,9 +142,7 @@ def consistency_matrix(
     path = np.hypot(*(a[:, None, :2] - a[None, :, :2]).transpose(2, 0, 1)) + np.hypot(
         *(b[:, None, :2] - b[None, :, :2]).transpose(2, 0, 1)
     )
-    agree = (shift <= RIGHT_DISTANCE + config.link_pair_slack * path) & (
-        turn <= RIGHT_ANGLE + config.link_pair_angle_slack * path
-    )
+    agree = (shift <= RIGHT_DISTANCE + slack * path) & (turn <= RIGHT_ANGLE + angle_slack * path)
     places = [(lk.candidate.source, lk.candidate.centre) for lk in links]
     ids = {p: k for k, p in enumerate(dict.fromkeys(places))}
     place = np.array([ids[p] for p in places])
@@ -193,7 +195,7 @@ def consistent_set(
     if not usable:
         return PairVerdict(pair, [], 0.0, 0.0, 0, False, "no link fits")
     links = [oriented(c, pair[0]) for c in usable]
-    agree = consistency_matrix(links, units, config)
+    agree = consistency_matrix(links, units, config.link_pair_slack, config.link_pair_angle_slack)
     weights = placement_weights(usable)
     chosen = heaviest_clique(agree, weights)
     members = [usable[i] for i in chosen]
@@ -207,7 +209,7 @@ def consistent_set(
     evidence = evidence_of(members, _link_placement(_best_of(members, pair[0]), units))
     conflict = max(evidence.conflict, through[1])
     probability = model.probability(evidence.features(conflict))
-    reason = doubt(probability, evidence, conflict, config)
+    reason = doubt(probability, evidence, conflict, config.join_probability)
     return PairVerdict(
         pair,
         members,
@@ -223,13 +225,14 @@ def consistent_set(
     )
 
 
-def doubt(probability: float, evidence: PairEvidence, conflict: float, config: MergeConfig) -> str:
-    """Why a placement is not believed ("" when it is): its probability, and the evidence
-    behind it (the wall no rival explains, the walls in free space)."""
-    if probability >= config.join_probability:
+def doubt(probability: float, evidence: PairEvidence, conflict: float, threshold: float) -> str:
+    """Why a placement is not believed ("" when it is): its probability below ``threshold``
+    (``join_probability``), and the evidence behind it (the wall no rival explains, the walls
+    in free space)."""
+    if probability >= threshold:
         return ""
     return (
-        f"P {probability:.3f} < {config.join_probability:g}: {evidence.margin:.1f} m of wall "
+        f"P {probability:.3f} < {threshold:g}: {evidence.margin:.1f} m of wall "
         f"no rival placement explains (of {evidence.score:.1f} m), {conflict:.1f} m in free space"
     )
 
@@ -522,7 +525,7 @@ def _judge_join(
     # groups (pair_evidence.group_conflict).
     conflict = max(verdict.conflict, group_conflict(group_a, group_b, T_ra_rb))
     probability = model.probability(evidence.features(conflict))
-    doubted = doubt(probability, evidence, conflict, config)
+    doubted = doubt(probability, evidence, conflict, config.join_probability)
     return dataclasses.replace(
         verdict,
         accepted=not doubted,

@@ -67,12 +67,14 @@ class MapViews:
             limits = windows.min(axis=2)
         return np.asarray(limits)
 
-    def free_points(self, config: MergeConfig, spacing: float) -> FloatArray:
+    def free_points(
+        self, spacing: float, spread: int, margin: float, view_range: float
+    ) -> FloatArray:
         """Points every ``spacing`` metres along every bearing of every view, out to
-        ``free_space_margin`` before the wall that ends it (:meth:`free_limits`): where the
-        robot's laser saw nothing."""
-        reach = self.free_limits(config.view_spread) - config.free_space_margin
-        steps = np.arange(spacing, config.view_range, spacing)
+        ``margin`` before the wall that ends it (:meth:`free_limits` of ``spread``) and to
+        ``view_range`` at most: where the robot's laser saw nothing."""
+        reach = self.free_limits(spread) - margin
+        steps = np.arange(spacing, view_range, spacing)
         view, bearing, step = np.nonzero(reach[:, :, None] > steps[None, None, :])
         if view.size == 0:
             return np.zeros((0, 2))
@@ -134,10 +136,11 @@ def view_source(
     return views
 
 
-def seen_through_allowance(value: float, config: MergeConfig) -> float:
+def seen_through_allowance(value: float, least: float, fraction: float) -> float:
     """How much wall in the other robot's free space a link of ``value`` m tolerates:
-    ``link_max_seen_through``, or that fraction of the value when larger (drifting maps)."""
-    return max(config.link_max_seen_through, config.link_max_seen_through_fraction * value)
+    ``least`` m (``link_max_seen_through``), or ``fraction`` of the value when larger
+    (drifting maps)."""
+    return max(least, fraction * value)
 
 
 def free_space_conflict(

@@ -156,8 +156,8 @@ def merge_joint(
     verdicts = _verdicts(units, matches, config, model, state, new_state)
     accepted = _accepted_pairs(units, verdicts, config, model, new_state.targets)
     checked = time.perf_counter()
-    previous_reference = None if previous is None else previous.reference
-    group, ref_unit, chains = _placed_group(accepted, units, chosen, previous_reference, config)
+    last = None if previous is None else previous.reference
+    group, ref_unit, chains = _placed_group(accepted, units, chosen, last, config.join_probability)
     new_state.solution = solved(
         units,
         group,
@@ -193,7 +193,7 @@ def _accepted_pairs(
 
     def conflict(group_a: Any, group_b: Any, T: FloatArray) -> float:
         targets = {key: target_of(units[key], config, kept) for key in (*group_a, *group_b)}
-        return group_conflict(group_a, group_b, T, units, targets, config)
+        return group_conflict(group_a, group_b, T, units, targets, config.place_radius)
 
     return accept_pairs(list(verdicts.values()), units, config, model, reaches, conflict)
 
@@ -203,14 +203,14 @@ def _placed_group(
     units: Mapping[UnitKey, MapUnit],
     chosen: str | None,
     previous: str | None,
-    config: MergeConfig,
+    join_probability: float,
 ) -> tuple[list[UnitKey], UnitKey | None, dict[UnitKey, float]]:
     """The maps placed in ``map`` (:func:`_reference`'s group, each joined to the reference
     map with a probability of at least ``join_probability``), the reference map and each
     map's probability of being joined right (:func:`chain_probabilities`)."""
     group, ref_unit = _reference(accepted, units, chosen, previous)
     chains = chain_probabilities(ref_unit, [(*v.pair, v.probability) for v in accepted.pairs])
-    group = [key for key in group if chains.get(key, 0.0) >= config.join_probability]
+    group = [key for key in group if chains.get(key, 0.0) >= join_probability]
     return group, ref_unit, chains
 
 
@@ -426,7 +426,9 @@ def _result(
     for key in solved.frames:
         result.frame_probabilities.setdefault(key[0], {})[key[1]] = chains[key]
     result.unmerged_reasons = {
-        robot: unmerged_reason(robot, units, verdicts, accepted, chains, ref_unit, config)
+        robot: unmerged_reason(
+            robot, units, verdicts, accepted, chains, ref_unit, config.join_probability
+        )
         for robot in robots
         if placements[robot] is None
     }

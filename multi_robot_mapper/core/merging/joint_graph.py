@@ -93,7 +93,7 @@ def _solve(
             anchored = key == ref_unit and row == 0
             x, y, theta = (float(v) for v in placed)
             graph.add_node(offsets[key] + row, (x, y, theta), anchored=anchored)
-        for edge in _intra_edges(unit, offsets[key], config, intra):
+        for edge in _intra_edges(unit, offsets[key], _edge_model(config), intra):
             graph.add_edge(edge)
     accepted_links = _add_links(graph, accepted, units, offsets)
     iterations = graph.solve() if accepted_links else 0
@@ -175,17 +175,32 @@ def _intra_pairs(unit: MapUnit, radius: float) -> list[tuple[int, int]]:
     return pairs
 
 
+# MergeConfig's graph_radius, graph_sigma, graph_drift, graph_angle_sigma, graph_angle_drift
+_EdgeModel = tuple[float, float, float, float, float]
+
+
+def _edge_model(config: MergeConfig) -> _EdgeModel:
+    """What the edges inside a map read of ``config``."""
+    return (
+        config.graph_radius,
+        config.graph_sigma,
+        config.graph_drift,
+        config.graph_angle_sigma,
+        config.graph_angle_drift,
+    )
+
+
 def _intra_edges(
-    unit: MapUnit, offset: int, config: MergeConfig, kept: OrderedDict[Any, Any]
+    unit: MapUnit, offset: int, model: _EdgeModel, kept: OrderedDict[Any, Any]
 ) -> list[Edge]:
     """The edges between keyframes of one map (:func:`_intra_pairs`), from their published
-    poses, with a standard deviation growing with the distance between them; the same map
-    seen again (most maps, most updates) reuses them."""
+    poses, with a standard deviation growing with the distance between them (``model``); the
+    same map seen again (most maps, most updates) reuses them."""
     content = hashlib.sha1(unit.poses.tobytes()).hexdigest()
-    key = (unit.key, content, config)
+    key = (unit.key, content, model)
     pairs, relative, information = cast(
         tuple[IntArray, FloatArray, FloatArray],
-        cached(kept, key, lambda: _intra_arrays(unit, config)),
+        cached(kept, key, lambda: _intra_arrays(unit, model)),
     )
     return [
         Edge(offset + int(a), offset + int(b), (x, y, t), info, robust=False)
@@ -193,14 +208,15 @@ def _intra_edges(
     ]
 
 
-def _intra_arrays(unit: MapUnit, config: MergeConfig) -> tuple[IntArray, FloatArray, FloatArray]:
+def _intra_arrays(unit: MapUnit, model: _EdgeModel) -> tuple[IntArray, FloatArray, FloatArray]:
     """Rows joined, their relative poses and information matrices (vectorised)."""
-    pairs = np.array(_intra_pairs(unit, config.graph_radius), dtype=np.int64).reshape(-1, 2)
+    radius, graph_sigma, drift, angle_sigma, angle_drift = model
+    pairs = np.array(_intra_pairs(unit, radius), dtype=np.int64).reshape(-1, 2)
     a, b = unit.poses[pairs[:, 0]], unit.poses[pairs[:, 1]]
     relative = se2.between_each(a, b)
     distance = np.hypot(*(b[:, :2] - a[:, :2]).T)
-    sigma = config.graph_sigma + config.graph_drift * distance
-    angle = config.graph_angle_sigma + config.graph_angle_drift * distance
+    sigma = graph_sigma + drift * distance
+    angle = angle_sigma + angle_drift * distance
     information = np.zeros((len(pairs), 3, 3))
     information[:, 0, 0] = information[:, 1, 1] = sigma**-2
     information[:, 2, 2] = angle**-2

@@ -221,7 +221,9 @@ def free_space_join(
     ) -> bool:
         if len(group_a) == 1 and len(group_b) == 1:
             return True  # exactly the pair match_maps judged
-        allowed = seen_through_allowance(link.value, config)
+        allowed = seen_through_allowance(
+            link.value, config.link_max_seen_through, config.link_max_seen_through_fraction
+        )
         for x, T_ga_x in group_a.items():
             for y, T_gb_y in group_b.items():
                 view_x, view_y = views(x), views(y)

@@ -8,7 +8,7 @@ from typing import Protocol
 
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.ffs import merge_ffs
+from multi_robot_mapper.core.merging.ffs.method import merge_ffs
 from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 

@@ -180,7 +180,8 @@ def occupancy_grid(
         free_space_margin=resolution,
     )
     for own, poses in _thinned(views, config.view_spacing):
-        _mark_free(cells, origin, resolution, MapViews.of(own, poses, view_config), view_config)
+        reach_of = (view_config.view_spread, view_config.free_space_margin, view_config.view_range)
+        _mark_free(cells, origin, resolution, MapViews.of(own, poses, view_config), reach_of)
     if config.path_radius > 0.0:
         for _, poses in views:
             _mark_path(cells, origin, resolution, poses, config.path_radius)
@@ -274,13 +275,15 @@ def _mark_free(
     origin: tuple[float, float],
     resolution: float,
     views: MapViews,
-    config: MergeConfig,
+    reach_of: tuple[int, float, float],
 ) -> None:
     """Set to FREE every cell whose centre lies in the free space of ``views``: within the
     field of view, nearer the viewpoint than the map's wall on that bearing (the nearest
-    within ``view_spread`` bearings) by ``free_space_margin``."""
-    reach = views.free_limits(config.view_spread) - config.free_space_margin
-    radius = min(config.view_range, float(np.max(reach, initial=0.0)))
+    within ``spread`` bearings) by ``margin``, and within ``view_range`` (``reach_of``:
+    spread, margin, view_range)."""
+    spread, margin, view_range = reach_of
+    reach = views.free_limits(spread) - margin
+    radius = min(view_range, float(np.max(reach, initial=0.0)))
     if radius <= 0.0 or len(views.poses) == 0:
         return
     height, width = cells.shape

@@ -105,22 +105,23 @@ def group_conflict(
     T_a_b: np.ndarray,
     units: Mapping[UnitKey, MapUnit],
     targets: Mapping[UnitKey, Target],
-    config: MergeConfig,
+    place_radius: float,
 ) -> float:
     """Metres of wall that joining two groups of maps puts in free space a robot of the other
     group saw, the larger way: group B (each map at its ``T_rootb_map``) placed at ``T_a_b``
     on group A (each at its ``T_roota_map``), the groups' maps drawn together, each wall once,
-    the patch of every map of B on the shared ground and of A likewise, each placement
-    refined (issue 46: a join is checked against every member of the group it creates).
+    the patch of every map of B on the shared ground (``place_radius`` wide) and of A
+    likewise, each placement refined (issue 46: a join is checked against every member of the
+    group it creates).
 
     Only the free space: whether the pair's placement is right is the pair's own evidence
     (its rivals searched over the whole of the other map); a join of groups is right when
     its pair is, and the other members can only add walls where their robots saw through."""
     drawing_a, positions_a = _group_drawing(group_a, units, targets)
     drawing_b, positions_b = _group_drawing(group_b, units, targets)
-    shared_a, shared_b = _shared_ground(positions_a, positions_b, T_a_b, 0.5 * config.place_radius)
-    patch_b = patch_of(drawing_b, shared_b, config.place_radius)
-    patch_a = patch_of(drawing_a, shared_a, config.place_radius)
+    shared_a, shared_b = _shared_ground(positions_a, positions_b, T_a_b, 0.5 * place_radius)
+    patch_b = patch_of(drawing_b, shared_b, place_radius)
+    patch_a = patch_of(drawing_a, shared_a, place_radius)
     worst = 0.0
     for target, patch, T in ((drawing_a, patch_b, T_a_b), (drawing_b, patch_a, se2.invert(T_a_b))):
         if len(patch.walls) == 0 or len(target.walls) == 0:

@@ -18,6 +18,7 @@ from multi_robot_mapper.core.matching import (
     MatchResult,
     integrate,
     refine_many,
+    refusal,
     refused,
     score_pairs,
 )
@@ -243,7 +244,9 @@ def _judged_link(
         through = free_space_conflict(
             map_a.segments, views_a, map_b.segments, views_b, result.matrix, config
         )
-        valid = through <= seen_through_allowance(result.value, config)
+        valid = through <= seen_through_allowance(
+            result.value, config.link_max_seen_through, config.link_max_seen_through_fraction
+        )
     return MapMatch(result, tight, valid, _INTEGRATE_CALLS, through, uniqueness)
 
 
@@ -277,7 +280,7 @@ def _best_places(
     correlation, link = config.correlation(), config.link_config()
     rough = placement_scores(drawing_a, drawing_b, candidates, correlation)
     # Long walls crossing each other refuse a placement outright (Alg. 4 l. 6-7).
-    rough[refused(judge_a, judge_b, candidates, link)] = -np.inf
+    rough[refused(judge_a, judge_b, candidates, *refusal(link))] = -np.inf
     keep: list[int] = []
     for k in np.argsort(-rough, kind="stable"):
         if len(keep) == _REFINED or not np.isfinite(rough[k]):
@@ -288,7 +291,7 @@ def _best_places(
         return None
     refined = refine_many(judge_a, judge_b, candidates[keep], link)
     scores = placement_scores(drawing_a, drawing_b, refined, correlation)
-    scores[refused(judge_a, judge_b, refined, link)] = -np.inf
+    scores[refused(judge_a, judge_b, refined, *refusal(link))] = -np.inf
     if not np.isfinite(scores).any():
         return None
     return refined, scores
@@ -298,7 +301,13 @@ def draw_map(segments: MapLike, views: MapViews | None, config: MergeConfig) -> 
     """A map drawn for the correlation, with its free space when its views are known (one
     point per cell along each bearing marks every cell the beams cross)."""
     cell = config.correlation_cell
-    free = np.zeros((0, 2)) if views is None else views.free_points(config, cell)
+    free = (
+        np.zeros((0, 2))
+        if views is None
+        else views.free_points(
+            cell, config.view_spread, config.free_space_margin, config.view_range
+        )
+    )
     return Drawing.of(segments, free, cell)
 
 

@@ -136,7 +136,9 @@ def place_drawing(place: Place, config: MergeConfig) -> Drawing:
     """A place drawn for the correlation, with its free space (within ``place_radius`` of its
     centre, like its walls: the place is a disk)."""
     cell = config.correlation_cell
-    free = place.views.free_points(config, cell)
+    free = place.views.free_points(
+        cell, config.view_spread, config.free_space_margin, config.view_range
+    )
     free = free[np.hypot(free[:, 0], free[:, 1]) <= config.place_radius]
     return Drawing.of(place.segment_map, free, cell)
 
@@ -160,13 +162,14 @@ _VERIFY_VIEWS = 6
 _VERIFY_SPACING = 2.0  # m
 
 
-def _verify_views(views: MapViews, config: MergeConfig) -> list[Viewpoint]:
-    """A map's views thinned for a verification (:data:`_VERIFY_VIEWS`)."""
+def _verify_views(views: MapViews, view_range: float) -> list[Viewpoint]:
+    """A map's views thinned for a verification (:data:`_VERIFY_VIEWS`), each seeing
+    ``view_range`` m at most."""
     rows = thin(views.poses, _VERIFY_SPACING)
     if len(rows) > _VERIFY_VIEWS:
         rows = rows[np.linspace(0, len(rows) - 1, _VERIFY_VIEWS).astype(int)]
     kept = MapViews(views.poses[rows], views.ranges[rows], views.angle_min, views.angle_increment)
-    return viewpoints(kept, config)
+    return viewpoints(kept, view_range)
 
 
 def placement_hypotheses(
@@ -226,7 +229,8 @@ def match_place(
     near = _close_to_any(poses[:, :2], hypotheses[:, 1:], config.place_radius)
     views = MapViews.of(crop.segments, poses[near], config)
     settings = place_config(config)
-    sides = (_verify_views(views, config) or None, _verify_views(place.views, config) or None)
+    reach = config.view_range
+    sides = (_verify_views(views, reach) or None, _verify_views(place.views, reach) or None)
     best = integrate(
         crop,
         own,
@@ -280,7 +284,7 @@ def _best_rival(
         own,
         rival.T_1_2,
         sides,
-        settings,
+        (settings.confirm_margin, settings.free_space_spread, settings.view_point_length),
         score=rival.evidence.score,
         rival_score=best_score,
         rival_T=best_T,

@@ -150,10 +150,10 @@ def clip_to_disk(segments: FloatArray, centre: FloatArray, radius: float) -> Flo
     return np.asarray(np.hstack((start, end)))
 
 
-def viewpoints(views: MapViews, config: MergeConfig) -> list[Viewpoint]:
+def viewpoints(views: MapViews, view_range: float) -> list[Viewpoint]:
     """A map's synthetic views (its own walls ray cast from its keyframe poses) as the
     viewpoints INTEGRATE's beam evidence takes: one scan per pose, in the laser frame (no
-    wall within ``view_range`` on a bearing: no return)."""
+    wall within ``view_range`` m on a bearing: no return)."""
     beams = views.ranges.shape[1]
     out = []
     for pose, row in zip(views.poses, views.ranges, strict=True):
@@ -163,7 +163,7 @@ def viewpoints(views: MapViews, config: MergeConfig) -> list[Viewpoint]:
             angle_max=views.angle_min + views.angle_increment * (beams - 1),
             angle_increment=views.angle_increment,
             range_min=0.0,
-            range_max=config.view_range,
+            range_max=view_range,
         )
         out.append(Viewpoint(scan, se2.matrix_from_pose(*pose)))
     return out

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.consistency import Accepted, PairVerdict
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey, unit_name
 
@@ -17,7 +16,7 @@ def unmerged_reason(
     accepted: Accepted,
     chains: Mapping[UnitKey, float],
     ref_unit: UnitKey | None,
-    config: MergeConfig,
+    join_probability: float,
 ) -> str:
     """The most telling reason the robot's map frame is not placed: its placement's
     probability below ``join_probability``, a join refused, the most probable placement
@@ -30,7 +29,7 @@ def unmerged_reason(
     if main in chains:
         return (
             f"placement probability {chains[main]:.3f} below join_probability "
-            f"{config.join_probability:g} (its paths of joins to {ref_unit[0]})"
+            f"{join_probability:g} (its paths of joins to {ref_unit[0]})"
         )
     group = next((g for g in accepted.groups if main in g), [main])
     others = sorted({key[0] for key in group} - {robot})

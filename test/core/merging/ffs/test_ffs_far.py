@@ -1,6 +1,6 @@
-"""FFS from afar (core/ffs/far.py, issue 51): the coarse point sets, the wall pulls, the joint
-step and the paper's experiment 4.2 on synthetic geometry with a known answer; re-seating a
-body left in a wrong minimum (core/ffs/reseat.py)."""
+"""FFS from afar (core/merging/ffs/far.py, issue 51): the coarse point sets, the wall pulls, the
+joint step and the paper's experiment 4.2 on synthetic geometry with a known answer; re-seating
+a body left in a wrong minimum (core/merging/ffs/reseat.py)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.ffs import FfsConfig, make_bodies
-from multi_robot_mapper.core.ffs.bodies import placed
-from multi_robot_mapper.core.ffs.far import (
+from multi_robot_mapper.core.merging.ffs import FfsConfig, make_bodies
+from multi_robot_mapper.core.merging.ffs.bodies import placed
+from multi_robot_mapper.core.merging.ffs.far import (
     coarser,
     joint_step,
     levels,
@@ -18,7 +18,7 @@ from multi_robot_mapper.core.ffs.far import (
     start_width,
     wall_pulls,
 )
-from multi_robot_mapper.core.ffs.reseat import BODY_FAN, reseat, run_ffs_reseated
+from multi_robot_mapper.core.merging.ffs.reseat import BODY_FAN, reseat, run_ffs_reseated
 
 # Two rooms joined by a door and a corridor: corners in every direction, walls of several
 # lengths, nothing symmetric.

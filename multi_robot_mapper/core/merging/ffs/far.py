@@ -37,7 +37,7 @@ rest stands still is not settled).
 Uses :class:`FfsConfig`'s ``sigma_start``, ``sigma_end``, ``dt_factor``, ``cutoff``,
 ``stop_relocation``, ``max_iterations``, ``time_budget``; ``sigma_start`` is the caller's: the
 scale of the start's misalignment (the merger's refinement starts within centimetres and runs
-:func:`~multi_robot_mapper.core.ffs.simulation.run_ffs` instead)."""
+:func:`~multi_robot_mapper.core.merging.ffs.simulation.run_ffs` instead)."""
 
 from __future__ import annotations
 
@@ -49,9 +49,9 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.ffs.bodies import Bodies, placed
-from multi_robot_mapper.core.ffs.config import FfsConfig
-from multi_robot_mapper.core.ffs.simulation import FfsResult
+from multi_robot_mapper.core.merging.ffs.bodies import Bodies, placed
+from multi_robot_mapper.core.merging.ffs.config import FfsConfig
+from multi_robot_mapper.core.merging.ffs.simulation import FfsResult
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

@@ -42,8 +42,8 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.ffs.bodies import Bodies, placed
-from multi_robot_mapper.core.ffs.config import FfsConfig
+from multi_robot_mapper.core.merging.ffs.bodies import Bodies, placed
+from multi_robot_mapper.core.merging.ffs.config import FfsConfig
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -147,7 +147,9 @@ def run_ffs(
         field = force_field(points, directions, bodies, centres, sigma, config.cutoff)
         spring = springs.acceleration(poses)
         potentials.append(field.potential)
-        relocation = _step(poses, field, spring, centres, moments, free, cooled, sigma, dt, config)
+        relocation = _step(
+            poses, field, spring, centres, moments, free, cooled, sigma, dt, config.spacing
+        )
         relocations.append(relocation)
         # Cooling (FFS 3.6): sigma linearly, dt exponentially.
         sigma = max(config.sigma_end, sigma - config.sigma_step)
@@ -205,7 +207,7 @@ def _step(
     cooled: float,
     sigma: float,
     dt: float,
-    config: FfsConfig,
+    spacing: float,
 ) -> float:
     """One step of the free bodies (``poses`` moved in place) by the field and the springs'
     accelerations: ½·a·Δt², turning about the rotation centres; the mean relocation of the
@@ -216,7 +218,7 @@ def _step(
     # sqrt(2 pi) sigma / spacing of neighbours on a line): then 1/2 a dt^2 with dt = 1 is
     # the whole step such a body needs, and a body touching others at a few points only
     # moves that much less (the paper's F / m).
-    contact = np.sqrt(2.0 * np.pi) * sigma / config.spacing / sigma**2
+    contact = np.sqrt(2.0 * np.pi) * sigma / spacing / sigma**2
     # Moment of inertia about the centre a * com (a = 1 - cooled), from the body's second
     # moment: sum m |p - a com|^2 = M (r^2 - (2a - a^2) |com|^2), no pass over the points.
     a = 1.0 - cooled

@@ -6,10 +6,11 @@ import dataclasses
 
 from multi_robot_mapper.core.config import ConfigError, param, validate
 from multi_robot_mapper.core.merging import MergeConfig
+from multi_robot_mapper.core.merging.methods import MERGE_METHODS
 from multi_robot_mapper.core.merging.occupancy import GridConfig
 
-METHODS = ("pivot", "ffs")
-IMPLEMENTED_METHODS = ("pivot", "ffs")
+# The node's choices: the merging registry's names, the one list of merging methods.
+METHODS = tuple(MERGE_METHODS)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -175,8 +176,8 @@ class MapMergerConfig:
 
     def require_implemented(self) -> None:
         """Raise :class:`ConfigError` when ``method`` names a method not implemented yet."""
-        if self.method not in IMPLEMENTED_METHODS:
+        if self.method not in MERGE_METHODS:
             raise ConfigError(
-                f"parameter 'method' = {self.method!r}: Force Field Simulation is not "
-                f"implemented yet; use one of: {', '.join(IMPLEMENTED_METHODS)}"
+                f"parameter 'method' = {self.method!r} is not a merging method; use one of: "
+                f"{', '.join(MERGE_METHODS)}"
             )

@@ -1,4 +1,4 @@
-"""Force Field Simulation (core/ffs): resampling, regions of interest, the force field,
+"""Force Field Simulation (core/merging/ffs): resampling, regions of interest, the force field,
 Algorithm 1 on synthetic geometry with a known answer, and the 'ffs' merging method."""
 
 from __future__ import annotations
@@ -14,9 +14,15 @@ from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError
-from multi_robot_mapper.core.ffs import FfsConfig, facing_sensor, make_bodies, resample, run_ffs
-from multi_robot_mapper.core.ffs.bodies import corner_points, placed
-from multi_robot_mapper.core.ffs.simulation import ChainSprings, force_field
+from multi_robot_mapper.core.merging.ffs import (
+    FfsConfig,
+    facing_sensor,
+    make_bodies,
+    resample,
+    run_ffs,
+)
+from multi_robot_mapper.core.merging.ffs.bodies import corner_points, placed
+from multi_robot_mapper.core.merging.ffs.simulation import ChainSprings, force_field
 
 # A 4 m x 3 m room with an L-shaped cabinet: corners in every direction.
 ROOM = np.array(
@@ -258,7 +264,7 @@ def test_ffs_updates_resume_where_the_last_one_stopped(
     # one with something new starts afresh from the joint graph.
     from multi_robot_mapper.core.extraction_config import ExtractionConfig
     from multi_robot_mapper.core.merging import MergeConfig
-    from multi_robot_mapper.core.merging.ffs import FfsState, merge_ffs
+    from multi_robot_mapper.core.merging.ffs.method import FfsState, merge_ffs
     from multi_robot_mapper.core.merging.joint import merge_joint
     from multi_robot_mapper.core.pipeline import run_offline
 
@@ -291,7 +297,7 @@ def test_ffs_updates_resume_where_the_last_one_stopped(
 
 
 def test_a_warm_start_carries_each_keyframe_as_the_last_simulation_corrected_it() -> None:
-    from multi_robot_mapper.core.merging.ffs import FfsState, warm_started
+    from multi_robot_mapper.core.merging.ffs.method import FfsState, warm_started
 
     before = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.1], [2.0, 0.5, 0.2]])
     # What FFS did to each held keyframe, in its own frame.

@@ -27,10 +27,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.ffs.bodies import facing_sensor, make_bodies
-from multi_robot_mapper.core.ffs.simulation import ChainSprings, FfsResult, run_ffs
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.ffs.bodies import facing_sensor, make_bodies
+from multi_robot_mapper.core.merging.ffs.simulation import ChainSprings, FfsResult, run_ffs
 from multi_robot_mapper.core.merging.joint import merge_joint
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 

@@ -29,10 +29,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter
 
-from multi_robot_mapper.core.ffs.bodies import Bodies, placed
-from multi_robot_mapper.core.ffs.config import FfsConfig
-from multi_robot_mapper.core.ffs.far import coarser, run_ffs_far
-from multi_robot_mapper.core.ffs.simulation import FfsResult
+from multi_robot_mapper.core.merging.ffs.bodies import Bodies, placed
+from multi_robot_mapper.core.merging.ffs.config import FfsConfig
+from multi_robot_mapper.core.merging.ffs.far import coarser, run_ffs_far
+from multi_robot_mapper.core.merging.ffs.simulation import FfsResult
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

@@ -9,6 +9,10 @@ from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.local_mapping import LocalMapperConfig
 from multi_robot_mapper.core.scan_stream import ScanStreamConfig
 
+# The stream rules' defaults are defined beside the rules (core/scan_stream.py), which the
+# offline pipeline applies without this node config; the node's parameters start from them.
+_STREAM = ScanStreamConfig()
+
 
 @dataclasses.dataclass(frozen=True)
 class RobotMapperConfig:
@@ -66,7 +70,7 @@ class RobotMapperConfig:
         "shorter keeps the pose fresher",
     )
     stamp_reset_jump: float = param(
-        5.0,
+        _STREAM.reset_jump,
         unit="s",
         doc="a scan stamped further back than this from the last one (a bag played again, a "
         "clock reset) starts the robot's map over; a smaller step back is a stale scan, "
@@ -75,7 +79,7 @@ class RobotMapperConfig:
         maximum=1e6,
     )
     max_stamp_lead: float = param(
-        10.0,
+        _STREAM.max_lead,
         unit="s",
         doc="a scan stamped further ahead of this node's clock is dropped (a robot clock far "
         "off, a corrupt stamp); not checked while a simulated clock has not started",
@@ -85,7 +89,7 @@ class RobotMapperConfig:
         "computer's (no NTP or chrony)",
     )
     stamp_gap_periods: float = param(
-        10.0,
+        _STREAM.gap_periods,
         unit="intervals",
         doc="a scan stamped further ahead of the last mapped one than this many of the "
         "stream's scan intervals (their recent median) is held until stamp_confirm_scans scans "
@@ -95,7 +99,7 @@ class RobotMapperConfig:
         maximum=1e6,
     )
     stamp_confirm_scans: int = param(
-        3,
+        _STREAM.confirm_scans,
         unit="scans",
         doc="scans in a row that must continue a new time (a jump ahead of the cadence, or "
         "back beyond stamp_reset_jump) before it is believed: then they are mapped (a jump "
@@ -105,7 +109,7 @@ class RobotMapperConfig:
         maximum=1000,
     )
     geometry_change_scans: int = param(
-        10,
+        _STREAM.geometry_scans,
         unit="scans",
         doc="a scan whose angle_min, angle_max, angle_increment or beam count differ from the "
         "laser's (its first scan's) is refused (angle_fields), unless this many scans in a row "
@@ -115,7 +119,7 @@ class RobotMapperConfig:
         maximum=100000,
     )
     copy_window: int = param(
-        200,
+        _STREAM.copy_window,
         unit="scans",
         doc="a scan whose ranges are an exact copy of one of the last this many mapped scans' "
         "is refused (copied_ranges): no laser reads the same twice; 0: not checked",

@@ -6,9 +6,9 @@ import pytest
 from conftest import REPO
 
 from multi_robot_mapper.core.config import ConfigError, config_from_flat
-from multi_robot_mapper.core.merger_config import MapMergerConfig
 from multi_robot_mapper.core.merging import MergeConfig
 from multi_robot_mapper.io.config_files import default_params_file, load_config
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
 
 
 def test_the_shipped_params_file_holds_the_defaults() -> None:
