@@ -109,22 +109,29 @@ def collected(work: Path) -> list[dict[str, Any]]:
     return sorted(rows, key=lambda row: (row["log"], row["robots"]))
 
 
-def wrong_links(links: list[list[Any]], bag: Path) -> tuple[int, int] | None:
-    """How many of the joint graph's links (``[robot_a, stamp_a, robot_b, stamp_b, x, y,
-    theta]``: keyframe b at T_a_b in keyframe a's frame) are wrong against the bag's reference
-    poses (off by more than the confidence's own tolerance, 0.30 m / 5 deg), and how many more
-    are wrong only by the reference's own error at one of their scans
-    (``reference_check.ReferenceJudge``). None when a link's keyframe has no reference pose."""
+def _verdicts(links: list[list[Any]], bag: Path) -> list[str | None]:
+    """Each joint-graph link (``[robot_a, stamp_a, robot_b, stamp_b, x, y, theta]``: keyframe b
+    at T_a_b in keyframe a's frame) judged against the bag's reference poses
+    (``reference_check.ReferenceJudge``): "wrong", "reference" (wrong only by the reference's
+    own error), or None where a keyframe has no reference pose."""
     from bench.reference_check import ReferenceJudge
     from multi_robot_mapper.io.bags import read_recordings
 
-    if not links:
-        return 0, 0
     judge = ReferenceJudge(read_recordings(bag))
-    verdicts = [
+    return [
         judge.verdict(a, stamp_a, b, stamp_b, (x, y, theta))
         for a, stamp_a, b, stamp_b, x, y, theta in links
     ]
+
+
+def wrong_links(links: list[list[Any]], bag: Path) -> tuple[int, int] | None:
+    """How many of the joint graph's links are wrong against the bag's reference poses (off by
+    more than the confidence's own tolerance, 0.30 m / 5 deg), and how many more are wrong only
+    by the reference's own error at one of their scans (:func:`_verdicts`). None when a link's
+    keyframe has no reference pose."""
+    if not links:
+        return 0, 0
+    verdicts = _verdicts(links, bag)
     if None in verdicts:
         return None
     return verdicts.count("wrong"), verdicts.count("reference")
@@ -133,16 +140,8 @@ def wrong_links(links: list[list[Any]], bag: Path) -> tuple[int, int] | None:
 def judged_links(links: list[list[Any]], bag: Path) -> tuple[int, int, int, int]:
     """:func:`wrong_links` over the links both of whose keyframes have a reference pose (on a
     dense bag one scan in 15-17 has one): wrong, wrong only by the reference, judged, all."""
-    from bench.reference_check import ReferenceJudge
-    from multi_robot_mapper.io.bags import read_recordings
-
-    judge = ReferenceJudge(read_recordings(bag))
-    verdicts = [
-        judge.verdict(a, stamp_a, b, stamp_b, (x, y, theta))
-        for a, stamp_a, b, stamp_b, x, y, theta in links
-    ]
-    judged = [v for v in verdicts if v is not None]
-    return judged.count("wrong"), judged.count("reference"), len(judged), len(verdicts)
+    judged = [v for v in _verdicts(links, bag) if v is not None] if links else []
+    return judged.count("wrong"), judged.count("reference"), len(judged), len(links)
 
 
 def fmt(value: Any, digits: int = 3) -> str:
