@@ -7,6 +7,7 @@ One JSON file (``map_merger``'s ``save_map`` / ``load_map`` services and ``save_
      "robots": {"robot1": {"map_frame": "robot1/map", "session": 1000000000.0 | null,
                            "map_stamp": [sec, nanosec] | null,
                            "placement": [x, y, theta] | null,
+                           "probability": 0.97 | null,  # that the placement is right
                            "segments": [[x1, y1, x2, y2], ...],     # the robot's own map frame
                            "keyframe_poses": [[x, y, theta], ...],  # the robot's own map frame
                            "session_of": null | "robot1"},  # an earlier session of robot1
@@ -14,8 +15,10 @@ One JSON file (``map_merger``'s ``save_map`` / ``load_map`` services and ``save_
      "global": {"segments": [[x1, y1, x2, y2], ...], "segment_robot": [0, ...]}}  # in map_frame
 
 A robot's ``placement`` is ``T_map_robot`` (its map frame in ``map_frame``) or null when it
-was unmerged; ``session`` is the stamp of its first keyframe (what tells a restarted robot's
-new map from the old one). The file is written under a temporary name and renamed when
+was unmerged, ``probability`` the merge's probability that it is right (null: not known, as in
+files written before it was saved; a loaded placement is published at once only with it);
+``session`` is the stamp of its first keyframe (what tells a restarted robot's new map from
+the old one). The file is written under a temporary name and renamed when
 complete: an interrupted save leaves the previous file. Reading checks every field and raises
 :class:`SavedMapError` with one line naming the file and the field.
 """
@@ -57,6 +60,7 @@ class SavedRobot:
     segments: FloatArray  # (N, 4) in the robot's map frame
     keyframe_poses: FloatArray  # (K, 3) in the robot's map frame
     session_of: str | None = None  # an earlier session of this robot (never updated again)
+    probability: float | None = None  # that ``placement`` is right (None: not known)
 
 
 @dataclasses.dataclass
@@ -87,6 +91,7 @@ def write_saved_map(path: str | Path, saved: SavedMap) -> Path:
                 "segments": np.asarray(robot.segments, dtype=np.float64).tolist(),
                 "keyframe_poses": np.asarray(robot.keyframe_poses, dtype=np.float64).tolist(),
                 "session_of": robot.session_of,
+                "probability": robot.probability,
             }
             for name, robot in saved.robots.items()
         },
@@ -201,6 +206,11 @@ def _robot(entry: Any, name: str, path: Path) -> SavedRobot:
     session_of = entry.get("session_of")
     if session_of is not None and not isinstance(session_of, str):
         raise SavedMapError(f"{path}: '{name}.session_of' must be a robot name or null")
+    probability = entry.get("probability")
+    if probability is not None and not (
+        isinstance(probability, int | float) and 0.0 <= float(probability) <= 1.0
+    ):
+        raise SavedMapError(f"{path}: '{name}.probability' must be a number in [0, 1] or null")
     return SavedRobot(
         map_frame=frame,
         session=None if session is None else float(session),
@@ -209,4 +219,5 @@ def _robot(entry: Any, name: str, path: Path) -> SavedRobot:
         segments=_numbers(entry.get("segments"), 4, f"{name}.segments", path),
         keyframe_poses=_numbers(entry.get("keyframe_poses"), 3, f"{name}.keyframe_poses", path),
         session_of=session_of,
+        probability=None if probability is None else float(probability),
     )

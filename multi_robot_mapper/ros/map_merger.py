@@ -368,6 +368,7 @@ class MapMerger(SavedMapServices, Node):
             self.last_merge_s = time.perf_counter() - began
             self.merges += 1
             merged = True
+            self.autosave()
         if self.result is not None:
             self._publish_result(self.result, inputs, merged)
         return merged

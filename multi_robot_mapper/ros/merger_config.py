@@ -137,8 +137,9 @@ class MapMergerConfig:
     save_on_shutdown: bool = param(
         False,
         unit="",
-        doc="save the map to map_file when the node shuts down",
-        tune="to keep the map when the merger stops: true",
+        doc="save the map to map_file when the node shuts down, and every 10 s while merges "
+        "change it (a killed merger leaves a recent file)",
+        tune="to keep the map when the merger stops or is killed: true",
     )
     load_on_start: bool = param(
         False,

@@ -233,6 +233,7 @@ def saved_map_of(
             segments=state.segments,
             keyframe_poses=state.keyframe_poses,
             session_of=state.session_of,
+            probability=None if result is None else result.probabilities.get(name),
         )
         for name, state in with_map.items()
     }
@@ -305,6 +306,7 @@ def result_of_saved(saved: SavedMap) -> MergeResult:
         segment_robot=np.asarray(saved.segment_robot, dtype=np.int64),
         timings={},
         stats={},
+        probabilities={n: p for n in names if (p := saved.robots[n].probability) is not None},
     )
 
 

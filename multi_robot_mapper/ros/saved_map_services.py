@@ -3,7 +3,9 @@ saving on shutdown and loading at start-up (``map_file``; the file format is io/
 
 from __future__ import annotations
 
+import dataclasses
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -13,11 +15,19 @@ from multi_robot_mapper.core.merging import MergeResult
 from multi_robot_mapper.io.saved_map import SavedMapError, read_saved_map, write_saved_map
 from multi_robot_mapper.ros.merger_config import MapMergerConfig
 from multi_robot_mapper.ros.merger_state import (
+    MergeInputs,
     RobotState,
+    merge_inputs,
     restore_saved_map,
     result_of_saved,
     saved_map_of,
 )
+
+# Seconds (wall clock) between two saves while the merges change the map, with
+# save_on_shutdown: a merger killed without a shutdown (SIGKILL, a power cut) leaves a file at
+# most this old, whose placements a restarted merger publishes at once (docs/results.md, a
+# merger restarted mid-run). A save of eight robots' maps is a few hundred kB of JSON.
+AUTOSAVE_PERIOD = 10.0
 
 
 class SavedMapServices:
@@ -29,23 +39,49 @@ class SavedMapServices:
     config: MapMergerConfig
     _lock: threading.Lock
     _merged_versions: dict[str, Any]
+    _saved_at = float("-inf")  # time.monotonic() of the last save
+    _publish_result: Callable[[MergeResult, MergeInputs, bool], None]  # MapMerger's
 
     def save_map(self, path: str | None = None) -> str:
         """Write every robot's partial map and placement and the global map to ``path``
         (default ``map_file``); raises :class:`SavedMapError`."""
         with self._lock:
             saved = saved_map_of(self.robots, self.result, self.config.map_frame)
-        return str(write_saved_map(path or self.config.map_file, saved))
+        written = str(write_saved_map(path or self.config.map_file, saved))
+        self._saved_at = time.monotonic()
+        return written
+
+    def autosave(self) -> None:
+        """After a merge that changed the map: save it (``save_on_shutdown``) when the last
+        save is :data:`AUTOSAVE_PERIOD` old; a failed save is a warning, the map is kept."""
+        if not self.config.save_on_shutdown:
+            return
+        if time.monotonic() - self._saved_at < AUTOSAVE_PERIOD:
+            return
+        try:
+            self.save_map()
+        except SavedMapError as exc:
+            self.get_logger().warning(f"map not saved: {exc}")
+            self._saved_at = time.monotonic()  # not retried at every merge
 
     def load_map(self, path: str | None = None) -> list[str]:
         """Read a saved map (default ``map_file``) and merge its robots with the live ones;
-        returns the robots loaded. Raises :class:`SavedMapError`."""
+        returns the robots loaded. Raises :class:`SavedMapError`.
+
+        With no merge yet, the saved placements are published at once (each robot's frame
+        is fixed in its own map, so a placement made before stays right while its robot maps
+        on): those whose probability was saved, and the reference's. The next merge
+        publishes its own."""
         saved = read_saved_map(path or self.config.map_file)
         with self._lock:
             loaded = restore_saved_map(self.robots, saved, self.config.keep_sessions)
-            if self.result is None:
+            restored = self.result is None
+            if restored:
                 self.result = result_of_saved(saved)  # its reference stays the map frame
             self._merged_versions = {}
+            inputs = merge_inputs(self.robots)
+        if restored and self.result is not None:
+            self._publish_result(_known_placements(self.result), inputs, True)
         return loaded
 
     def _on_save(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -67,6 +103,16 @@ class SavedMapServices:
         self.get_logger().info(
             f"loaded {', '.join(loaded) or 'no robot'} from {self.config.map_file}"
         )
+
+
+def _known_placements(result: MergeResult) -> MergeResult:
+    """``result`` with the placements of unknown probability left out (none is withdrawn:
+    nothing was published before)."""
+    known = {
+        name: pose if name == result.reference or name in result.probabilities else None
+        for name, pose in result.placements.items()
+    }
+    return dataclasses.replace(result, placements=known)
 
 
 def _answer(response: Trigger.Response, action: Callable[[], str]) -> Trigger.Response:

@@ -39,6 +39,7 @@ def sample() -> SavedMap:
             rng.normal(size=(4, 4)),
             np.zeros((2, 3)),
             "robot1",
+            0.97,
         ),
     }
     return SavedMap(
@@ -54,13 +55,8 @@ def test_a_saved_map_reads_back_exactly(tmp_path: Path) -> None:
     assert sorted(back.robots) == sorted(saved.robots)
     for name, robot in saved.robots.items():
         got = back.robots[name]
-        assert (got.map_frame, got.session, got.map_stamp, got.placement, got.session_of) == (
-            robot.map_frame,
-            robot.session,
-            robot.map_stamp,
-            robot.placement,
-            robot.session_of,
-        )
+        fields = ("map_frame", "session", "map_stamp", "placement", "session_of", "probability")
+        assert [getattr(got, f) for f in fields] == [getattr(robot, f) for f in fields]
         np.testing.assert_array_equal(got.segments, robot.segments)  # JSON floats are exact
         np.testing.assert_array_equal(got.keyframe_poses, robot.keyframe_poses)
     np.testing.assert_array_equal(back.segments, saved.segments)
@@ -112,6 +108,8 @@ def test_unreadable_files_name_the_problem(tmp_path: Path, content: str, message
         ),
         (lambda d: d["robots"]["robot1"].__setitem__("placement", [1, 2]), "robot1.placement"),
         (lambda d: d["robots"]["robot1"].__setitem__("map_stamp", [1, -2]), "robot1.map_stamp"),
+        (lambda d: d["robots"]["robot1"].__setitem__("probability", 1.5), "robot1.probability"),
+        (lambda d: d["robots"]["robot1"].__setitem__("probability", "x"), "robot1.probability"),
         (lambda d: d.__setitem__("reference", "nobody"), "'reference'"),
         (lambda d: d["global"].__setitem__("segment_robot", [0, 9, 0, 0, 0, 0, 0]), "outside"),
         (lambda d: d["global"].__setitem__("segment_robot", [0]), "one index per segment"),
@@ -124,6 +122,16 @@ def test_bad_fields_are_refused_by_name(tmp_path: Path, edit, message: str) -> N
     path.write_text(json.dumps(data))
     with pytest.raises(SavedMapError, match=message):
         read_saved_map(path)
+
+
+def test_a_file_without_probabilities_reads_them_as_unknown(tmp_path: Path) -> None:
+    """Files written before the placements' probabilities were saved still load."""
+    path = write_saved_map(tmp_path / "map.json", sample())
+    data = json.loads(path.read_text())
+    for entry in data["robots"].values():
+        del entry["probability"]
+    path.write_text(json.dumps(data))
+    assert all(robot.probability is None for robot in read_saved_map(path).robots.values())
 
 
 def test_a_missing_file_says_so(tmp_path: Path) -> None:

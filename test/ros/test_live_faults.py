@@ -228,17 +228,37 @@ def test_save_and_load_services_bring_the_map_back_into_a_merger_without_robots(
     assert not answer.success and "no such saved map" in answer.message
 
 
-def test_the_merger_saves_on_shutdown_when_asked(rig: Rig, tmp_path: Path) -> None:
+def test_the_merger_saves_as_it_merges_and_a_restart_publishes_the_saved_placements_at_once(
+    rig: Rig, tmp_path: Path
+) -> None:
     maps, views = office_maps()
     map_file = tmp_path / "on_exit.json"
     rig.start_merger(map_file=str(map_file), save_on_shutdown=True)
     for name in NAMES:
         rig.add_robot(name, maps[name], views[name])
     assert rig.spin_until(lambda: rig.merged(*NAMES))
-    assert not map_file.exists()
-    rig.stop_merger()
+    assert map_file.exists()  # saved after a merge: a killed merger leaves a recent file
+    rig.stop_merger()  # and on shutdown
     saved = read_saved_map(map_file)
     assert all(saved.robots[n].placement is not None for n in NAMES)
+    other = next(n for n in NAMES if n != saved.reference)
+    assert 0.0 < (saved.robots[other].probability or 0.0) <= 1.0
+
+    # Started again with no robot left and no merge to come (merge_period of an hour): the
+    # saved placements are published from the file alone, each with its probability.
+    for name in NAMES:
+        rig.remove_robot(name)
+        rig.observer.frames[name].clear()
+    rig.observer.probabilities.clear()
+    merger = rig.start_merger(map_file=str(map_file), load_on_start=True, merge_period=3600.0)
+    assert rig.spin_until(lambda: all(rig.observer.frames[n] for n in NAMES), 10.0)
+    assert rig.spin_until(lambda: len(rig.observer.probabilities) == len(NAMES), 10.0)
+    assert merger.merges == 0
+    for name in NAMES:
+        got = pose_from_msg(rig.observer.frames[name][-1].pose)
+        np.testing.assert_allclose(got, saved.robots[name].placement, atol=1e-9)
+    assert rig.observer.probabilities[saved.reference] == 1.0
+    assert rig.observer.probabilities[other] == saved.robots[other].probability
 
 
 def test_a_restarted_merger_rebuilds_the_map_from_the_latched_partial_maps(rig: Rig) -> None:
