@@ -23,10 +23,11 @@ from multi_robot_mapper.ros.merger_state import (
     saved_map_of,
 )
 
-# Seconds (wall clock) between two saves while the merges change the map, with
+# Seconds (wall clock) between two saves while the merges change the maps, with
 # save_on_shutdown: a merger killed without a shutdown (SIGKILL, a power cut) leaves a file at
 # most this old, whose placements a restarted merger publishes at once (docs/results.md, a
-# merger restarted mid-run). A save of eight robots' maps is a few hundred kB of JSON.
+# merger restarted mid-run). A save of eight robots' maps is a few hundred kB of JSON. A merge
+# that places or withdraws a robot is saved at once.
 AUTOSAVE_PERIOD = 10.0
 
 
@@ -40,6 +41,7 @@ class SavedMapServices:
     _lock: threading.Lock
     _merged_versions: dict[str, Any]
     _saved_at = float("-inf")  # time.monotonic() of the last save
+    _saved_placed: frozenset[str] = frozenset()  # the robots placed in it
     _publish_result: Callable[[MergeResult, MergeInputs, bool], None]  # MapMerger's
 
     def save_map(self, path: str | None = None) -> str:
@@ -49,14 +51,17 @@ class SavedMapServices:
             saved = saved_map_of(self.robots, self.result, self.config.map_frame)
         written = str(write_saved_map(path or self.config.map_file, saved))
         self._saved_at = time.monotonic()
+        self._saved_placed = _placed(self.result)
         return written
 
     def autosave(self) -> None:
-        """After a merge that changed the map: save it (``save_on_shutdown``) when the last
-        save is :data:`AUTOSAVE_PERIOD` old; a failed save is a warning, the map is kept."""
+        """After a merge: save the map (``save_on_shutdown``) when the robots placed changed
+        or the last save is :data:`AUTOSAVE_PERIOD` old; a failed save is a warning, the map
+        is kept."""
         if not self.config.save_on_shutdown:
             return
-        if time.monotonic() - self._saved_at < AUTOSAVE_PERIOD:
+        recent = time.monotonic() - self._saved_at < AUTOSAVE_PERIOD
+        if recent and _placed(self.result) == self._saved_placed:
             return
         try:
             self.save_map()
@@ -103,6 +108,12 @@ class SavedMapServices:
         self.get_logger().info(
             f"loaded {', '.join(loaded) or 'no robot'} from {self.config.map_file}"
         )
+
+
+def _placed(result: MergeResult | None) -> frozenset[str]:
+    return frozenset(
+        () if result is None else (n for n, p in result.placements.items() if p is not None)
+    )
 
 
 def _known_placements(result: MergeResult) -> MergeResult:
