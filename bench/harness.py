@@ -190,16 +190,10 @@ def imported_bag(
 ) -> Path:
     """``bag``: log ``name`` cut into ``robots`` robots by ``mrm import-carmen`` (each run
     ``overlap`` scans into its predecessor), imported once and reused after."""
-    if not bag.exists():
-        bag.parent.mkdir(parents=True, exist_ok=True)
-        partial = bag.with_name(bag.name + ".partial")
-        shutil.rmtree(partial, ignore_errors=True)  # left by an interrupted import
-        imported = [str(carmen_log(name)), "--robots", str(robots), "--out", str(partial)]
-        if overlap:
-            imported += ["--overlap-scans", str(overlap)]
-        mrm(["import-carmen", *imported], log)
-        partial.rename(bag)
-    return bag
+    imported = [str(carmen_log(name)), "--robots", str(robots)]
+    if overlap:
+        imported += ["--overlap-scans", str(overlap)]
+    return _imported_once("import-carmen", imported, bag, log)
 
 
 def imported_dense_bag(name: str, robots: int, bag: Path, log: Path | None = None) -> Path:
@@ -207,16 +201,21 @@ def imported_dense_bag(name: str, robots: int, bag: Path, log: Path | None = Non
     ``robots`` robots by ``mrm import-bag``, its truth file's reference poses attached and
     CARMEN's beam geometry (the shared bags were converted from CARMEN logs: docs/bags.md),
     imported once and reused after."""
+    source, truth = BAGS / f"{name}.bag", BAGS / f"{name}.truth.csv"
+    imported = [str(source), "--robots", str(robots), "--beam-geometry", "carmen"]
+    if truth.is_file():
+        imported += ["--truth", str(truth)]
+    return _imported_once("import-bag", imported, bag, log)
+
+
+def _imported_once(command: str, arguments: list[str], bag: Path, log: Path | None) -> Path:
+    """``mrm COMMAND ARGUMENTS --out`` into ``bag`` unless it is there: written under a
+    temporary name and renamed when complete, so an interrupted import is never reused."""
     if not bag.exists():
         bag.parent.mkdir(parents=True, exist_ok=True)
         partial = bag.with_name(bag.name + ".partial")
         shutil.rmtree(partial, ignore_errors=True)  # left by an interrupted import
-        source, truth = BAGS / f"{name}.bag", BAGS / f"{name}.truth.csv"
-        imported = [str(source), "--robots", str(robots), "--out", str(partial)]
-        imported += ["--beam-geometry", "carmen"]
-        if truth.is_file():
-            imported += ["--truth", str(truth)]
-        mrm(["import-bag", *imported], log)
+        mrm([command, *arguments, "--out", str(partial)], log)
         partial.rename(bag)
     return bag
 
