@@ -209,8 +209,8 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
     """The node's regime on a reference-built cut: the robots drive at once (each run's time
     counted from its own first scan), and every ``every`` seconds the keyframes made so far
     are merged with the previous update within ``update_budget``; then updates with nothing
-    new until no match is pending. One line: updates, their time (median, 90th percentile,
-    largest), the largest part not spent matching, the updates until every robot was placed
+    new until no match is pending. One line: updates, their time (median, 90th and 95th
+    percentiles, largest), the largest part not spent matching, the updates until every robot was placed
     (and stayed so), robots placed at the end, keyframes; then each stage's median time."""
     from multi_robot_mapper.core.merging.joint import merge_joint
 
@@ -245,11 +245,11 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
             placed_since = len(times)
         if clock >= stop and result.stats["matches_pending"] == 0:
             break
-    spread = np.percentile(times, [50, 90, 100])
+    spread = np.percentile(times, [50, 90, 95, 100])
     count = sum(len(k) for k in keyframes.values())
     print(
         f"| {name} | {robots} | {len(times)} | {spread[0]:.2f} | {spread[1]:.2f} | "
-        f"{spread[2]:.2f} | {rest:.2f} | {placed_since or '-'} | {placed}/{robots} | {count} |",
+        f"{spread[2]:.2f} | {spread[3]:.2f} | {rest:.2f} | {placed_since or '-'} | {placed}/{robots} | {count} |",
         flush=True,
     )
     median = np.median(np.array(stages), axis=0)
