@@ -113,7 +113,7 @@ class JointState:
     seen: OrderedDict[Any, tuple[float, float]] = dataclasses.field(default_factory=OrderedDict)
     # Each map as a place-matching target, and its places, per content (place_matching).
     targets: Targets = dataclasses.field(default_factory=OrderedDict)
-    places: Places = dataclasses.field(default_factory=OrderedDict)
+    places: Places = dataclasses.field(default_factory=Places)
     # The global map's fusion, map by map (global_map.fuse_keyframes).
     fusion: FusionCache = dataclasses.field(default_factory=FusionCache)
 
