@@ -5,7 +5,8 @@ not grow"): each shared log cut into K runs as the issue-13 benches cut it
 
     .venv/bin/python -m bench.whole_merge [--logs intel aces fhw csail] [--robots 8]
 
-Prints ``label log robots seconds placed`` per case, and the median. ``--placements FILE``
+Prints ``label log robots seconds placed cpu`` per case (``cpu``: the process's CPU seconds,
+the figure to compare on a loaded machine: one thread), and the median. ``--placements FILE``
 writes every robot's placement per log to a JSON file (to diff two commits' placements);
 ``--profile FILE`` runs the merges under cProfile and writes its statistics to FILE
 (``python -m pstats FILE``). To compare with an older
@@ -67,9 +68,9 @@ def main() -> None:
         _, keyframes = joint_cut(list(read_carmen(path)), args.robots, 40)
         if profiler is not None:
             profiler.enable()
-        started = time.perf_counter()
+        started, cpu = time.perf_counter(), time.process_time()
         result = merge_joint(keyframes, MergeConfig(), budget=0.0)
-        elapsed = time.perf_counter() - started
+        elapsed, cpu = time.perf_counter() - started, time.process_time() - cpu
         if profiler is not None:
             profiler.disable()
         placements[name] = {
@@ -78,7 +79,8 @@ def main() -> None:
         }
         seconds.append(elapsed)
         placed = sum(p is not None for p in result.placements.values())
-        print(f"{args.label} {name} {args.robots} {elapsed:.2f} {placed}/{args.robots}", flush=True)
+        line = f"{args.label} {name} {args.robots} {elapsed:.2f} {placed}/{args.robots} {cpu:.2f}"
+        print(line, flush=True)
     if args.placements is not None:
         args.placements.write_text(json.dumps(placements, indent=1) + "\n")
     if profiler is not None:
