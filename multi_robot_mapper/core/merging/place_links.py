@@ -28,6 +28,7 @@ either map moves its keyframes (its own loop closures).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import numpy as np
@@ -37,9 +38,12 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import (
     CorrelationTarget,
     Drawing,
+    ScoringRasters,
     correlation_peaks,
     rotation_candidates,
+    scorer_rasters,
 )
+from multi_robot_mapper.core.evidence.placement import EVIDENCE_CORRELATION
 from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.matching import IntegrateConfig, MatchResult, integrate
 from multi_robot_mapper.core.matching.beams import BeamAgreement, Viewpoint
@@ -130,6 +134,12 @@ class Target:
         )
         signature = MapSignature.of(unit.segment_map)
         return Target(unit, signature, drawing, prepared, poses, views, shapes)
+
+    @functools.cached_property
+    def rasters(self) -> ScoringRasters:
+        """The drawing's rasters at the evidence model's scale, made once per map content
+        (every pair with this map weighs its placements on them; issue 50)."""
+        return scorer_rasters(self.drawing, EVIDENCE_CORRELATION.cell, EVIDENCE_CORRELATION.blur)
 
 
 def place_drawing(place: Place, config: MergeConfig) -> Drawing:
