@@ -53,7 +53,7 @@ from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.matching.shape import Shape
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.free_space import MapViews
+from multi_robot_mapper.core.merging.free_space import MapViews, ViewRows
 from multi_robot_mapper.core.merging.pairwise import MapSignature, draw_map, longest
 from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, thin, viewpoints
 from multi_robot_mapper.core.merging.shape_placements import shape_placements, view_shapes
@@ -118,8 +118,9 @@ class Target:
     shapes: list[Shape]  # Wolter's shape all round from each view pose (shape_hypotheses)
 
     @staticmethod
-    def of(unit: MapUnit, config: MergeConfig) -> Target:
-        views = MapViews.of(unit.segments, unit.poses, config) if len(unit.poses) else None
+    def of(unit: MapUnit, config: MergeConfig, rows: ViewRows | None = None) -> Target:
+        """``unit`` prepared (``rows``: views cast before, :meth:`MapViews.of`)."""
+        views = MapViews.of(unit.segments, unit.poses, config, rows) if len(unit.poses) else None
         drawing = draw_map(unit.segment_map, views, config)
         correlation = config.correlation()
         # A place (walls and free space) reaches place_radius from its centre: the grid must

@@ -19,6 +19,7 @@ from typing import Any, cast
 
 from multi_robot_mapper.core.evidence.correlation import Drawing
 from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.free_space import ViewRows
 from multi_robot_mapper.core.merging.pairwise import MapSignature
 from multi_robot_mapper.core.merging.place_links import (
     LinkCandidate,
@@ -68,7 +69,14 @@ def cached(store: OrderedDict[Any, Any], key: Any, make: Callable[[], Any]) -> A
     return found
 
 
-Targets = OrderedDict[tuple[UnitKey, str, MergeConfig], Target]
+class Targets(OrderedDict[tuple[UnitKey, str, MergeConfig], Target]):
+    """Each map as a target per content and, in ``views``, every view of a map cast so far
+    by its pose and the walls in its reach (:data:`free_space.ViewRows`): a map that grew at
+    its end casts only the views near its end again."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.views: ViewRows = OrderedDict()
 
 
 class Places(OrderedDict[tuple[UnitKey, str, MergeConfig], list[Place]]):
@@ -87,7 +95,7 @@ KEPT_PLACES = 8192
 def target_of(unit: MapUnit, config: MergeConfig, kept: Targets) -> Target:
     """``unit`` as a target of place matches, made once per content (``kept``)."""
     key = (unit.key, unit.segment_map.digest, config)
-    return cast(Target, cached(kept, key, lambda: Target.of(unit, config)))
+    return cast(Target, cached(kept, key, lambda: Target.of(unit, config, kept.views)))
 
 
 def content_digest(unit: MapUnit) -> str:

@@ -94,3 +94,22 @@ def test_two_mergers_in_one_process_share_nothing() -> None:
     for name in kept:
         assert getattr(one, name) is not getattr(two, name), name
     assert one.fusion is not two.fusion
+
+
+def test_a_grown_maps_views_are_cast_again_only_near_its_new_walls() -> None:
+    from collections import OrderedDict
+
+    from multi_robot_mapper.core.merging.free_space import MapViews, ViewRows
+
+    keyframes = corridor_maps()["b"]
+    shorter = units_of({"b": keyframes[:-4]})[("b", 0)]
+    full = units_of({"b": keyframes})[("b", 0)]
+    rows: ViewRows = OrderedDict()
+    MapViews.of(shorter.segments, shorter.poses, CONFIG, rows)
+    cast_before = len(rows)
+    views = MapViews.of(full.segments, full.poses, CONFIG, rows)
+    fresh = MapViews.of(full.segments, full.poses, CONFIG)
+    np.testing.assert_array_equal(views.poses, fresh.poses)
+    np.testing.assert_array_equal(views.ranges, fresh.ranges)  # bit for bit
+    # Views far from the new keyframes' walls were not cast again.
+    assert 0 < len(rows) - cast_before < len(views.poses)
