@@ -48,7 +48,6 @@ from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.matching import IntegrateConfig, MatchResult, integrate
 from multi_robot_mapper.core.matching.beams import BeamAgreement, Viewpoint
 from multi_robot_mapper.core.matching.confidence import MatchEvidence, confidence
-from multi_robot_mapper.core.matching.integrate import match_evidence
 from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.matching.shape import Shape
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
@@ -254,7 +253,7 @@ def match_place(
     if best.value <= 0.0 or best.evidence is None:
         return []
     found = [_candidate(place, own, unit, crop, best, 0, config)]
-    rival = _best_rival(crop, own, hypotheses, best.T_1_2, best.evidence.score, sides, settings)
+    rival = _best_rival(crop, own, hypotheses, best.T_1_2, best.evidence, sides, settings)
     if rival is not None:
         found.append(_candidate(place, own, unit, crop, rival, 1, config))
     return found
@@ -265,11 +264,11 @@ def _best_rival(
     own: SegmentMap,
     hypotheses: FloatArray,
     best_T: FloatArray,
-    best_score: float,
+    best: MatchEvidence,
     sides: tuple[list[Viewpoint] | None, list[Viewpoint] | None],
     settings: IntegrateConfig,
 ) -> MatchResult | None:
-    """The best rival of the best placement ``best_T`` (its score ``best_score``) of the
+    """The best rival of the best placement ``best_T`` (its evidence ``best``) of the
     place's segments ``own`` on the target's ``crop``, with its confidence against the best
     placement; None when every hypothesis lies at the best placement or the rival's
     verification finds nothing else."""
@@ -290,17 +289,19 @@ def _best_rival(
     )
     if not (rival.value > 0.0 and rival.evidence is not None and _differs(rival.T_1_2, best_T)):
         return None
-    evidence = match_evidence(
-        crop,
-        own,
-        rival.T_1_2,
-        sides,
-        (settings.confirm_margin, settings.free_space_spread, settings.view_point_length),
-        score=rival.evidence.score,
-        rival_score=best_score,
-        rival_T=best_T,
-        support=rival.evidence.support,
-        fraction=rival.evidence.fraction,
+    # Its evidence with the best placement as its rival: the beams on each were judged by
+    # the two verifications already (the same maps, views and settings: match_evidence's
+    # judgements of rival.T_1_2 and of best_T, bit for bit; judging them again was a fifth
+    # of a place match, issue 50).
+    found = rival.evidence
+    evidence = MatchEvidence(
+        found.second_in_first,
+        found.first_in_second,
+        found.score,
+        best.score,
+        found.support,
+        found.fraction,
+        best.second_in_first + best.first_in_second,
     )
     return dataclasses.replace(rival, confidence=confidence(evidence.features()))
 
