@@ -19,7 +19,7 @@ FloatArray = NDArray[np.float64]
 
 
 # A view's ranges by what they are cast from: the pose, the walls within reach of it, the fan.
-ViewRows = OrderedDict[tuple[bytes, str, tuple[float, float, int, float]], FloatArray]
+ViewRows = OrderedDict[tuple[str, tuple[float, float, int, float]], FloatArray]
 # Rows kept: 8 robots' maps of a few hundred views each, twice over.
 KEPT_ROWS = 8192
 
@@ -48,7 +48,7 @@ def _cast(
         segments[None, :, 3],
     )
     keys = [
-        (pose.tobytes(), hashlib.sha1(segments[near].tobytes()).hexdigest(), fan)
+        (hashlib.sha1(np.concatenate((pose, segments[near].ravel())).tobytes()).hexdigest(), fan)
         for pose, near in zip(poses, gap <= reach, strict=True)
     ]
     missing = [row for row, key in enumerate(keys) if key not in kept]

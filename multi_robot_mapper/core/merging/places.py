@@ -210,8 +210,8 @@ def places_of(unit: MapUnit, config: MergeConfig, index: PlaceIndex | None = Non
                 for r in rows
             ]
         ).reshape(-1, 3)
-        inputs = hashlib.sha1(pose.tobytes() + segments.tobytes() + view_poses.tobytes())
-        key = (unit.key, int(unit.index[row]), inputs.hexdigest(), config)
+        inputs = np.concatenate((pose, [len(segments)], segments.ravel(), view_poses.ravel()))
+        key = (unit.key, int(unit.index[row]), hashlib.sha1(inputs.tobytes()).hexdigest(), config)
         place = index.get(key) if index is not None else None
         if place is None:
             place = _place(unit, row, segments, view_poses, length, config)
