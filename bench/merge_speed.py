@@ -209,9 +209,10 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
     """The node's regime on a reference-built cut: the robots drive at once (each run's time
     counted from its own first scan), and every ``every`` seconds the keyframes made so far
     are merged with the previous update within ``update_budget``; then updates with nothing
-    new until no match is pending. One line: updates, their time (median, 90th percentile,
-    largest), the largest part not spent matching, the updates until every robot was placed
-    (and stayed so), robots placed at the end, keyframes; then each stage's median time."""
+    new until no match is pending. One line: updates, their time (median, 90th and 95th
+    percentiles, largest), the largest part not spent matching, the updates until every robot
+    was placed (and stayed so), robots placed at the end, keyframes; then the CPU seconds per
+    update (median, p90, p95, max) and each stage's median time."""
     from multi_robot_mapper.core.merging.joint import merge_joint
 
     path = carmen_log(name)
@@ -222,6 +223,7 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
     start = {robot: frames[0].stamp for robot, frames in keyframes.items()}
     stop = max(frames[-1].stamp - start[robot] for robot, frames in keyframes.items())
     times: list[float] = []
+    cpus: list[float] = []  # CPU seconds per update: the figure to compare on a loaded machine
     stages: list[list[float]] = []
     rest = 0.0
     placed_since = None
@@ -233,9 +235,10 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
             robot: [kf for kf in frames if kf.stamp - start[robot] <= clock]
             for robot, frames in keyframes.items()
         }
-        began = time.perf_counter()
+        began, cpu = time.perf_counter(), time.process_time()
         result = merge_joint({r: f for r, f in shown.items() if f}, config, previous=result)
         times.append(time.perf_counter() - began)
+        cpus.append(time.process_time() - cpu)
         stages.append([result.timings[f"{stage}_s"] for stage in STAGES])
         rest = max(rest, result.timings["total_s"] - result.timings["matching_s"])
         placed = sum(pose is not None for pose in result.placements.values())
@@ -245,11 +248,17 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
             placed_since = len(times)
         if clock >= stop and result.stats["matches_pending"] == 0:
             break
-    spread = np.percentile(times, [50, 90, 100])
+    spread = np.percentile(times, [50, 90, 95, 100])
     count = sum(len(k) for k in keyframes.values())
     print(
         f"| {name} | {robots} | {len(times)} | {spread[0]:.2f} | {spread[1]:.2f} | "
-        f"{spread[2]:.2f} | {rest:.2f} | {placed_since or '-'} | {placed}/{robots} | {count} |",
+        f"{spread[2]:.2f} | {spread[3]:.2f} | {rest:.2f} | {placed_since or '-'} | "
+        f"{placed}/{robots} | {count} |",
+        flush=True,
+    )
+    print(
+        "  CPU s per update (median, p90, p95, max): "
+        + ", ".join(f"{v:.2f}" for v in np.percentile(cpus, [50, 90, 95, 100])),
         flush=True,
     )
     median = np.median(np.array(stages), axis=0)

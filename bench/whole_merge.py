@@ -5,7 +5,11 @@ not grow"): each shared log cut into K runs as the issue-13 benches cut it
 
     .venv/bin/python -m bench.whole_merge [--logs intel aces fhw csail] [--robots 8]
 
-Prints ``label log robots seconds placed`` per case, and the median. To compare with an older
+Prints ``label log robots seconds placed cpu`` per case (``cpu``: the process's CPU seconds,
+the figure to compare on a loaded machine: one thread), and the median. ``--placements FILE``
+writes every robot's placement per log to a JSON file (to diff two commits' placements);
+``--profile FILE`` runs the merges under cProfile and writes its statistics to FILE
+(``python -m pstats FILE``). To compare with an older
 commit whose package lacks today's ``bench.harness``, run this file by path with the older
 checkout first on the path: its own ``bench.merge_speed.joint_cut`` (the same cut) is used
 then, and the data is this file's checkout's ``../shared/data``::
@@ -25,6 +29,8 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import cProfile  # noqa: E402
+import json  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -48,20 +54,37 @@ def main() -> None:
     parser.add_argument("--logs", nargs="*", default=list(LOGS))
     parser.add_argument("--robots", type=int, default=8)
     parser.add_argument("--label", default="this", help="first word of each line printed")
+    parser.add_argument("--placements", type=Path, help="JSON file of every placement")
+    parser.add_argument("--profile", type=Path, help="cProfile statistics of the merges")
     args = parser.parse_args()
     seconds = []
+    placements: dict[str, dict[str, list[float] | None]] = {}
+    profiler = cProfile.Profile() if args.profile else None
     for name in args.logs:
         path = CARMEN / f"{name}.log.gz"
         if not path.is_file():
             print(f"{name}: skipped ({path} is absent)", flush=True)
             continue
         _, keyframes = joint_cut(list(read_carmen(path)), args.robots, 40)
-        started = time.perf_counter()
+        if profiler is not None:
+            profiler.enable()
+        started, cpu = time.perf_counter(), time.process_time()
         result = merge_joint(keyframes, MergeConfig(), budget=0.0)
-        elapsed = time.perf_counter() - started
+        elapsed, cpu = time.perf_counter() - started, time.process_time() - cpu
+        if profiler is not None:
+            profiler.disable()
+        placements[name] = {
+            robot: None if pose is None else [float(v) for v in pose]
+            for robot, pose in sorted(result.placements.items())
+        }
         seconds.append(elapsed)
         placed = sum(p is not None for p in result.placements.values())
-        print(f"{args.label} {name} {args.robots} {elapsed:.2f} {placed}/{args.robots}", flush=True)
+        line = f"{args.label} {name} {args.robots} {elapsed:.2f} {placed}/{args.robots} {cpu:.2f}"
+        print(line, flush=True)
+    if args.placements is not None:
+        args.placements.write_text(json.dumps(placements, indent=1) + "\n")
+    if profiler is not None:
+        profiler.dump_stats(str(args.profile))
     if seconds:
         print(f"median {np.median(seconds):.2f} s, max {max(seconds):.2f} s")
 

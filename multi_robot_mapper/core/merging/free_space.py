@@ -3,17 +3,64 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+from collections import OrderedDict
 from collections.abc import Callable, Mapping
 
 import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.geometry import lines_of, sample_segments
+from multi_robot_mapper.core.geometry import lines_of, point_segment_distance, sample_segments
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.simulation import raycast_fans
 
 FloatArray = NDArray[np.float64]
+
+
+# A view's ranges by what they are cast from: the pose, the walls within reach of it, the fan.
+ViewRows = OrderedDict[tuple[str, tuple[float, float, int, float]], FloatArray]
+# Rows kept: 8 robots' maps of a few hundred views each, twice over.
+KEPT_ROWS = 8192
+
+
+def _cast(
+    segments: FloatArray,
+    poses: FloatArray,
+    fan: tuple[float, float, int, float],
+    kept: ViewRows,
+) -> FloatArray:
+    """(K, B) :func:`raycast_fans` of ``poses`` with the fan (first bearing, step, beams,
+    range), each row taken from ``kept`` when cast before from the same pose on the same walls
+    within its range (+ 1 m): a robot's map grows at its end, and the views of the rest of it
+    are those of the last update (issue 50). Each (view, wall) pair is solved apart and a
+    beam's range is the least hit within range, so a row cast on the walls within range is
+    the row cast on all of them, bit for bit."""
+    if len(segments) == 0 or len(poses) == 0:
+        return raycast_fans(segments, poses, *fan)
+    reach = fan[3] + 1.0
+    gap = point_segment_distance(
+        poses[:, None, 0],
+        poses[:, None, 1],
+        segments[None, :, 0],
+        segments[None, :, 1],
+        segments[None, :, 2],
+        segments[None, :, 3],
+    )
+    keys = [
+        (hashlib.sha1(np.concatenate((pose, segments[near].ravel())).tobytes()).hexdigest(), fan)
+        for pose, near in zip(poses, gap <= reach, strict=True)
+    ]
+    missing = [row for row, key in enumerate(keys) if key not in kept]
+    if missing:
+        cast = raycast_fans(segments, poses[missing], *fan)
+        for row, ranges in zip(missing, cast, strict=True):
+            kept[keys[row]] = ranges
+    for key in keys:
+        kept.move_to_end(key)
+    while len(kept) > KEPT_ROWS:
+        kept.popitem(last=False)
+    return np.array([kept[key] for key in keys])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -34,9 +81,15 @@ class MapViews:
     angle_increment: float  # rad between columns
 
     @staticmethod
-    def of(segments: FloatArray, keyframe_poses: FloatArray, config: MergeConfig) -> MapViews:
+    def of(
+        segments: FloatArray,
+        keyframe_poses: FloatArray,
+        config: MergeConfig,
+        rows: ViewRows | None = None,
+    ) -> MapViews:
         """The views of a map from its keyframe poses, at least ``view_spacing`` apart and at
-        most ``max_views`` of them, ``view_field`` wide around each heading."""
+        most ``max_views`` of them, ``view_field`` wide around each heading. ``rows``: rows
+        cast before, by pose and the walls within ``view_range`` of it (:func:`_cast`)."""
         poses = np.asarray(keyframe_poses, dtype=np.float64).reshape(-1, 3)
         kept: list[int] = []
         for index in range(len(poses)):  # greedy thinning over keyframes (a few hundred)
@@ -51,8 +104,10 @@ class MapViews:
         step = 2.0 * np.pi / config.view_beams
         beams = max(2, round(config.view_field / step) + 1)
         first = -0.5 * step * (beams - 1)
-        ranges = raycast_fans(segments, chosen, first, step, beams, config.view_range)
-        return MapViews(chosen, ranges, first, step)
+        fan = (first, step, beams, config.view_range)
+        if rows is None:
+            return MapViews(chosen, raycast_fans(segments, chosen, *fan), first, step)
+        return MapViews(chosen, _cast(segments, chosen, fan, rows), first, step)
 
     def free_limits(self, spread: int) -> FloatArray:
         """(K, B) how far free space reaches along each bearing: the nearest wall within

@@ -112,8 +112,8 @@ class JointState:
     intra: OrderedDict[Any, Any] = dataclasses.field(default_factory=OrderedDict)
     seen: OrderedDict[Any, tuple[float, float]] = dataclasses.field(default_factory=OrderedDict)
     # Each map as a place-matching target, and its places, per content (place_matching).
-    targets: Targets = dataclasses.field(default_factory=OrderedDict)
-    places: Places = dataclasses.field(default_factory=OrderedDict)
+    targets: Targets = dataclasses.field(default_factory=Targets)
+    places: Places = dataclasses.field(default_factory=Places)
     # The global map's fusion, map by map (global_map.fuse_keyframes).
     fusion: FusionCache = dataclasses.field(default_factory=FusionCache)
 

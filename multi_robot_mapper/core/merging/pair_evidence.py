@@ -92,9 +92,16 @@ def pair_evidence(
     same = config.correlation_cell == EVIDENCE_CORRELATION.cell
     prepared_a = target_a.correlation if same else None
     prepared_b = target_b.correlation if same else None
-    b_on_a = placement_evidence(target_a.drawing, patch_b, T_a_b, EVIDENCE_CORRELATION, prepared_a)
+    b_on_a = placement_evidence(
+        target_a.drawing, patch_b, T_a_b, EVIDENCE_CORRELATION, prepared_a, target_a.rasters
+    )
     a_on_b = placement_evidence(
-        target_b.drawing, patch_a, se2.invert(T_a_b), EVIDENCE_CORRELATION, prepared_b
+        target_b.drawing,
+        patch_a,
+        se2.invert(T_a_b),
+        EVIDENCE_CORRELATION,
+        prepared_b,
+        target_b.rasters,
     )
     return PairEvidence(b_on_a, a_on_b)
 

@@ -28,6 +28,7 @@ either map moves its keyframes (its own loop closures).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import numpy as np
@@ -37,19 +38,21 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import (
     CorrelationTarget,
     Drawing,
+    ScoringRasters,
     correlation_peaks,
     rotation_candidates,
+    scorer_rasters,
 )
+from multi_robot_mapper.core.evidence.placement import EVIDENCE_CORRELATION
 from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.matching import IntegrateConfig, MatchResult, integrate
 from multi_robot_mapper.core.matching.beams import BeamAgreement, Viewpoint
 from multi_robot_mapper.core.matching.confidence import MatchEvidence, confidence
-from multi_robot_mapper.core.matching.integrate import match_evidence
 from multi_robot_mapper.core.matching.refine import match_information
 from multi_robot_mapper.core.matching.shape import Shape
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.free_space import MapViews
+from multi_robot_mapper.core.merging.free_space import MapViews, ViewRows
 from multi_robot_mapper.core.merging.pairwise import MapSignature, draw_map, longest
 from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, thin, viewpoints
 from multi_robot_mapper.core.merging.shape_placements import shape_placements, view_shapes
@@ -114,8 +117,9 @@ class Target:
     shapes: list[Shape]  # Wolter's shape all round from each view pose (shape_hypotheses)
 
     @staticmethod
-    def of(unit: MapUnit, config: MergeConfig) -> Target:
-        views = MapViews.of(unit.segments, unit.poses, config) if len(unit.poses) else None
+    def of(unit: MapUnit, config: MergeConfig, rows: ViewRows | None = None) -> Target:
+        """``unit`` prepared (``rows``: views cast before, :meth:`MapViews.of`)."""
+        views = MapViews.of(unit.segments, unit.poses, config, rows) if len(unit.poses) else None
         drawing = draw_map(unit.segment_map, views, config)
         correlation = config.correlation()
         # A place (walls and free space) reaches place_radius from its centre: the grid must
@@ -130,6 +134,12 @@ class Target:
         )
         signature = MapSignature.of(unit.segment_map)
         return Target(unit, signature, drawing, prepared, poses, views, shapes)
+
+    @functools.cached_property
+    def rasters(self) -> ScoringRasters:
+        """The drawing's rasters at the evidence model's scale, made once per map content
+        (every pair with this map weighs its placements on them; issue 50)."""
+        return scorer_rasters(self.drawing, EVIDENCE_CORRELATION.cell, EVIDENCE_CORRELATION.blur)
 
 
 def place_drawing(place: Place, config: MergeConfig) -> Drawing:
@@ -243,7 +253,7 @@ def match_place(
     if best.value <= 0.0 or best.evidence is None:
         return []
     found = [_candidate(place, own, unit, crop, best, 0, config)]
-    rival = _best_rival(crop, own, hypotheses, best.T_1_2, best.evidence.score, sides, settings)
+    rival = _best_rival(crop, own, hypotheses, best.T_1_2, best.evidence, sides, settings)
     if rival is not None:
         found.append(_candidate(place, own, unit, crop, rival, 1, config))
     return found
@@ -254,11 +264,11 @@ def _best_rival(
     own: SegmentMap,
     hypotheses: FloatArray,
     best_T: FloatArray,
-    best_score: float,
+    best: MatchEvidence,
     sides: tuple[list[Viewpoint] | None, list[Viewpoint] | None],
     settings: IntegrateConfig,
 ) -> MatchResult | None:
-    """The best rival of the best placement ``best_T`` (its score ``best_score``) of the
+    """The best rival of the best placement ``best_T`` (its evidence ``best``) of the
     place's segments ``own`` on the target's ``crop``, with its confidence against the best
     placement; None when every hypothesis lies at the best placement or the rival's
     verification finds nothing else."""
@@ -279,17 +289,19 @@ def _best_rival(
     )
     if not (rival.value > 0.0 and rival.evidence is not None and _differs(rival.T_1_2, best_T)):
         return None
-    evidence = match_evidence(
-        crop,
-        own,
-        rival.T_1_2,
-        sides,
-        (settings.confirm_margin, settings.free_space_spread, settings.view_point_length),
-        score=rival.evidence.score,
-        rival_score=best_score,
-        rival_T=best_T,
-        support=rival.evidence.support,
-        fraction=rival.evidence.fraction,
+    # Its evidence with the best placement as its rival: the beams on each were judged by
+    # the two verifications already (the same maps, views and settings: match_evidence's
+    # judgements of rival.T_1_2 and of best_T, bit for bit; judging them again was a fifth
+    # of a place match, issue 50).
+    found = rival.evidence
+    evidence = MatchEvidence(
+        found.second_in_first,
+        found.first_in_second,
+        found.score,
+        best.score,
+        found.support,
+        found.fraction,
+        best.second_in_first + best.first_in_second,
     )
     return dataclasses.replace(rival, confidence=confidence(evidence.features()))
 

@@ -19,6 +19,7 @@ from typing import Any, cast
 
 from multi_robot_mapper.core.evidence.correlation import Drawing
 from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.merging.free_space import ViewRows
 from multi_robot_mapper.core.merging.pairwise import MapSignature
 from multi_robot_mapper.core.merging.place_links import (
     LinkCandidate,
@@ -26,7 +27,13 @@ from multi_robot_mapper.core.merging.place_links import (
     match_place,
     place_drawing,
 )
-from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, places_of
+from multi_robot_mapper.core.merging.places import (
+    MapUnit,
+    Place,
+    PlaceIndex,
+    UnitKey,
+    places_of,
+)
 
 MatchKey = tuple[UnitKey, int, UnitKey]  # (source map, place centre keyframe, target map)
 # A place match to make: (priority, 0 for the smaller map's places, the place's rank in its
@@ -62,14 +69,33 @@ def cached(store: OrderedDict[Any, Any], key: Any, make: Callable[[], Any]) -> A
     return found
 
 
-Targets = OrderedDict[tuple[UnitKey, str, MergeConfig], Target]
-Places = OrderedDict[tuple[UnitKey, str, MergeConfig], list[Place]]
+class Targets(OrderedDict[tuple[UnitKey, str, MergeConfig], Target]):
+    """Each map as a target per content and, in ``views``, every view of a map cast so far
+    by its pose and the walls in its reach (:data:`free_space.ViewRows`): a map that grew at
+    its end casts only the views near its end again."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.views: ViewRows = OrderedDict()
+
+
+class Places(OrderedDict[tuple[UnitKey, str, MergeConfig], list[Place]]):
+    """Each map's places per content and, in ``index``, every place by its exact inputs
+    (:data:`places.PlaceIndex`): one map's change remakes only the places it touched."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.index: PlaceIndex = OrderedDict()
+
+
+# Places kept by their inputs: 8 robots' maps of a few hundred places each, twice over.
+KEPT_PLACES = 8192
 
 
 def target_of(unit: MapUnit, config: MergeConfig, kept: Targets) -> Target:
     """``unit`` as a target of place matches, made once per content (``kept``)."""
     key = (unit.key, unit.segment_map.digest, config)
-    return cast(Target, cached(kept, key, lambda: Target.of(unit, config)))
+    return cast(Target, cached(kept, key, lambda: Target.of(unit, config, kept.views)))
 
 
 def content_digest(unit: MapUnit) -> str:
@@ -79,9 +105,14 @@ def content_digest(unit: MapUnit) -> str:
 
 
 def places_of_unit(unit: MapUnit, config: MergeConfig, kept: Places) -> list[Place]:
-    """``unit``'s places, made once per content (``kept``)."""
+    """``unit``'s places, made once per content (``kept``); of a map that changed, the places
+    whose inputs did not change are taken from ``kept.index`` (:func:`places.places_of`)."""
     key = (unit.key, content_digest(unit), config)
-    return cast(list[Place], cached(kept, key, lambda: places_of(unit, config)))
+    found = cached(kept, key, lambda: places_of(unit, config, kept.index))
+    # The places used most recently: KEPT_PLACES of them, the longest unused dropped first.
+    while len(kept.index) > KEPT_PLACES:
+        kept.index.popitem(last=False)
+    return cast(list[Place], found)
 
 
 # --- links --------------------------------------------------------------------------------

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -178,10 +179,19 @@ def thin(poses: FloatArray, spacing: float) -> IntArray:
     return np.asarray(kept, dtype=np.int64)
 
 
-def places_of(unit: MapUnit, config: MergeConfig) -> list[Place]:
+# A place's inputs (its unit and centre keyframe, the centre's pose, its clipped walls and its
+# viewpoints, the config) to the place made of them: PlaceIndex, kept in the merge's state.
+PlaceIndex = OrderedDict[tuple[UnitKey, int, str, MergeConfig], Place]
+
+
+def places_of(unit: MapUnit, config: MergeConfig, index: PlaceIndex | None = None) -> list[Place]:
     """The unit's places: keyframes at least ``place_spacing`` apart (greedily, oldest first,
     so that a growing map keeps its earlier places), each with the unit's walls within
-    ``place_radius``; places with less than ``place_min_length`` of wall are left out."""
+    ``place_radius``; places with less than ``place_min_length`` of wall are left out.
+
+    ``index``: places made before, by their exact inputs. A robot's map grows at its end: of
+    a map that changed, most places have the same walls and viewpoints as before, and their
+    ray cast views (most of a place's cost) are taken from ``index`` (issue 50)."""
     places = []
     for row in thin(unit.poses, config.place_spacing):
         pose = unit.poses[row]
@@ -200,18 +210,37 @@ def places_of(unit: MapUnit, config: MergeConfig) -> list[Place]:
                 for r in rows
             ]
         ).reshape(-1, 3)
-        digest = hashlib.sha1(
-            np.round(segments, 3).tobytes() + np.round(view_poses, 3).tobytes()
-        ).hexdigest()
-        places.append(
-            Place(
-                unit=unit.key,
-                centre=int(unit.index[row]),
-                T_unit_centre=pose.copy(),
-                segments=segments,
-                views=MapViews.of(segments, view_poses, config),
-                length=length,
-                digest=digest,
-            )
-        )
+        inputs = np.concatenate((pose, [len(segments)], segments.ravel(), view_poses.ravel()))
+        key = (unit.key, int(unit.index[row]), hashlib.sha1(inputs.tobytes()).hexdigest(), config)
+        place = index.get(key) if index is not None else None
+        if place is None:
+            place = _place(unit, row, segments, view_poses, length, config)
+        if index is not None:
+            index[key] = place
+            index.move_to_end(key)  # the oldest unused are dropped first (the caller's cap)
+        places.append(place)
     return places
+
+
+def _place(
+    unit: MapUnit,
+    row: int,
+    segments: FloatArray,
+    view_poses: FloatArray,
+    length: float,
+    config: MergeConfig,
+) -> Place:
+    """The place of ``unit``'s keyframe ``row``: its walls (``segments``, ``length`` m) and
+    viewpoints (``view_poses``) in the centre's frame, ray cast (:meth:`MapViews.of`)."""
+    digest = hashlib.sha1(
+        np.round(segments, 3).tobytes() + np.round(view_poses, 3).tobytes()
+    ).hexdigest()
+    return Place(
+        unit=unit.key,
+        centre=int(unit.index[row]),
+        T_unit_centre=unit.poses[row].copy(),
+        segments=segments,
+        views=MapViews.of(segments, view_poses, config),
+        length=length,
+        digest=digest,
+    )

@@ -99,3 +99,29 @@ def test_the_best_peak_is_the_rigid_motion_between_a_map_and_its_copy(
     # One cell of translation (and what half a degree of turn moves the far end by).
     assert abs(se2.wrap_angle(best_theta - theta)) < np.radians(0.5)
     assert np.hypot(tx - x, ty - y) < CONFIG.cell + 0.2
+
+
+def test_slides_scored_through_their_bound_pick_what_scoring_all_picks() -> None:
+    # PlacementScorer.best_of scores in full only the slides whose bound (score_bound) can
+    # reach the best: the same slide and score as np.argmax over every slide's score.
+    from multi_robot_mapper.core.evidence.correlation import score_bound
+    from multi_robot_mapper.core.evidence.placement import EVIDENCE_CORRELATION, PlacementScorer
+
+    walls = polygon([(0, 0), (40, 0), (40, 3), (22, 3), (22, 12), (19, 12), (19, 3), (0, 3)])
+    for index in range(10):  # doors every 4 m along the corridor: look-alikes slid by 4 m
+        walls = np.vstack((walls, [[4.0 * index, 0.0, 4.0 * index, -1.5]]))
+    xs, ys = np.meshgrid(np.arange(0.2, 40.0, 0.3), np.arange(0.2, 2.8, 0.3))
+    a = Drawing.of(walls, np.column_stack((xs.ravel(), ys.ravel())), EVIDENCE_CORRELATION.cell)
+    patch = walls[np.hypot(walls[:, 0] - 20.0, walls[:, 1] - 2.0) < 6.0]
+    b = Drawing.of(patch, np.zeros((0, 2)), EVIDENCE_CORRELATION.cell)
+    scorer = PlacementScorer(a, b, EVIDENCE_CORRELATION)
+    for theta, tx, ty in ((0.0, 0.0, 0.0), (0.05, 0.4, -0.2), (np.pi, 40.0, 3.0)):
+        slides = scorer.slides(np.array([theta, tx, ty]))
+        assert len(slides) > 50
+        every = scorer.scores(slides)
+        blur_cell = (EVIDENCE_CORRELATION.blur, EVIDENCE_CORRELATION.cell)
+        weight = EVIDENCE_CORRELATION.free_space_weight
+        assert (score_bound(b, slides, scorer.rasters_a, blur_cell, weight) >= every).all()
+        best, value = scorer.best_of(slides)
+        assert best == int(np.argmax(every))
+        assert value == pytest.approx(float(every[best]), rel=1e-12, abs=1e-12)
