@@ -22,7 +22,7 @@ from multi_robot_mapper.core.matching import (
     refused,
     score_pairs,
 )
-from multi_robot_mapper.core.matching.scoring import pair_kept
+from multi_robot_mapper.core.matching.scoring import pair_kept, pair_tolerance
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import (
     MapViews,
@@ -289,7 +289,9 @@ def _best_places(
             keep.append(int(k))
     if not keep:
         return None
-    refined = refine_many(judge_a, judge_b, candidates[keep], link)
+    refined = refine_many(
+        judge_a, judge_b, candidates[keep], pair_tolerance(link), link.refine_iterations
+    )
     scores = placement_scores(drawing_a, drawing_b, refined, correlation)
     scores[refused(judge_a, judge_b, refined, *refusal(link))] = -np.inf
     if not np.isfinite(scores).any():
@@ -350,7 +352,7 @@ def tight_fraction(
         / config.integrate.point_distance_tolerance,
     )
     map1, map2 = SegmentMap.of(segments1), SegmentMap.of(segments2)
-    scores = score_pairs(map1, map2, np.asarray(T_1_2)[None, :], tight)
+    scores = score_pairs(map1, map2, np.asarray(T_1_2)[None, :], pair_tolerance(tight))
     shorter = min(map1.total_length, map2.total_length)
     return float(scores.value.sum()) / max(shorter, 1e-9)
 

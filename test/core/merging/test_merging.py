@@ -23,6 +23,7 @@ from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.matching import IntegrateConfig
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.merging import (
     Link,
     MapViews,
@@ -57,7 +58,12 @@ def fused_map(walls: np.ndarray, poses: np.ndarray, rng: np.random.Generator) ->
         found = extract_scan(data, ExtractionConfig())[0].segments
         placed = se2.transform_segments(se2.matrix_from_pose(*pose), found)
         segments, owner = fuse(
-            segments, owner, placed, np.zeros(len(placed), np.int64), IntegrateConfig(), 0.02
+            segments,
+            owner,
+            placed,
+            np.zeros(len(placed), np.int64),
+            pair_tolerance(IntegrateConfig()),
+            0.02,
         )
     return segments
 
@@ -479,7 +485,12 @@ def test_intel_split_into_three_robots_is_merged_as_the_reference_poses_say() ->
             T_world_laser = se2.matrix_from_pose(*scans[i].reference_pose)
             placed = se2.transform_segments(T_world_laser, found)
             segments, owner = fuse(
-                segments, owner, placed, np.zeros(len(placed), np.int64), IntegrateConfig(), 0.02
+                segments,
+                owner,
+                placed,
+                np.zeros(len(placed), np.int64),
+                pair_tolerance(IntegrateConfig()),
+                0.02,
             )
         # Each robot's map in its own first scan's frame.
         frames[f"robot{k}"] = se2.matrix_from_pose(*scans[chunk[0]].reference_pose)
