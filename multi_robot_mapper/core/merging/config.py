@@ -11,6 +11,7 @@ from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.merging.ffs.config import FfsConfig
+from multi_robot_mapper.core.merging.joint_graph_config import JointGraphConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -416,68 +417,6 @@ class MergeConfig:
         maximum=100.0,
         tune="a robot of the team faster than 2 m/s: its top speed",
     )
-    link_sigma: float = param(
-        0.05,
-        unit="m",
-        doc="no link between robots is trusted to better than this (and link_angle_sigma) in "
-        "the joint graph: places are fused maps, a little bent",
-        minimum=1e-4,
-        maximum=10.0,
-    )
-    link_angle_sigma: float = param(
-        0.01,
-        unit="rad",
-        doc="see link_sigma, for the rotation",
-        minimum=1e-5,
-        maximum=1.0,
-    )
-    link_robust_scale: float = param(
-        1.0,
-        unit="",
-        doc="Dynamic Covariance Scaling parameter of the links in the joint graph (squared "
-        "Mahalanobis units): a link whose error grows far beyond it is switched off",
-        minimum=0.0,
-        maximum=1000.0,
-    )
-    graph_sigma: float = param(
-        0.02,
-        unit="m",
-        doc="an edge between two keyframes of one robot's map (their published poses) has this "
-        "standard deviation, plus graph_drift per metre between them",
-        minimum=1e-4,
-        maximum=10.0,
-    )
-    graph_drift: float = param(
-        0.02,
-        unit="m/m",
-        doc="see graph_sigma: how much a robot's own map may bend per metre",
-        minimum=0.0,
-        maximum=1.0,
-    )
-    graph_angle_sigma: float = param(
-        0.005,
-        unit="rad",
-        doc="rotation of an edge between two keyframes of one robot's map, plus "
-        "graph_angle_drift per metre",
-        minimum=1e-5,
-        maximum=1.0,
-    )
-    graph_angle_drift: float = param(
-        0.005,
-        unit="rad/m",
-        doc="see graph_angle_sigma",
-        minimum=0.0,
-        maximum=1.0,
-    )
-    graph_radius: float = param(
-        2.0,
-        unit="m",
-        doc="besides consecutive keyframes, keyframes of one robot's map this close to each "
-        "other get an edge (the wire carries no loop closures: this keeps what the robot's own "
-        "closures made of its map)",
-        minimum=0.0,
-        maximum=100.0,
-    )
     update_budget: float = param(
         1.0,
         unit="s",
@@ -489,6 +428,8 @@ class MergeConfig:
         tune="more with more robots or a slow computer; 0: every place matched each update (slow)",
     )
     integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
+    # the joint graph of every robot's keyframes (method 'pivot' and 'ffs')
+    graph: JointGraphConfig = dataclasses.field(default_factory=JointGraphConfig)
     # Force Field Simulation after the joint graph's placement (method 'ffs' only)
     ffs: FfsConfig = dataclasses.field(default_factory=FfsConfig)
 

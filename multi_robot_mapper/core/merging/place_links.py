@@ -324,8 +324,8 @@ def _candidate(
         own,
         np.array([theta, x, y]),
         pair_tolerance(config.integrate),
-        config.link_sigma,
-        (config.link_sigma, config.link_angle_sigma),
+        config.graph.link_sigma,
+        (config.graph.link_sigma, config.graph.link_angle_sigma),
         (10.0, 1.0),
     )
     return LinkCandidate(
