@@ -122,7 +122,7 @@ def split_runs(name: str, robots: int, overlap: int, use_views: bool, config: Me
         f"{name:6s} {robots} robots: merged {merged}/{robots}, worst error {worst * 100:.1f} cm, "
         f"valid links {result.stats['links_valid']}/{len(result.pairs)} (wrong {wrong}), "
         f"merge {elapsed:.1f} s, map sizes {min(sizes)}-{max(sizes)} segments, "
-        f"overlapping {overlapping(frames, maps, config.link_min_value)}/{robots}"
+        f"overlapping {overlapping(frames, maps, config.pairwise.link_min_value)}/{robots}"
     )
 
 
