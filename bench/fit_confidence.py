@@ -80,6 +80,7 @@ from multi_robot_mapper.core.matching.confidence import (  # noqa: E402
     MODEL_FILE as CONFIDENCE_MODEL_FILE,
 )
 from multi_robot_mapper.core.matching.integrate import match_evidence  # noqa: E402
+from multi_robot_mapper.core.matching.scoring import pair_tolerance  # noqa: E402
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen  # noqa: E402
 
 DENSE = ("freiburg-079",)
@@ -182,7 +183,9 @@ def collect_log(name: str, out_dir: Path) -> str:
         for k in scans_:
             T = anchor @ se2.matrix_from_pose(*poses[k])
             placed = se2.transform_segments(T, segments[k])
-            fused, owner = fuse(fused, owner, placed, np.full(len(placed), k), config, 0.02)
+            fused, owner = fuse(
+                fused, owner, placed, np.full(len(placed), k), pair_tolerance(config), 0.02
+            )
             viewpoints.append(Viewpoint(views[k], T))
         return fused, viewpoints
 

@@ -36,6 +36,7 @@ from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping import Keyframe, LocalMapper, LocalMapperConfig
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.merging import MergeConfig
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.se2 import Pose
@@ -254,7 +255,7 @@ def reference_keyframes(scans: list[CarmenScan], spacing: float, turn: float) ->
         found = extract_scan(carmen_scan_data(scan), ExtractionConfig())[0].segments
         placed = se2.transform_segments(se2.matrix_from_pose(*pose), found)
         own = np.full(len(placed), len(poses) - 1, dtype=np.int64)
-        world, owner = fuse(world, owner, placed, own, config, 0.02)
+        world, owner = fuse(world, owner, placed, own, pair_tolerance(config), 0.02)
     keyframes = []
     for k, pose in enumerate(poses):
         T_world_keyframe = se2.matrix_from_pose(*pose)

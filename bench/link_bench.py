@@ -49,6 +49,7 @@ from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.config import config_from_flat, parse_override  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE, RIGHT_DISTANCE  # noqa: E402
+from multi_robot_mapper.core.matching.scoring import pair_tolerance  # noqa: E402
 from multi_robot_mapper.core.merging import MergeConfig  # noqa: E402
 from multi_robot_mapper.core.pipeline import OfflineMap, TimedLaserScan, run_offline  # noqa: E402
 from multi_robot_mapper.io.bags import read_recordings, reference_poses  # noqa: E402
@@ -315,7 +316,7 @@ def overlapping_truth(local: OfflineMap, truth: Truth, minimum: float = 15.0) ->
         for b in robots[i + 1 :]:
             if not len(maps[a]) or not len(maps[b]):
                 continue
-            scores = score_pairs(maps[a], maps[b], np.zeros((1, 3)), config)
+            scores = score_pairs(maps[a], maps[b], np.zeros((1, 3)), pair_tolerance(config))
             if float(transform_values(scores, 1)[0]) >= minimum:
                 parent[root(b)] = root(a)
     sizes: dict[str, int] = {}

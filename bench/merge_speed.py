@@ -56,6 +56,7 @@ from multi_robot_mapper.core.extraction import extract_scan  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.fusion import fuse  # noqa: E402
 from multi_robot_mapper.core.matching import IntegrateConfig  # noqa: E402
+from multi_robot_mapper.core.matching.scoring import pair_tolerance  # noqa: E402
 from multi_robot_mapper.core.merging import MergeConfig, longest, merge  # noqa: E402
 from multi_robot_mapper.io.carmen import CarmenScan, carmen_scan_data, read_carmen  # noqa: E402
 
@@ -71,7 +72,9 @@ def partial_map(
     for scan in scans:
         found = extract_scan(carmen_scan_data(scan), ExtractionConfig())[0].segments
         placed = se2.transform_segments(se2.matrix_from_pose(*scan.reference_pose), found)
-        world, owner = fuse(world, owner, placed, np.zeros(len(placed), np.int64), config, 0.02)
+        world, owner = fuse(
+            world, owner, placed, np.zeros(len(placed), np.int64), pair_tolerance(config), 0.02
+        )
     T_world_robot = se2.matrix_from_pose(*scans[0].reference_pose)
     T_robot_world = se2.invert(T_world_robot)
     own = se2.transform_segments(T_robot_world, longest(world, segments))
@@ -119,7 +122,7 @@ def split_runs(name: str, robots: int, overlap: int, use_views: bool, config: Me
         f"{name:6s} {robots} robots: merged {merged}/{robots}, worst error {worst * 100:.1f} cm, "
         f"valid links {result.stats['links_valid']}/{len(result.pairs)} (wrong {wrong}), "
         f"merge {elapsed:.1f} s, map sizes {min(sizes)}-{max(sizes)} segments, "
-        f"overlapping {overlapping(frames, maps, config.link_min_value)}/{robots}"
+        f"overlapping {overlapping(frames, maps, config.pairwise.link_min_value)}/{robots}"
     )
 
 

@@ -19,6 +19,7 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.matching import IntegrateConfig, cross_support, integrate
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.io.carmen import carmen_scan_data, read_carmen
 
 FRACTIONS = (0.0, 0.1, 0.15, 0.25)
@@ -39,7 +40,7 @@ def pair_outcomes(log: Path, limit: int | None) -> np.ndarray:
         )
         x, y, theta = se2.pose_from_matrix(se2.invert(T_true) @ result.matrix)
         correct = np.hypot(x, y) <= 0.30 and abs(theta) <= np.radians(5.0)
-        support = cross_support(segments[k], segments[k + 1], result.T_1_2, config)
+        support = cross_support(segments[k], segments[k + 1], result.T_1_2, pair_tolerance(config))
         rows.append((float(correct), result.value, result.fraction, support))
     return np.asarray(rows)
 

@@ -33,6 +33,7 @@ from multi_robot_mapper.core.geometry import sample_segments
 from multi_robot_mapper.core.local_mapping import Closure, Keyframe, LocalMapper, LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.evidence import Weighed
 from multi_robot_mapper.core.matching import IntegrateConfig
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.scan import LaserScanData, ScanError
 
 FloatArray = NDArray[np.float64]
@@ -322,7 +323,9 @@ def truth_snapshots(drive: Drive, times: Sequence[float]) -> list[list[Keyframe]
             T_world_keyframe = se2.matrix_from_pose(*drive.T_world_laser[row])
             placed = se2.transform_segments(T_world_keyframe, found)
             mine = np.full(len(placed), done, dtype=np.int64)
-            world, owner = fuse(world, owner, placed, mine, config, FUSION_TOLERANCE)
+            world, owner = fuse(
+                world, owner, placed, mine, pair_tolerance(config), FUSION_TOLERANCE
+            )
             done += 1
         keyframes = []
         for k in range(done):

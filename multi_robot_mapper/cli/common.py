@@ -151,7 +151,7 @@ def add_config_options(parser: argparse.ArgumentParser, merging: bool = False) -
             help="the merging parameters, as config/map_merger.yaml; its merge.* section is used "
             "(default: the built-in defaults, which that file holds)",
         )
-    merge_example = " or --set merge.link_min_value=20" if merging else ""
+    merge_example = " or --set merge.pairwise.link_min_value=20" if merging else ""
     add_set_option(
         parser,
         "override one parameter, e.g. --set extraction.split_tolerance=0.03"

@@ -15,7 +15,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from multi_robot_mapper.core.geometry import lines_of
-from multi_robot_mapper.core.matching import IntegrateConfig, score_pairs
+from multi_robot_mapper.core.matching.scoring import PairTolerance, score_pairs
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -48,7 +48,7 @@ def pair_distance(segments1: FloatArray, segments2: FloatArray) -> FloatArray:
 def matching_chains(
     segments1: FloatArray,
     segments2: FloatArray,
-    config: IntegrateConfig,
+    pairs: PairTolerance,
     max_distance: float,
 ) -> tuple[IntArray, IntArray, int]:
     """Chain label of every S1 and every S2 segment (-1 = unmatched), and the chain count.
@@ -61,7 +61,7 @@ def matching_chains(
     none1, none2 = np.full(n1, -1, dtype=np.int64), np.full(n2, -1, dtype=np.int64)
     if n1 == 0 or n2 == 0:
         return none1, none2, 0
-    scores = score_pairs(segments1, segments2, np.zeros((1, 3)), config)
+    scores = score_pairs(segments1, segments2, np.zeros((1, 3)), pairs)
     a, b = scores.first, scores.second
     close = pair_distance(segments1[a], segments2[b]) <= max_distance
     a, b = a[close], b[close]
@@ -194,7 +194,7 @@ def fuse(
     owner1: IntArray,
     segments2: FloatArray,
     owner2: IntArray,
-    config: IntegrateConfig,
+    pairs: PairTolerance,
     tolerance: float,
     max_distance: float | None = None,
 ) -> tuple[FloatArray, IntArray]:
@@ -206,7 +206,7 @@ def fuse(
     ``max_distance`` (default three tolerances) are not fused. Returns segments and owners.
     """
     limit = 3.0 * tolerance if max_distance is None else max_distance
-    chain1, chain2, count = matching_chains(segments1, segments2, config, limit)
+    chain1, chain2, count = matching_chains(segments1, segments2, pairs, limit)
     # An unmatched S2 piece lying along S1 within the fusion distance adds nothing (a corner
     # sliver or a short piece the matching value ignores); keeping it would grow the map with
     # every keyframe of the same place.

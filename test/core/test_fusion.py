@@ -7,6 +7,7 @@ import pytest
 
 from multi_robot_mapper.core.fusion import chain_polyline, fuse, matching_chains
 from multi_robot_mapper.core.matching import IntegrateConfig
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 
 CONFIG = IntegrateConfig()
 
@@ -25,7 +26,9 @@ def _max_distance_to(pieces: np.ndarray, segment: np.ndarray) -> float:
 def test_a_wall_seen_twice_becomes_one_polyline_and_unmatched_walls_stay() -> None:
     map_segments = np.array([[0.0, 0.0, 4.0, 0.0], [4.0, 0.0, 4.0, 3.0]])
     scan = np.array([[1.0, 0.005, 6.0, 0.005], [10.0, 10.0, 11.0, 10.0]])
-    fused, owner = fuse(map_segments, np.array([0, 0]), scan, np.array([1, 1]), CONFIG, 0.02)
+    fused, owner = fuse(
+        map_segments, np.array([0, 0]), scan, np.array([1, 1]), pair_tolerance(CONFIG), 0.02
+    )
     # The two collinear pieces of y = 0 are one segment from x = 0 to x = 6; the corner wall
     # and the far wall are kept as they were, with their owners.
     assert len(fused) == 3
@@ -66,7 +69,7 @@ def test_a_curved_wall_seen_all_around_is_not_cut_by_chords() -> None:
     pieces = np.hstack((7.0 * ring, 7.0 * np.roll(ring, -1, axis=0)))
     again = np.hstack((7.01 * ring, 7.01 * np.roll(ring, -1, axis=0)))
     owners = np.zeros(len(pieces), dtype=np.int64)
-    fused, _ = fuse(pieces, owners, again, owners + 1, CONFIG, 0.02)
+    fused, _ = fuse(pieces, owners, again, owners + 1, pair_tolerance(CONFIG), 0.02)
     middle = 0.5 * (fused[:, :2] + fused[:, 2:])
     assert np.hypot(middle[:, 0], middle[:, 1]).min() > 6.9
     length = np.hypot(fused[:, 2] - fused[:, 0], fused[:, 3] - fused[:, 1]).sum()
@@ -77,7 +80,9 @@ def test_parallel_walls_apart_are_not_fused() -> None:
     # Both sides of a corridor 1 m wide, and a cupboard 0.2 m in front of a wall: no chain.
     walls = np.array([[0.0, 0.0, 5.0, 0.0], [0.0, 1.0, 5.0, 1.0]])
     cupboard = np.array([[1.0, 0.2, 2.0, 0.2]])
-    chain1, chain2, count = matching_chains(walls, cupboard, CONFIG, max_distance=0.06)
+    chain1, chain2, count = matching_chains(
+        walls, cupboard, pair_tolerance(CONFIG), max_distance=0.06
+    )
     assert count == 0
     assert (chain1 == -1).all() and (chain2 == -1).all()
 
@@ -85,7 +90,12 @@ def test_parallel_walls_apart_are_not_fused() -> None:
 def test_fusing_a_set_with_itself_changes_nothing_but_duplicates() -> None:
     room = np.array([[0.0, 0.0, 5.0, 0.0], [5.0, 0.0, 5.0, 4.0], [5.0, 4.0, 0.0, 4.0]])
     fused, _ = fuse(
-        room, np.zeros(3, dtype=np.int64), room, np.ones(3, dtype=np.int64), CONFIG, 0.02
+        room,
+        np.zeros(3, dtype=np.int64),
+        room,
+        np.ones(3, dtype=np.int64),
+        pair_tolerance(CONFIG),
+        0.02,
     )
     assert len(fused) == 3
     total = np.hypot(fused[:, 2] - fused[:, 0], fused[:, 3] - fused[:, 1]).sum()

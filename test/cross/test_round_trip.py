@@ -131,8 +131,10 @@ def test_simulate_replay_pivot_evaluate_merges_the_robots(capsys, tmp_path: Path
     frames = json.loads((strict / "robots.json").read_text())
     unmerged = [v for v in frames.values() if isinstance(v, str) and v.startswith("unmerged")]
     assert len(unmerged) == 1, frames
-    code, _, err = mrm(capsys, "replay", bag, "--out", strict, "--set", "merge.link_min_value=-1")
-    assert code == 2 and "merge.link_min_value" in err
+    code, _, err = mrm(
+        capsys, "replay", bag, "--out", strict, "--set", "merge.pairwise.link_min_value=-1"
+    )
+    assert code == 2 and "merge.pairwise.link_min_value" in err
 
 
 def test_replay_ffs_merges_and_an_unknown_method_exits_2(capsys, tmp_path: Path) -> None:

@@ -20,10 +20,11 @@ def test_the_shipped_params_file_holds_the_defaults() -> None:
 
 def test_the_merge_section_is_the_merging_config() -> None:
     config = config_from_flat(
-        MapMergerConfig, {"merge.link_min_value": 3.0, "merge.integrate.seed": 4}
+        MapMergerConfig, {"merge.pairwise.link_min_value": 3.0, "merge.integrate.seed": 4}
     )
     assert config.merge == MergeConfig(
-        link_min_value=3.0, integrate=MergeConfig().integrate.__class__(seed=4)
+        pairwise=MergeConfig().pairwise.__class__(link_min_value=3.0),
+        integrate=MergeConfig().integrate.__class__(seed=4),
     )
 
 

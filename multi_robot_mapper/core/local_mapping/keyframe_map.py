@@ -26,6 +26,7 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.geometry import point_segment_distance
 from multi_robot_mapper.core.matching import IntegrateConfig
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.core.segment_map import SegmentMap
@@ -207,7 +208,7 @@ class KeyframeMap:
             self._owner[near],
             placed,
             np.full(len(placed), index, dtype=np.int64),
-            self.config,
+            pair_tolerance(self.config),
             self.tolerance,
         )
         local = se2.inverse_transform_segments_each(self._poses[fused_owner], fused)

@@ -24,6 +24,7 @@ from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeScan
 from multi_robot_mapper.core.matching.beams import Viewpoint
 from multi_robot_mapper.core.matching.config import IntegrateConfig
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.core.segment_map import SegmentMap
 
@@ -62,7 +63,7 @@ def fused_keyframes(
             owner,
             placed,
             np.full(len(placed), k, dtype=np.int64),
-            config,
+            pair_tolerance(config),
             tolerance,
         )
         viewpoints.append(Viewpoint(member.view, T))

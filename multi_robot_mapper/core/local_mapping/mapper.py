@@ -69,6 +69,7 @@ from multi_robot_mapper.core.matching import MatchResult
 from multi_robot_mapper.core.matching.integrate import pose_of_match
 from multi_robot_mapper.core.matching.prior import prior_support
 from multi_robot_mapper.core.matching.refine import match_information
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.matching.shape import Shapes
 from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.scan import LaserScanData
@@ -442,7 +443,7 @@ class LocalMapper(BackendLink):
             reference,
             segments,
             result.T_1_2,
-            config.integrate,
+            pair_tolerance(config.integrate),
             config.wall_sigma,
             (config.edge_sigma_floor, config.edge_angle_floor),
             (10.0, 1.0),

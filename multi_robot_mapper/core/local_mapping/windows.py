@@ -36,6 +36,7 @@ from multi_robot_mapper.core.matching.beams import Viewpoint
 from multi_robot_mapper.core.matching.confidence import TRACK_TURNS
 from multi_robot_mapper.core.matching.integrate import hypotheses_of, pose_of_match
 from multi_robot_mapper.core.matching.refine import match_information
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
 from multi_robot_mapper.core.se2 import Pose
 
@@ -186,7 +187,7 @@ class WindowMatcher:
             a.segment_map,
             b.segment_map,
             T_1_2,
-            config.integrate,
+            pair_tolerance(config.integrate),
             config.wall_sigma,
             (config.edge_sigma_floor, config.edge_angle_floor),
             (10.0, 1.0),

@@ -36,8 +36,10 @@ from multi_robot_mapper.core.matching.integrate import MatchResult, integrate
 from multi_robot_mapper.core.matching.refine import refine, refine_many
 from multi_robot_mapper.core.matching.scoring import (
     PairScores,
+    PairTolerance,
     best_prescreened,
     cross_support,
+    pair_tolerance,
     refusal,
     refused,
     score_pairs,
@@ -51,6 +53,7 @@ __all__ = [
     "Lines",
     "MatchResult",
     "PairScores",
+    "PairTolerance",
     "best_prescreened",
     "cross_support",
     "distinct_hypotheses",
@@ -59,6 +62,7 @@ __all__ = [
     "integrate",
     "landmarks",
     "lines_of",
+    "pair_tolerance",
     "refine",
     "refine_many",
     "refusal",

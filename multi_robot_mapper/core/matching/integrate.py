@@ -39,16 +39,17 @@ from multi_robot_mapper.core.matching.prior import (
     MotionPrior,
     excluded_by,
     support_with_prior,
-    weighs,
 )
-from multi_robot_mapper.core.matching.refine import normal_equations, refine_many
+from multi_robot_mapper.core.matching.refine import prior_weighs, refine_many
 from multi_robot_mapper.core.matching.scoring import (
     information,
     pair_kept,
+    pair_tolerance,
     pruned_values,
     refusal,
     refused,
     score_pairs,
+    support_and_slide,
     transform_values,
 )
 from multi_robot_mapper.core.se2 import Pose
@@ -187,7 +188,9 @@ def _integrate(
     clock.lap("evaluation")
     if candidates.size == 0:
         return _no_match(len(transforms), evaluated, clock)
-    refined = refine_many(map1, map2, transforms[candidates], config, prior)
+    refined = refine_many(
+        map1, map2, transforms[candidates], pair_tolerance(config), config.refine_iterations, prior
+    )
     clock.lap("refinement")
     ranked = _ranked(map1, map2, transforms, candidates, refined, views, config, prior)
     clock.lap("ranking")
@@ -269,7 +272,7 @@ def _ranked(
                 map1, map2, refined[bad], views, config
             )
     # The prior decides the offset along a corridor where it counts: nothing to slide there.
-    support[_weighs(map1, map2, refined, config, prior)] = np.inf
+    support[prior_weighs(map1, map2, refined, pair_tolerance(config), prior)] = np.inf
     slid, slid_values, slid_scores = _slide(
         map1, map2, refined, scores, support, slide, views, config
     )
@@ -280,7 +283,9 @@ def _ranked(
     if pick >= len(candidates) and config.refine_iterations > 0:
         # A slid hypothesis sits on a grid along the corridor: refine it too (the damped
         # steps leave it where it is along a bare corridor).
-        polished = refine_many(map1, map2, refined[pick : pick + 1], config)
+        polished = refine_many(
+            map1, map2, refined[pick : pick + 1], pair_tolerance(config), config.refine_iterations
+        )
         polished_value, polished_score, _, _ = _net_scores(map1, map2, polished, views, config)
         if (
             polished_score[0] >= scores[pick] - _POLISH_TOLERANCE
@@ -312,7 +317,7 @@ def _judged_result(
     through, _ = seen_through_many(map1, map2, best_T[None, :], views, beam_limits(config))
     best_score = best_value - config.free_space_weight * float(through[0])
     fraction = best_score / max(min(map1.total_length, map2.total_length), 1e-9)
-    best_support, slide, total = _support_and_slide(map1, map2, best_T, config)
+    best_support, slide, total = support_and_slide(map1, map2, best_T, pair_tolerance(config))
     valid = (
         best_score >= config.min_match_value
         and fraction >= config.min_match_fraction
@@ -354,7 +359,7 @@ def _evidence_of(
     best_T = refined[pick]
     support, slide, total = spread
     rivals = _distinct_from(refined, best_T)
-    counts = _weighs(map1, map2, best_T[None, :], config, prior)
+    counts = prior_weighs(map1, map2, best_T[None, :], pair_tolerance(config), prior)
     weighed = prior if counts.size and counts[0] else None
     if weighed is not None:
         rivals &= ~excluded_by(weighed, refined, slide)
@@ -385,33 +390,6 @@ class _StageClock:
         now = time.perf_counter()
         self.seconds[stage] = self.seconds.get(stage, 0.0) + now - self._last
         self._last = now
-
-
-def _support_and_slide(
-    map1: SegmentMap, map2: SegmentMap, T_1_2: FloatArray, config: IntegrateConfig
-) -> tuple[float, FloatArray, float]:
-    """The cross support of ``T_1_2``, its least constrained direction (a unit vector in
-    S1's frame: along a corridor, the way the placement could slide) and the matched length
-    (the trace of the walls' normal matrix: the two eigenvalues' sum)."""
-    scores = score_pairs(map1, map2, T_1_2.reshape(1, 3), config)
-    support, direction = information(map1, scores, 1)
-    total = float(scores.value.sum())
-    return float(support[0]), np.asarray(direction[0], dtype=np.float64), total
-
-
-def _weighs(
-    map1: SegmentMap,
-    map2: SegmentMap,
-    transforms: FloatArray,
-    config: IntegrateConfig,
-    prior: MotionPrior | None,
-) -> BoolArray:
-    """Where ``prior`` counts for each of ``transforms`` (:func:`~core.matching.prior.
-    weighs`, on the walls' Gauss-Newton matrix there)."""
-    system = None if prior is None else normal_equations(map1, map2, transforms, config)
-    if system is None:
-        return np.zeros(len(transforms), dtype=bool)
-    return weighs(prior, system[0])
 
 
 def _distinct_from(transforms: FloatArray, T: FloatArray) -> BoolArray:
@@ -545,7 +523,7 @@ def _net_scores(
     wins, the visible stretch of wall moving with the robot), and what tells the offsets
     apart is the little that crosses the corridor (door jambs, its end).
     """
-    scores = score_pairs(map1, map2, transforms, config)
+    scores = score_pairs(map1, map2, transforms, pair_tolerance(config))
     count = len(transforms)
     values = transform_values(scores, count)
     support, direction = information(map1, scores, count)

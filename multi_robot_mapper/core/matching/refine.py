@@ -6,29 +6,33 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.matching.config import IntegrateConfig
-from multi_robot_mapper.core.matching.prior import MotionPrior, add_prior
+from multi_robot_mapper.core.matching.prior import MotionPrior, add_prior, weighs
 from multi_robot_mapper.core.matching.scoring import (
     PairGeometry,
+    PairTolerance,
     geometry_scores,
     pair_geometry,
 )
 from multi_robot_mapper.core.segment_map import MapLike
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 
-def refine(map1: MapLike, map2: MapLike, T_1_2: FloatArray, config: IntegrateConfig) -> FloatArray:
+def refine(
+    map1: MapLike, map2: MapLike, T_1_2: FloatArray, pairs: PairTolerance, iterations: int
+) -> FloatArray:
     """Point-to-line least squares (Cox; Wolter 5.1) from ``T_1_2``; see :func:`refine_many`."""
     T = np.asarray(T_1_2, dtype=np.float64).reshape(1, 3)
-    return np.asarray(refine_many(map1, map2, T, config)[0], dtype=np.float64)
+    return np.asarray(refine_many(map1, map2, T, pairs, iterations)[0], dtype=np.float64)
 
 
 def refine_many(
     map1: MapLike,
     map2: MapLike,
     transforms: FloatArray,
-    config: IntegrateConfig,
+    pairs: PairTolerance,
+    iterations: int,
     prior: MotionPrior | None = None,
 ) -> FloatArray:
     """Point-to-line least squares (Cox; Wolter 5.1) of several hypotheses at once.
@@ -37,24 +41,24 @@ def refine_many(
     pairs of Alg. 4 l. 5-19) and pulls the part of each S2 segment that projects onto its S1
     segment onto that segment's line. The squared point-to-line residual and its Jacobian are
     linear along a segment, so two Gauss points per pair integrate the normal equations
-    exactly (before weighting); a Cauchy weight (scale ``point_distance_tolerance``) lets the
+    exactly (before weighting); a Cauchy weight (scale ``pairs.point_tolerance``) lets the
     nearer of two parallel candidate lines win. A damped Gauss-Newton step solves each 3x3
     system, so the offset along a bare corridor (not observable) stays where it was; with a
     motion ``prior`` it goes where the prior puts it (:func:`~core.matching.prior.add_prior`:
-    along the least constrained direction only). ``refine_iterations`` 0 returns the
-    hypotheses unchanged.
+    along the least constrained direction only). At most ``iterations`` steps; 0 returns the
+    hypotheses unchanged (INTEGRATE's ``refine_iterations``).
     """
     T = np.array(transforms, dtype=np.float64).reshape(-1, 3)
     count = len(T)
-    if count == 0 or len(map1) == 0 or len(map2) == 0 or config.refine_iterations == 0:
+    if count == 0 or len(map1) == 0 or len(map2) == 0 or iterations == 0:
         return T
     geometry = pair_geometry(map1, map2)
     active = np.ones(count, dtype=bool)
-    for _ in range(config.refine_iterations):
+    for _ in range(iterations):
         live = np.flatnonzero(active)
         if live.size == 0:
             break
-        system = _normal_equations(geometry, T[live], *_tolerances(config))
+        system = _normal_equations(geometry, T[live], *pairs)
         if system is None:
             break
         H, g = system if prior is None else add_prior(*system, T[live], prior)
@@ -69,11 +73,26 @@ def refine_many(
     return T
 
 
+def prior_weighs(
+    map1: MapLike,
+    map2: MapLike,
+    transforms: FloatArray,
+    pairs: PairTolerance,
+    prior: MotionPrior | None,
+) -> BoolArray:
+    """Where ``prior`` counts for each of ``transforms`` (:func:`~core.matching.prior.
+    weighs`, on the walls' Gauss-Newton matrix there)."""
+    system = None if prior is None else normal_equations(map1, map2, transforms, pairs)
+    if system is None:
+        return np.zeros(len(transforms), dtype=bool)
+    return weighs(prior, system[0])
+
+
 _GAUSS = np.array([0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0)])
 
 
 def normal_equations(
-    map1: MapLike, map2: MapLike, transforms: FloatArray, config: IntegrateConfig
+    map1: MapLike, map2: MapLike, transforms: FloatArray, pairs: PairTolerance
 ) -> tuple[FloatArray, FloatArray] | None:
     """``(H, g)``: the Gauss-Newton system ``sum w J J^T``, ``sum w J r`` of each hypothesis
     (``(T, 3, 3)`` and ``(T, 3)``, in (theta, tx, ty)), None when no segment pair matches.
@@ -84,13 +103,7 @@ def normal_equations(
     per pair integrate the normal equations exactly (before weighting): ``w`` is metres of
     overlapping segment, times a Cauchy weight (scale ``point_distance_tolerance``).
     """
-    return _normal_equations(pair_geometry(map1, map2), transforms, *_tolerances(config))
-
-
-def _tolerances(config: IntegrateConfig) -> tuple[float, float, float]:
-    """What the least squares read of ``config``: the pairs' direction and distance
-    tolerances, and the Cauchy weight's scale."""
-    return config.max_match_angle, config.match_distance, config.point_distance_tolerance
+    return _normal_equations(pair_geometry(map1, map2), transforms, *pairs)
 
 
 def _normal_equations(
@@ -145,7 +158,7 @@ def match_information(
     map1: MapLike,
     map2: MapLike,
     T_1_2: FloatArray,
-    config: IntegrateConfig,
+    pairs: PairTolerance,
     wall_sigma: float,
     sigma_floor: tuple[float, float],
     sigma_ceiling: tuple[float, float],
@@ -162,7 +175,7 @@ def match_information(
     next), and a direction no wall constrains (along a bare corridor) keeps the ceiling.
     """
     T = np.asarray(T_1_2, dtype=np.float64).reshape(1, 3)
-    system = normal_equations(map1, map2, T, config)
+    system = normal_equations(map1, map2, T, pairs)
     H_thetat = np.zeros((3, 3)) if system is None else system[0][0]
     theta = float(T[0, 0])
     c, s = np.cos(theta), np.sin(theta)

@@ -24,6 +24,24 @@ BoolArray = NDArray[np.bool_]
 _ROUGH_CUT = 10
 
 
+class PairTolerance(NamedTuple):
+    """What matching two segments under a transformation reads of INTEGRATE's config (Alg. 4):
+    the largest angle between two matching segments (rad), the largest distance between them
+    (m), and the scale of the distance penalty (m)."""
+
+    max_angle: float
+    match_distance: float
+    point_tolerance: float
+
+
+def pair_tolerance(config: IntegrateConfig) -> PairTolerance:
+    """The pair tolerances of ``config``: ``max_match_angle``, ``match_distance``,
+    ``point_distance_tolerance``."""
+    return PairTolerance(
+        config.max_match_angle, config.match_distance, config.point_distance_tolerance
+    )
+
+
 @dataclasses.dataclass(frozen=True)
 class PairScores:
     """Matching values of candidate (hypothesis, s1, s2) triples with a positive value."""
@@ -152,7 +170,7 @@ def score_pairs(
     map1: MapLike,
     map2: MapLike,
     transforms: FloatArray,
-    config: IntegrateConfig,
+    pairs: PairTolerance,
 ) -> PairScores:
     """Matching value of every candidate triple (Alg. 4 l. 5-19), all hypotheses at once.
 
@@ -161,13 +179,7 @@ def score_pairs(
     segments of the max distance of the other's end points to its line) exceeds
     ``match_distance`` score 0; pairs that do not intersect are penalised by 0.95^(d/tol).
     """
-    return geometry_scores(
-        pair_geometry(map1, map2),
-        transforms,
-        config.max_match_angle,
-        config.match_distance,
-        config.point_distance_tolerance,
-    )
+    return geometry_scores(pair_geometry(map1, map2), transforms, *pairs)
 
 
 def geometry_scores(
@@ -433,16 +445,26 @@ def information(map1: MapLike, scores: PairScores, count: int) -> tuple[FloatArr
     return np.asarray(np.maximum(half_trace - radius, 0.0), dtype=np.float64), direction
 
 
-def cross_support(
-    map1: MapLike, map2: MapLike, T_1_2: FloatArray, config: IntegrateConfig
-) -> float:
+def cross_support(map1: MapLike, map2: MapLike, T_1_2: FloatArray, pairs: PairTolerance) -> float:
     """Matched length in the least constrained direction: the smallest eigenvalue of the sum
     of matching value x n n^T over matched pairs (n the S1 line's normal). Zero when every
     matched wall is parallel, so the offset along them rests on where walls happen to end."""
     T = np.asarray(T_1_2, dtype=np.float64).reshape(1, 3)
     first, second = SegmentMap.of(map1), SegmentMap.of(map2)
-    scores = score_pairs(first, second, T, config)
+    scores = score_pairs(first, second, T, pairs)
     return float(information(first, scores, 1)[0][0])
+
+
+def support_and_slide(
+    map1: MapLike, map2: MapLike, T_1_2: FloatArray, pairs: PairTolerance
+) -> tuple[float, FloatArray, float]:
+    """The cross support of ``T_1_2``, its least constrained direction (a unit vector in
+    S1's frame: along a corridor, the way the placement could slide) and the matched length
+    (the trace of the walls' normal matrix: the two eigenvalues' sum)."""
+    scores = score_pairs(map1, map2, T_1_2.reshape(1, 3), pairs)
+    support, direction = information(map1, scores, 1)
+    total = float(scores.value.sum())
+    return float(support[0]), np.asarray(direction[0], dtype=np.float64), total
 
 
 def best_prescreened(
@@ -546,5 +568,6 @@ def pruned_values(
         pool = pool[best]
     pool = np.concatenate((np.arange(forced), pool))
     values = np.zeros(count)
-    values[pool] = transform_values(score_pairs(first, second, transforms[pool], config), pool.size)
+    scores = score_pairs(first, second, transforms[pool], pair_tolerance(config))
+    values[pool] = transform_values(scores, pool.size)
     return values, int(pool.size)

@@ -9,6 +9,7 @@ from scipy.sparse.csgraph import connected_components
 
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.geometry import point_segment_distance
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.merging.config import MergeConfig
 
 FloatArray = NDArray[np.float64]
@@ -65,7 +66,7 @@ def fuse_maps(
             owner1[in1],
             segments2[in2],
             owner2[in2],
-            config.integrate,
+            pair_tolerance(config.integrate),
             config.fusion_tolerance,
         )
         parts.append(fused)

@@ -11,6 +11,8 @@ from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.merging.ffs.config import FfsConfig
+from multi_robot_mapper.core.merging.joint_graph_config import JointGraphConfig
+from multi_robot_mapper.core.merging.pairwise_config import PairwiseConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -20,8 +22,8 @@ class MergeConfig:
     ``integrate`` holds INTEGRATE's matching tolerances; for links between maps its validity
     thresholds (``min_match_value``, ``min_match_fraction``, ``min_cross_support``) and its
     hypothesis budget (``max_hypotheses``, ``all_pairs_below``, ``refine_candidates``) are
-    replaced by the ``link_*`` and hypothesis parameters below: partial maps are larger than
-    scans and overlap by a smaller fraction.
+    replaced by ``pairwise``'s (:meth:`link_config`): partial maps are larger than scans and
+    overlap by a smaller fraction.
     """
 
     reference: str = param(
@@ -30,96 +32,6 @@ class MergeConfig:
         doc="robot whose map frame is 'map'; empty: the robot with the largest map (total "
         "segment length) among the largest group of linked robots",
         tune="one robot's map should be 'map' (one that starts at a known place): name it",
-    )
-    link_min_value: float = param(
-        15.0,
-        unit="m",
-        doc="validity threshold: a link's best transformation must overlap at least this "
-        "length of matching segments (more than the walls of one room: a single room or "
-        "corner looks alike in many places)",
-        minimum=0.0,
-        maximum=1000000.0,
-    )
-    link_min_fraction: float = param(
-        0.3,
-        unit="",
-        doc="validity threshold on segments alone (a robot without viewpoints): overlap at "
-        "least this fraction of the shorter map's total segment length",
-        minimum=0.0,
-        maximum=1.0,
-    )
-    viewed_link_min_fraction: float = param(
-        0.1,
-        unit="",
-        doc="link_min_fraction when both robots' viewpoints are known: free space and "
-        "uniqueness (link_min_uniqueness) then tell look-alike places apart, and robots that "
-        "share a small part of their maps can be linked",
-        minimum=0.0,
-        maximum=1.0,
-    )
-    link_min_cross_support: float = param(
-        1.5,
-        unit="m",
-        doc="validity threshold: matched length across the least constrained direction "
-        "(parallel walls alone cannot fix the offset along them)",
-        minimum=0.0,
-        maximum=1000.0,
-    )
-    link_min_tight_fraction: float = param(
-        0.15,
-        unit="",
-        doc="validity threshold on segments alone: segments matched within tight_distance must "
-        "overlap at least this fraction of the shorter map (the same walls coincide to "
-        "centimetres, look-alike walls of other places only roughly)",
-        minimum=0.0,
-        maximum=1.0,
-    )
-    viewed_link_min_tight_fraction: float = param(
-        0.05,
-        unit="",
-        doc="link_min_tight_fraction when both robots' viewpoints are known",
-        minimum=0.0,
-        maximum=1.0,
-    )
-    tight_distance: float = param(
-        0.05,
-        unit="m",
-        doc="matching distance of the tight overlap (link_min_tight_fraction)",
-        minimum=0.001,
-        maximum=1.0,
-    )
-    hypothesis_segments: int = param(
-        12,
-        unit="segments",
-        doc="the angles between every pair of this many longest segments of each map "
-        "propose the transformations",
-        minimum=2,
-        maximum=1000,
-    )
-    coarse_segments: int = param(
-        40,
-        unit="segments",
-        doc="hypotheses are ranked on this many longest segments of each map; the best are "
-        "then refined and judged on the whole maps",
-        minimum=2,
-        maximum=10_000,
-    )
-    judge_segments: int = param(
-        250,
-        unit="segments",
-        doc="the best hypotheses are refined and judged on this many longest segments of each "
-        "map (short pieces add cost, not evidence)",
-        minimum=2,
-        maximum=100_000,
-    )
-    correlation_candidates: int = param(
-        8,
-        unit="",
-        doc="the best placements of the map correlation (every translation, for each rotation "
-        "the wall directions allow) that join INTEGRATE's own hypothesis as candidates; the "
-        "best few distinct places among them are refined and judged",
-        minimum=1,
-        maximum=1000,
     )
     correlation_cell: float = param(
         0.3,
@@ -135,49 +47,6 @@ class MergeConfig:
         "counts against as this many metres of matched wall",
         minimum=0.0,
         maximum=100.0,
-    )
-    link_min_uniqueness: float = param(
-        2.0,
-        unit="",
-        doc="validity threshold when both robots' viewpoints are known: the link's "
-        "correlation score (matched wall minus wall in free space, m) must be at least this "
-        "many times that of the best distinct placement (> 2 m or 10 degrees away): a place "
-        "that fits twice is ambiguous (symmetric corridors, rows of equal rooms) and is "
-        "refused",
-        minimum=1.0,
-        maximum=100.0,
-    )
-    max_hypotheses: int = param(
-        150,
-        unit="",
-        doc="at most this many most-voted INTEGRATE hypotheses are ranked per pair of maps",
-        minimum=1,
-        maximum=100_000,
-    )
-    reuse_length_change: float = param(
-        5.0,
-        unit="%",
-        doc="a pair's result is reused while each map's total segment length stays within "
-        "this of the length it was computed on (and its segment count within "
-        "reuse_count_change)",
-        minimum=0.0,
-        maximum=100.0,
-    )
-    reuse_count_change: float = param(
-        10.0,
-        unit="%",
-        doc="a pair's result is reused while each map's segment count stays within this (or "
-        "2 segments) of the count it was computed on",
-        minimum=0.0,
-        maximum=100.0,
-    )
-    stability_margin: float = param(
-        0.25,
-        unit="",
-        doc="a link of the previous tree stays in the tree unless another link's value "
-        "exceeds it by this fraction (placements do not flip between similar links)",
-        minimum=0.0,
-        maximum=10.0,
     )
     link_max_seen_through: float = param(
         1.0,
@@ -416,68 +285,6 @@ class MergeConfig:
         maximum=100.0,
         tune="a robot of the team faster than 2 m/s: its top speed",
     )
-    link_sigma: float = param(
-        0.05,
-        unit="m",
-        doc="no link between robots is trusted to better than this (and link_angle_sigma) in "
-        "the joint graph: places are fused maps, a little bent",
-        minimum=1e-4,
-        maximum=10.0,
-    )
-    link_angle_sigma: float = param(
-        0.01,
-        unit="rad",
-        doc="see link_sigma, for the rotation",
-        minimum=1e-5,
-        maximum=1.0,
-    )
-    link_robust_scale: float = param(
-        1.0,
-        unit="",
-        doc="Dynamic Covariance Scaling parameter of the links in the joint graph (squared "
-        "Mahalanobis units): a link whose error grows far beyond it is switched off",
-        minimum=0.0,
-        maximum=1000.0,
-    )
-    graph_sigma: float = param(
-        0.02,
-        unit="m",
-        doc="an edge between two keyframes of one robot's map (their published poses) has this "
-        "standard deviation, plus graph_drift per metre between them",
-        minimum=1e-4,
-        maximum=10.0,
-    )
-    graph_drift: float = param(
-        0.02,
-        unit="m/m",
-        doc="see graph_sigma: how much a robot's own map may bend per metre",
-        minimum=0.0,
-        maximum=1.0,
-    )
-    graph_angle_sigma: float = param(
-        0.005,
-        unit="rad",
-        doc="rotation of an edge between two keyframes of one robot's map, plus "
-        "graph_angle_drift per metre",
-        minimum=1e-5,
-        maximum=1.0,
-    )
-    graph_angle_drift: float = param(
-        0.005,
-        unit="rad/m",
-        doc="see graph_angle_sigma",
-        minimum=0.0,
-        maximum=1.0,
-    )
-    graph_radius: float = param(
-        2.0,
-        unit="m",
-        doc="besides consecutive keyframes, keyframes of one robot's map this close to each "
-        "other get an edge (the wire carries no loop closures: this keeps what the robot's own "
-        "closures made of its map)",
-        minimum=0.0,
-        maximum=100.0,
-    )
     update_budget: float = param(
         1.0,
         unit="s",
@@ -489,6 +296,10 @@ class MergeConfig:
         tune="more with more robots or a slow computer; 0: every place matched each update (slow)",
     )
     integrate: IntegrateConfig = dataclasses.field(default_factory=IntegrateConfig)
+    # the whole-map merge (merge(): every pair of maps matched whole, a spanning tree of links)
+    pairwise: PairwiseConfig = dataclasses.field(default_factory=PairwiseConfig)
+    # the joint graph of every robot's keyframes (method 'pivot' and 'ffs')
+    graph: JointGraphConfig = dataclasses.field(default_factory=JointGraphConfig)
     # Force Field Simulation after the joint graph's placement (method 'ffs' only)
     ffs: FfsConfig = dataclasses.field(default_factory=FfsConfig)
 
@@ -502,14 +313,17 @@ class MergeConfig:
         )
 
     def link_config(self, hypotheses: int | None = None, viewed: bool = False) -> IntegrateConfig:
-        """``integrate`` with this config's validity thresholds (``viewed``: those for two
-        robots whose viewpoints are known) and hypothesis budget."""
+        """``integrate`` with the whole-map merge's validity thresholds (``viewed``: those for
+        two robots whose viewpoints are known) and hypothesis budget (``pairwise``)."""
+        pairwise = self.pairwise
         return dataclasses.replace(
             self.integrate,
-            min_match_value=self.link_min_value,
-            min_match_fraction=self.viewed_link_min_fraction if viewed else self.link_min_fraction,
-            min_cross_support=self.link_min_cross_support,
-            max_hypotheses=self.max_hypotheses if hypotheses is None else hypotheses,
-            all_pairs_below=self.hypothesis_segments,
+            min_match_value=pairwise.link_min_value,
+            min_match_fraction=(
+                pairwise.viewed_link_min_fraction if viewed else pairwise.link_min_fraction
+            ),
+            min_cross_support=pairwise.link_min_cross_support,
+            max_hypotheses=pairwise.max_hypotheses if hypotheses is None else hypotheses,
+            all_pairs_below=pairwise.hypothesis_segments,
             refine_candidates=min(self.integrate.refine_candidates, 3),
         )

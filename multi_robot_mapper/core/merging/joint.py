@@ -22,7 +22,7 @@ segments in its own frame). Each piece of each robot is a map of its own (a
    and, once a set is refused so, only sets that outweigh it ``link_set_uniqueness`` times;
 4. **one graph** (:class:`~multi_robot_mapper.core.pose_graph.PoseGraph`, gtsam) of every
    keyframe of the maps joined to the reference: edges between a map's keyframes from their
-   published poses (consecutive keyframes, and keyframes within ``graph_radius``: the wire
+   published poses (consecutive keyframes, and keyframes within ``graph.radius``: the wire
    carries no loop closures, so these keep what the robot's own closures made of its map),
    with a standard deviation growing with their distance; every accepted link between
    keyframes of two maps, under the DCS robust kernel. Solved in one batch from the maps

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.consistency import Accepted, placement
+from multi_robot_mapper.core.merging.joint_graph_config import JointGraphConfig
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.place_matching import cached, content_digest
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
@@ -85,7 +86,7 @@ def _solve(
     for key in order:
         offsets[key] = total
         total += len(units[key].index)
-    graph = PoseGraph(robust_scale=config.link_robust_scale, kernel="dcs")
+    graph = PoseGraph(robust_scale=config.graph.link_robust_scale, kernel="dcs")
     for key in order:
         unit = units[key]
         start = [se2.pose_from_matrix(rigid[key] @ se2.matrix_from_pose(*p)) for p in unit.poses]
@@ -93,7 +94,7 @@ def _solve(
             anchored = key == ref_unit and row == 0
             x, y, theta = (float(v) for v in placed)
             graph.add_node(offsets[key] + row, (x, y, theta), anchored=anchored)
-        for edge in _intra_edges(unit, offsets[key], _edge_model(config), intra):
+        for edge in _intra_edges(unit, offsets[key], _edge_model(config.graph), intra):
             graph.add_edge(edge)
     accepted_links = _add_links(graph, accepted, units, offsets)
     iterations = graph.solve() if accepted_links else 0
@@ -175,19 +176,13 @@ def _intra_pairs(unit: MapUnit, radius: float) -> list[tuple[int, int]]:
     return pairs
 
 
-# MergeConfig's graph_radius, graph_sigma, graph_drift, graph_angle_sigma, graph_angle_drift
+# JointGraphConfig's radius, sigma, drift, angle_sigma, angle_drift
 _EdgeModel = tuple[float, float, float, float, float]
 
 
-def _edge_model(config: MergeConfig) -> _EdgeModel:
-    """What the edges inside a map read of ``config``."""
-    return (
-        config.graph_radius,
-        config.graph_sigma,
-        config.graph_drift,
-        config.graph_angle_sigma,
-        config.graph_angle_drift,
-    )
+def _edge_model(graph: JointGraphConfig) -> _EdgeModel:
+    """What the edges inside a map read of ``graph``."""
+    return (graph.radius, graph.sigma, graph.drift, graph.angle_sigma, graph.angle_drift)
 
 
 def _intra_edges(

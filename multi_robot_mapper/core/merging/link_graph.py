@@ -358,7 +358,7 @@ def merge(
     kept = set() if previous is None else {(lk.robot_a, lk.robot_b) for lk in previous.links}
     all_links = [record.link for record in records.values()]
     joins = free_space_join(clean, views, config) if viewpoints else None
-    tree = spanning_tree(robots, all_links, kept, config.stability_margin, joins)
+    tree = spanning_tree(robots, all_links, kept, config.pairwise.stability_margin, joins)
     if chosen is None:
         chosen = choose_reference(
             robots, tree, lengths, None if previous is None else previous.reference

@@ -22,7 +22,7 @@ from multi_robot_mapper.core.matching import (
     refused,
     score_pairs,
 )
-from multi_robot_mapper.core.matching.scoring import pair_kept
+from multi_robot_mapper.core.matching.scoring import pair_kept, pair_tolerance
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import (
     MapViews,
@@ -78,8 +78,8 @@ class MapSignature:
         """
         if self.digest == earlier.digest:
             return True
-        count_slack = max(2.0, config.reuse_count_change / 100.0 * earlier.count)
-        length_slack = config.reuse_length_change / 100.0 * earlier.length
+        count_slack = max(2.0, config.pairwise.reuse_count_change / 100.0 * earlier.count)
+        length_slack = config.pairwise.reuse_length_change / 100.0 * earlier.length
         return (
             abs(self.count - earlier.count) <= count_slack
             and abs(self.length - earlier.length) <= length_slack
@@ -159,8 +159,8 @@ def match_maps(
         draw_map(map_a, views_a, config),
         draw_map(map_b, views_b, config),
     )
-    judge_a = map_a.longest(config.judge_segments)
-    judge_b = map_b.longest(config.judge_segments)
+    judge_a = map_a.longest(config.pairwise.judge_segments)
+    judge_b = map_b.longest(config.pairwise.judge_segments)
     candidates = _candidates(map_a, map_b, drawing_a, drawing_b, config)
     # The judges' pair geometry: built once for refusal, refinement, INTEGRATE, tight overlap.
     with pair_kept(judge_a, judge_b):
@@ -235,10 +235,12 @@ def _judged_link(
     viewed = views_a is not None and views_b is not None
     tight = tight_fraction(judge_a, judge_b, result.T_1_2, config)
     valid = result.valid and tight >= (
-        config.viewed_link_min_tight_fraction if viewed else config.link_min_tight_fraction
+        config.pairwise.viewed_link_min_tight_fraction
+        if viewed
+        else config.pairwise.link_min_tight_fraction
     )
     if viewed:
-        valid = valid and uniqueness >= config.link_min_uniqueness
+        valid = valid and uniqueness >= config.pairwise.link_min_uniqueness
     through = 0.0
     if valid and (views_a is not None or views_b is not None):
         through = free_space_conflict(
@@ -289,7 +291,9 @@ def _best_places(
             keep.append(int(k))
     if not keep:
         return None
-    refined = refine_many(judge_a, judge_b, candidates[keep], link)
+    refined = refine_many(
+        judge_a, judge_b, candidates[keep], pair_tolerance(link), link.refine_iterations
+    )
     scores = placement_scores(drawing_a, drawing_b, refined, correlation)
     scores[refused(judge_a, judge_b, refined, *refusal(link))] = -np.inf
     if not np.isfinite(scores).any():
@@ -320,7 +324,7 @@ def _candidates(
 ) -> FloatArray:
     """Candidate placements ``(theta, tx, ty)`` of map b in map a."""
     rows: list[FloatArray] = []
-    k, c = config.hypothesis_segments, config.coarse_segments
+    k, c = config.pairwise.hypothesis_segments, config.pairwise.coarse_segments
     ranking = dataclasses.replace(config.link_config(), all_pairs_below=k)
     angles = integrate(
         map_a.longest(c),
@@ -335,7 +339,7 @@ def _candidates(
     correlation = config.correlation()
     rotations = rotation_candidates(map_a, map_b, correlation.rotations)
     peaks, _ = correlation_peaks(drawing_a, drawing_b, rotations, correlation)
-    rows.append(peaks[: config.correlation_candidates])
+    rows.append(peaks[: config.pairwise.correlation_candidates])
     return np.vstack(rows)
 
 
@@ -346,11 +350,11 @@ def tight_fraction(
     row), as a fraction of the shorter set's total length."""
     tight = dataclasses.replace(
         config.integrate,
-        segment_distance_threshold=config.tight_distance
+        segment_distance_threshold=config.pairwise.tight_distance
         / config.integrate.point_distance_tolerance,
     )
     map1, map2 = SegmentMap.of(segments1), SegmentMap.of(segments2)
-    scores = score_pairs(map1, map2, np.asarray(T_1_2)[None, :], tight)
+    scores = score_pairs(map1, map2, np.asarray(T_1_2)[None, :], pair_tolerance(tight))
     shorter = min(map1.total_length, map2.total_length)
     return float(scores.value.sum()) / max(shorter, 1e-9)
 

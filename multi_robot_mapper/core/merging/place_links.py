@@ -49,6 +49,7 @@ from multi_robot_mapper.core.matching import IntegrateConfig, MatchResult, integ
 from multi_robot_mapper.core.matching.beams import BeamAgreement, Viewpoint
 from multi_robot_mapper.core.matching.confidence import MatchEvidence, confidence
 from multi_robot_mapper.core.matching.refine import match_information
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.matching.shape import Shape
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.merging.config import MergeConfig
@@ -334,9 +335,9 @@ def _candidate(
         se2.transform_segments(se2.invert(T_target_keyframe), crop.segments),
         own,
         np.array([theta, x, y]),
-        config.integrate,
-        config.link_sigma,
-        (config.link_sigma, config.link_angle_sigma),
+        pair_tolerance(config.integrate),
+        config.graph.link_sigma,
+        (config.graph.link_sigma, config.graph.link_angle_sigma),
         (10.0, 1.0),
     )
     return LinkCandidate(

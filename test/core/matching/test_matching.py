@@ -30,6 +30,7 @@ from multi_robot_mapper.core.matching.hypotheses import (
     _within_comparison_budget,
 )
 from multi_robot_mapper.core.matching.integrate import _distinct_candidates
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.segment_map import SegmentMap
 from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
@@ -215,16 +216,22 @@ def test_refinement_pulls_several_hypotheses_at_once() -> None:
         se2.invert(se2.matrix_from_pose(T_1_2[1], T_1_2[2], T_1_2[0])), ROOM
     )
     start = T_1_2 + np.array([[0.02, 0.05, -0.04], [-0.015, -0.06, 0.03], [0.0, 0.0, 0.0]])
-    refined = refine_many(ROOM, moved, start, CONFIG)
+    refined = refine_many(ROOM, moved, start, pair_tolerance(CONFIG), CONFIG.refine_iterations)
     np.testing.assert_allclose(refined, np.tile(T_1_2, (3, 1)), atol=1e-4)
     # refine() is the one-hypothesis case.
-    np.testing.assert_allclose(refine(ROOM, moved, start[0], CONFIG), T_1_2, atol=1e-4)
+    np.testing.assert_allclose(
+        refine(ROOM, moved, start[0], pair_tolerance(CONFIG), CONFIG.refine_iterations),
+        T_1_2,
+        atol=1e-4,
+    )
 
 
 def test_no_refinement_leaves_hypotheses_unchanged() -> None:
     start = np.array([[0.1, 0.2, 0.3], [1.0, -1.0, 2.0]])
     config = dataclasses.replace(CONFIG, refine_iterations=0)
-    np.testing.assert_array_equal(refine_many(ROOM, ROOM, start, config), start)
+    np.testing.assert_array_equal(
+        refine_many(ROOM, ROOM, start, pair_tolerance(config), config.refine_iterations), start
+    )
 
 
 def test_without_refinement_the_answer_is_a_generated_hypothesis() -> None:
@@ -362,10 +369,10 @@ def test_pair_scores_follow_a_segment_set_changed_in_place() -> None:
     moved = se2.transform_segments(se2.matrix_from_pose(0.3, -0.2, 0.1), ROOM)
     T = np.array([[0.0, 0.0, 0.0], [-0.1, -0.3, 0.2]])
     edited = moved.copy()
-    before = scoring.score_pairs(ROOM, edited, T, CONFIG)
+    before = scoring.score_pairs(ROOM, edited, T, pair_tolerance(CONFIG))
     edited[:, [0, 2]] += 1.0  # the same array, new content
-    again = scoring.score_pairs(ROOM, edited, T, CONFIG)
-    fresh = scoring.score_pairs(ROOM.copy(), edited.copy(), T, CONFIG)
+    again = scoring.score_pairs(ROOM, edited, T, pair_tolerance(CONFIG))
+    fresh = scoring.score_pairs(ROOM.copy(), edited.copy(), T, pair_tolerance(CONFIG))
     for field in dataclasses.fields(again):
         assert np.array_equal(getattr(again, field.name), getattr(fresh, field.name))
     assert not np.array_equal(before.value, again.value)
@@ -376,7 +383,9 @@ def test_large_pair_geometries_are_not_kept() -> None:
     many = rng.uniform(-20.0, 20.0, (250, 4))  # 62 500 pairs, over the kept size
     segment_map = SegmentMap.of(many)
     with scoring.pair_kept(segment_map, segment_map):
-        scores = scoring.score_pairs(segment_map, segment_map, np.zeros((1, 3)), CONFIG)
+        scores = scoring.score_pairs(
+            segment_map, segment_map, np.zeros((1, 3)), pair_tolerance(CONFIG)
+        )
         assert scoring.pair_geometry(segment_map, segment_map) is not scoring.pair_geometry(
             segment_map, segment_map
         )
@@ -459,7 +468,7 @@ def test_pair_values_are_alg4_triple_by_triple(seed: int) -> None:
     transforms = np.column_stack(
         (rng.choice([0.0, np.pi / 2, 0.15], 6) + rng.normal(0, 0.05, 6), rng.normal(0, 0.5, (6, 2)))
     )
-    scores = scoring.score_pairs(segments1, segments2, transforms, CONFIG)
+    scores = scoring.score_pairs(segments1, segments2, transforms, pair_tolerance(CONFIG))
     found = {
         (int(h), int(a), int(b)): float(v)
         for h, a, b, v in zip(

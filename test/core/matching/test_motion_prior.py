@@ -20,6 +20,7 @@ from multi_robot_mapper.core.matching.prior import (
     weakest_directions,
 )
 from multi_robot_mapper.core.matching.refine import normal_equations, refine_many
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
 
 CONFIG = IntegrateConfig()
@@ -44,7 +45,7 @@ def _scans(world: np.ndarray, moved: float, seed: int = 3) -> tuple[np.ndarray, 
 
 def test_the_weakest_direction_of_a_corridor_match_is_along_it() -> None:
     _, _, s1, s2 = _scans(CORRIDOR, 0.5)
-    H, _ = normal_equations(s1, s2, np.array([[0.0, 0.5, 0.1]]), CONFIG)
+    H, _ = normal_equations(s1, s2, np.array([[0.0, 0.5, 0.1]]), pair_tolerance(CONFIG))
     u, weakest = weakest_directions(H)
     assert abs(u[0, 0]) == pytest.approx(1.0, abs=1e-3)  # along x
     assert weakest[0] < 1e-6 < np.trace(H[0])
@@ -56,9 +57,9 @@ def test_the_prior_decides_the_corridor_offset_and_the_walls_the_rest() -> None:
     # with a prior at the truth, the offset along goes to the prior.
     _, _, s1, s2 = _scans(CORRIDOR, 0.5)
     start = np.array([[0.0, 0.8, 0.25]])
-    alone = refine_many(s1, s2, start, CONFIG)[0]
+    alone = refine_many(s1, s2, start, pair_tolerance(CONFIG), CONFIG.refine_iterations)[0]
     prior = MotionPrior(np.array([0.0, 0.5, 0.0]), prior_support(0.01, 0.05) or 0.0, 0.05)
-    pulled = refine_many(s1, s2, start, CONFIG, prior)[0]
+    pulled = refine_many(s1, s2, start, pair_tolerance(CONFIG), CONFIG.refine_iterations, prior)[0]
     assert alone[1] == pytest.approx(0.8, abs=0.01)
     assert alone[2] == pytest.approx(0.1, abs=0.01) and pulled[2] == pytest.approx(0.1, abs=0.01)
     assert pulled[1] == pytest.approx(0.5, abs=0.01)
@@ -69,8 +70,10 @@ def test_where_the_walls_observe_every_direction_the_prior_is_not_weighed() -> N
     _, _, s1, s2 = _scans(ROOM, 0.5)
     start = np.array([[0.0, 0.6, 0.15]])
     wrong_prior = MotionPrior(np.array([0.0, 1.5, 1.0]), 100.0, 0.05)
-    alone = refine_many(s1, s2, start, CONFIG)[0]
-    with_prior = refine_many(s1, s2, start, CONFIG, wrong_prior)[0]
+    alone = refine_many(s1, s2, start, pair_tolerance(CONFIG), CONFIG.refine_iterations)[0]
+    with_prior = refine_many(
+        s1, s2, start, pair_tolerance(CONFIG), CONFIG.refine_iterations, wrong_prior
+    )[0]
     np.testing.assert_allclose(with_prior, alone, atol=1e-9)
     assert alone[1:] == pytest.approx([0.5, 0.1], abs=0.01)
 

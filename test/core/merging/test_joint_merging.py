@@ -29,6 +29,7 @@ from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.logistic import LogisticModel
 from multi_robot_mapper.core.matching import IntegrateConfig
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult
 from multi_robot_mapper.core.merging.consistency import (
     PairVerdict,
@@ -68,7 +69,9 @@ def keyframes_along(walls: np.ndarray, poses: np.ndarray, seed: int) -> list[Key
         found = extract_scan(data, ExtractionConfig())[0].segments
         placed = se2.transform_segments(se2.matrix_from_pose(*pose), found)
         own = np.full(len(placed), k, dtype=np.int64)
-        segments, owner = fuse(segments, owner, placed, own, IntegrateConfig(), 0.02)
+        segments, owner = fuse(
+            segments, owner, placed, own, pair_tolerance(IntegrateConfig()), 0.02
+        )
     return [
         Keyframe(
             k,

@@ -23,6 +23,7 @@ from multi_robot_mapper.core.extraction import extract_scan
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.matching import IntegrateConfig
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.merging import (
     Link,
     MapViews,
@@ -36,6 +37,7 @@ from multi_robot_mapper.core.merging import (
     seen_through_length,
     spanning_tree,
 )
+from multi_robot_mapper.core.merging.pairwise_config import PairwiseConfig
 from multi_robot_mapper.core.simulation import LaserModel, drive_path, plan_paths, simulate_scan
 from multi_robot_mapper.core.worlds import ROUTES, WORLDS, arc, polygon
 
@@ -57,7 +59,12 @@ def fused_map(walls: np.ndarray, poses: np.ndarray, rng: np.random.Generator) ->
         found = extract_scan(data, ExtractionConfig())[0].segments
         placed = se2.transform_segments(se2.matrix_from_pose(*pose), found)
         segments, owner = fuse(
-            segments, owner, placed, np.zeros(len(placed), np.int64), IntegrateConfig(), 0.02
+            segments,
+            owner,
+            placed,
+            np.zeros(len(placed), np.int64),
+            pair_tolerance(IntegrateConfig()),
+            0.02,
         )
     return segments
 
@@ -274,9 +281,9 @@ def test_a_look_alike_building_is_refused_by_the_free_space_the_robots_saw() -> 
             link = record.link
             assert not link.valid
             assert (
-                link.uniqueness < CONFIG.link_min_uniqueness
+                link.uniqueness < CONFIG.pairwise.link_min_uniqueness
                 or link.seen_through > CONFIG.link_max_seen_through
-                or link.fraction < CONFIG.viewed_link_min_fraction
+                or link.fraction < CONFIG.pairwise.viewed_link_min_fraction
             )
     placed = {n: f for n, f in zip(names, frames, strict=True) if n != "lookalike"}
     assert_placed(result, placed, TOLERANCE_M, TOLERANCE_RAD)
@@ -316,16 +323,19 @@ def test_a_wrong_looking_link_below_the_threshold_is_refused() -> None:
     assert not record.link.valid
     # It overlaps (the shared corner), but less than the thresholds ask: too little wall
     # (one corner is no more than a room's walls) and too small a part of the map.
-    assert 0.0 < record.link.value < CONFIG.link_min_value
-    assert 0.0 < record.link.fraction < CONFIG.link_min_fraction
+    assert 0.0 < record.link.value < CONFIG.pairwise.link_min_value
+    assert 0.0 < record.link.fraction < CONFIG.pairwise.link_min_fraction
     assert result.unmerged in (["mixed"], ["office"]) and result.links == []
     # The same pair with the thresholds lowered would be taken: it is the threshold refusing.
     lax = dataclasses.replace(
         CONFIG,
-        link_min_fraction=0.0,
-        link_min_value=0.0,
-        link_min_cross_support=0.0,
-        link_min_tight_fraction=0.0,
+        pairwise=dataclasses.replace(
+            CONFIG.pairwise,
+            link_min_fraction=0.0,
+            link_min_value=0.0,
+            link_min_cross_support=0.0,
+            link_min_tight_fraction=0.0,
+        ),
     )
     assert merge(maps, lax).pairs[("mixed", "office")].link.valid
 
@@ -413,13 +423,14 @@ def test_edge_cases_single_empty_and_unknown_reference() -> None:
 
 def test_the_config_is_validated_and_loads_from_flat_names() -> None:
     with pytest.raises(ConfigError, match="link_min_fraction"):
-        MergeConfig(link_min_fraction=1.5)
+        MergeConfig(pairwise=PairwiseConfig(link_min_fraction=1.5))
     with pytest.raises(ConfigError, match="fusion_tolerance"):
         MergeConfig(fusion_tolerance=0.0)
     config = config_from_flat(
-        MergeConfig, {"link_min_value": 3.0, "integrate.point_distance_tolerance": 0.03}
+        MergeConfig, {"pairwise.link_min_value": 3.0, "integrate.point_distance_tolerance": 0.03}
     )
-    assert config.link_min_value == 3.0 and config.integrate.point_distance_tolerance == 0.03
+    assert config.pairwise.link_min_value == 3.0
+    assert config.integrate.point_distance_tolerance == 0.03
     # The link thresholds, not INTEGRATE's scan thresholds, decide a link's validity.
     assert config.link_config().min_match_value == 3.0
 
@@ -479,7 +490,12 @@ def test_intel_split_into_three_robots_is_merged_as_the_reference_poses_say() ->
             T_world_laser = se2.matrix_from_pose(*scans[i].reference_pose)
             placed = se2.transform_segments(T_world_laser, found)
             segments, owner = fuse(
-                segments, owner, placed, np.zeros(len(placed), np.int64), IntegrateConfig(), 0.02
+                segments,
+                owner,
+                placed,
+                np.zeros(len(placed), np.int64),
+                pair_tolerance(IntegrateConfig()),
+                0.02,
             )
         # Each robot's map in its own first scan's frame.
         frames[f"robot{k}"] = se2.matrix_from_pose(*scans[chunk[0]].reference_pose)
