@@ -55,11 +55,13 @@ class SavedMapServices:
         return written
 
     def autosave(self) -> None:
-        """After a merge: save the map (``save_on_shutdown``) when the robots placed changed
-        or the last save is :data:`AUTOSAVE_PERIOD` old; a failed save is a warning, the map
-        is kept."""
+        """After a merge that left no place unmatched: save the map (``save_on_shutdown``)
+        when the robots placed changed or the last save is :data:`AUTOSAVE_PERIOD` old; a
+        failed save is a warning, the map is kept."""
         if not self.config.save_on_shutdown:
             return
+        if self.result is not None and self.result.stats.get("matches_pending", 0) > 0:
+            return  # an update that left places unmatched may lack placements it will make
         recent = time.monotonic() - self._saved_at < AUTOSAVE_PERIOD
         if recent and _placed(self.result) == self._saved_placed:
             return
