@@ -90,6 +90,23 @@ def keyframe_scans(log: str, count: int) -> tuple[list[np.ndarray], np.ndarray, 
     return sets, np.array(poses), raw
 
 
+def distorted(
+    poses: np.ndarray, fixed: np.ndarray, shift: float, turn: float, seed: int
+) -> np.ndarray:
+    """Seed 000's Sec. 4.2 distortion: every free body of ``poses`` (x, y, theta) moved by
+    uniform +-``shift`` (m) in x and y and +-``turn`` (degrees), the same draws per seed."""
+    rng = np.random.default_rng(seed)
+    start = poses.copy()
+    noise = np.column_stack(
+        [
+            rng.uniform(-shift, shift, (len(start), 2)),
+            rng.uniform(-1, 1, len(start)) * np.radians(turn),
+        ]
+    )
+    start[~fixed] += noise[~fixed]
+    return start
+
+
 def deviation(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     """Largest position (m) and heading (rad) difference between two sets of poses."""
     return (
@@ -180,15 +197,7 @@ def reconvergence(
     )
     hits, per_iteration, cpu_iteration, runs = 0, [], [], []
     for seed in range(args.seeds):
-        rng = np.random.default_rng(seed)
-        start = r0.poses.copy()
-        noise = np.column_stack(
-            [
-                rng.uniform(-shift, shift, (len(start), 2)),
-                rng.uniform(-1, 1, len(start)) * np.radians(turn),
-            ]
-        )
-        start[~fixed] += noise[~fixed]
+        start = distorted(r0.poses, fixed, shift, turn, seed)
         started, cpu = time.perf_counter(), time.process_time()
         result = simulate(bodies, start, config, fixed=fixed)
         per_iteration.append((time.perf_counter() - started) * 1000.0 / max(result.iterations, 1))

@@ -26,7 +26,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from bench.ffs_bench import keyframe_scans  # noqa: E402
+from bench.ffs_bench import distorted, keyframe_scans  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.merging.ffs import FfsConfig, make_bodies  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.far import run_ffs_far, start_width  # noqa: E402
@@ -68,15 +68,7 @@ def main() -> None:
     print(bodies_off("R0 from the reference poses", r0.poses, reference), flush=True)
     for seed in (int(s) for s in args.seeds.split(",") if s):
         # As bench.ffs_bench: every free body moved by uniform +-shift, +-turn from R0.
-        rng = np.random.default_rng(seed)
-        start = r0.poses.copy()
-        noise = np.column_stack(
-            [
-                rng.uniform(-shift, shift, (len(start), 2)),
-                rng.uniform(-1, 1, len(start)) * np.radians(turn),
-            ]
-        )
-        start[~fixed] += noise[~fixed]
+        start = distorted(r0.poses, fixed, shift, turn, seed)
         cpu = time.process_time()
         result = simulate(bodies, start, config, fixed=fixed)
         print(f"seed {seed}: {result.iterations} iterations, {_ms(cpu, result.iterations)} ms")
