@@ -99,6 +99,7 @@ from multi_robot_mapper.ros.merger_state import (
     MergeInputs,
     RobotState,
     after_new_session,
+    matches_pending,
     merge_inputs,
     received_map,
     robot_statuses,
@@ -331,7 +332,7 @@ class MapMerger(SavedMapServices, Node):
             sessions = len(self._new_sessions)
         merged = False
         # A merge update matches places within its time budget: while some wait, merge again.
-        pending = self.result is not None and self.result.stats.get("matches_pending", 0) > 0
+        pending = matches_pending(self.result)
         if inputs.maps and (inputs.versions != self._merged_versions or pending):
             reference = config.merge.reference
             if reference and reference not in inputs.maps:
@@ -426,7 +427,7 @@ class MapMerger(SavedMapServices, Node):
         with self._lock:
             versions = merge_inputs(self.robots).versions
         result = self.result
-        pending = result is not None and result.stats.get("matches_pending", 0) > 0
+        pending = matches_pending(result)
         return bool(versions) and versions == self._merged_versions and not pending
 
     def _merge_without_new_maps(

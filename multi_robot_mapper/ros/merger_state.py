@@ -292,6 +292,12 @@ def _fill(state: RobotState, entry: SavedRobot) -> None:
     state.version += 1
 
 
+def matches_pending(result: MergeResult | None) -> bool:
+    """Did the merge update that gave ``result`` leave places unmatched (its time budget
+    spent)? Then the next update goes on matching, and its placements are not final."""
+    return result is not None and result.stats.get("matches_pending", 0) > 0
+
+
 def result_of_saved(saved: SavedMap) -> MergeResult:
     """The saved merge as a :class:`MergeResult` (no pair results: each pair is matched again
     at the next merge; the reference is kept while it is in a largest group)."""

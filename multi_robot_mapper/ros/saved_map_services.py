@@ -17,6 +17,7 @@ from multi_robot_mapper.ros.merger_config import MapMergerConfig
 from multi_robot_mapper.ros.merger_state import (
     MergeInputs,
     RobotState,
+    matches_pending,
     merge_inputs,
     restore_saved_map,
     result_of_saved,
@@ -60,7 +61,7 @@ class SavedMapServices:
         failed save is a warning, the map is kept."""
         if not self.config.save_on_shutdown:
             return
-        if self.result is not None and self.result.stats.get("matches_pending", 0) > 0:
+        if matches_pending(self.result):
             return  # an update that left places unmatched may lack placements it will make
         recent = time.monotonic() - self._saved_at < AUTOSAVE_PERIOD
         if recent and _placed(self.result) == self._saved_placed:
