@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: venv test lint typecheck unit fuzz demo bench config clean
+.PHONY: venv test lint typecheck unit unit-ros unit-rest fuzz demo bench config clean
 
 venv: $(STAMP)
 
@@ -28,8 +28,19 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
+# Two pytest runs side by side, one per core, each printed whole when it ends: the tests that
+# start ROS nodes (marked `ros` by test/conftest.py: in order, on one domain, with a core of
+# their own for their timeouts) and the rest. `make unit TEST_JOBS=1` runs them one by one.
+TEST_JOBS ?= 2
+
 unit: $(STAMP)
-	$(BIN)/python -m pytest
+	@$(MAKE) --no-print-directory -j$(TEST_JOBS) --output-sync=target unit-ros unit-rest
+
+unit-ros: $(STAMP)
+	$(BIN)/python -m pytest -m ros
+
+unit-rest: $(STAMP)
+	$(BIN)/python -m pytest -m "not ros"
 
 test: lint typecheck unit
 

@@ -47,6 +47,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
+from std_msgs.msg import Float64  # noqa: E402
 
 from bench.harness import OUTPUT  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
@@ -69,10 +70,14 @@ DRIVE_S = 150.0  # long enough for most restarts to come while the robots drive
 
 
 class Frames:
-    """The newest ``robot_frames/<robot>`` of each robot and when it came (monotonic s), and
-    whether a merger's ``/diagnostics`` came since :meth:`clear` (the new process is up: a
-    killed participant's publishers stay in the graph until their lease ends, so counting
-    ``global_map``'s publishers would count the dead one)."""
+    """The newest ``robot_frames/<robot>`` of each robot still placed and when it came
+    (monotonic s), and whether a merger's ``/diagnostics`` came since :meth:`clear` (the new
+    process is up: a killed participant's publishers stay in the graph until their lease ends,
+    so counting ``global_map``'s publishers would count the dead one).
+
+    A robot placed once and placed no more keeps its last latched ``robot_frames`` pose, in the
+    ``map`` frame of that time (the reference may have changed since): the merger withdraws it
+    by publishing 0 on ``robot_frames/<robot>/probability``, and so it is dropped here."""
 
     def __init__(self, node: Node) -> None:
         self._lock = threading.Lock()
@@ -86,10 +91,21 @@ class Frames:
                 lambda msg, r=robot: self._on_frame(r, msg),
                 LATCHED_QOS,
             )
+            node.create_subscription(
+                Float64,
+                f"/robot_frames/{robot}/probability",
+                lambda msg, r=robot: self._on_probability(r, msg),
+                LATCHED_QOS,
+            )
 
     def _on_frame(self, robot: str, msg: PoseStamped) -> None:
         with self._lock:
             self.frames[robot] = (time.monotonic(), np.asarray(pose_from_msg(msg.pose)))
+
+    def _on_probability(self, robot: str, msg: Float64) -> None:
+        if msg.data <= 0.0:
+            with self._lock:
+                self.frames.pop(robot, None)
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         if any(status.name == "map_merger" for status in msg.status):

@@ -36,6 +36,29 @@ def carmen_log(name: str) -> Path:
     return path
 
 
+def spins_ros(item: pytest.Item) -> bool:
+    """Whether a test starts ROS nodes: marked ``ros``, asks for ``ros_context``, or its module
+    holds rclpy's names (an executor, a node, ``isolated_context``) for its fixtures to use."""
+    if item.get_closest_marker("ros") or "ros_context" in getattr(item, "fixturenames", ()):
+        return True
+    names = vars(getattr(item, "module", None) or object).values()
+    return any(
+        str(getattr(value, "__module__", "")).startswith(
+            ("rclpy", "multi_robot_mapper.ros.testing")
+        )
+        for value in names
+    )
+
+
+@pytest.hookimpl(tryfirst=True)  # before ``-m`` selects by the markers
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Every test that starts ROS nodes is marked ``ros``: ``make test`` runs them in one
+    pytest (``-m ros``, in order, on this run's domain) and the rest in another beside it."""
+    for item in items:
+        if spins_ros(item):
+            item.add_marker(pytest.mark.ros)
+
+
 @pytest.fixture
 def ros_context() -> Iterator[object]:
     """A fresh rclpy context on this run's isolated domain, shut down after the test."""
