@@ -17,7 +17,10 @@ logs' keyframes (docs/decisions.md, "FFS from afar"):
   corridor, where the field barely resists; here the step is the one that minimises the
   potential's quadratic model over all bodies' poses together (Gauss-Newton on the weighted
   point-to-wall distances, frozen weights: the iteratively reweighted form of Eq. 4), the
-  fixed bodies held. It is bounded per body (below) as Δt bounds the paper's.
+  fixed bodies held. It is bounded per body (below) as Δt bounds the paper's. While σ is
+  wider than _JOINT_WIDTH (0.2 m) each body takes its own Newton step instead, the others
+  held: a wide field matches a few walls at the wrong place, and a joint step slides whole
+  runs of keyframes along their corridor by those few pulls (issue 51, docs/decisions.md).
 - **Bounded steps.** A body moves at most σ per iteration and turns at most σ / its radius
   of gyration: rotation from far-away points cannot throw a body further than the field's
   width (the issue's "rotation must not dominate").
@@ -75,15 +78,19 @@ _PAIRS = 60000
 # chain's soft modes (a corridor's length) converge in a few steps. It does not hold a body
 # whose walls all run one way (aces's corridors slid metres: docs/decisions.md).
 _DAMPING = 1e-4
+# The step is joint (Gauss-Newton over all bodies' poses) once σ is at most this (m); wider,
+# each body takes its own Newton step, the others held. A wide field's few pulls across a
+# corridor's length come from walls matched at the wrong place (aces at the reference poses:
+# the pulls holding keyframes 28-59 along their corridor sit 0.46 m off on average, points
+# pulled to another keyframe's wall end 1 m along the wall), and the joint step moves the whole
+# run by their mean, σ per iteration, 3 m in 15 iterations; each body alone feels its own
+# pulls, which cancel inside the run. Below it the joint step brings back what bodies alone do
+# not (a run of 30 keyframes of intel left 15-19 cm off with the hand-over at 0.08 m).
+# Screened on intel and aces at 0.08, 0.2 and 0.3 m (docs/decisions.md, issue 51).
+_JOINT_WIDTH = 0.2
 # The step's share of the model's at the end of the cooling: the whole step cycles by about
 # half a millimetre at the end (the synthetic building of the tests), half of it settles.
 _FINAL_STEP_SHARE = 0.5
-_HANDOVER = float(__import__("os").environ.get("FFS_HANDOVER", "0"))
-_WIDE = __import__("os").environ.get("FFS_WIDE", "paper")
-_ALONG = __import__("os").environ.get("FFS_ALONG", "") == "1"
-_SOFT = float(__import__("os").environ.get("FFS_SOFT", "1"))
-_GAIN = float(__import__("os").environ.get("FFS_GAIN", "1"))
-_OBSERVED = float(__import__("os").environ.get("FFS_OBSERVED", "0"))
 # Absolute curvature floor (per unit weight): a body with no wall in reach does not move.
 _FLOOR = 1e-6
 
@@ -100,7 +107,6 @@ class _Pulls:
     foot: FloatArray  # (M, 2) the soft-nearest point of the other body
     weight: FloatArray
     pairs: int  # point pairs examined (within the cut-off)
-    stride: int = 1  # every stride-th point pulled
 
 
 def coarser(bodies: Bodies, cell: float) -> Bodies:
@@ -153,8 +159,7 @@ def wall_pulls(
     """Every point's pull towards each other body's nearest wall in reach (module doc);
     ``points``, ``directions`` placed in ``map``, ``cell`` the points' spacing."""
     # Every point is a wall to pull towards; every stride-th one is pulled (module doc).
-    stride = max(1, -(-len(points) // pulled))
-    sources = np.arange(0, len(points), stride)
+    sources = np.arange(0, len(points), max(1, -(-len(points) // pulled)))
     pairs = cKDTree(points[sources]).sparse_distance_matrix(
         cKDTree(points), cutoff * sigma, output_type="ndarray"
     )
@@ -166,8 +171,7 @@ def wall_pulls(
     gap = points[j] - points[i]
     # The soft nearest of the other body's points: weights over a point spacing, summed per
     # (point, body) key; gaps are < cutoff * sigma < 2 * cutoff * cell, no underflow.
-    soft = cell * _SOFT
-    near = bodies.masses[j] * np.exp(-np.einsum("ij,ij->i", gap, gap) / (2.0 * soft**2))
+    near = bodies.masses[j] * np.exp(-np.einsum("ij,ij->i", gap, gap) / (2.0 * cell**2))
     key = i * bodies.count + bodies.body[j]
     total = np.bincount(key, near, len(points) * bodies.count)
     keys = np.flatnonzero(total > 0.0)
@@ -184,12 +188,7 @@ def wall_pulls(
     distance = np.einsum("ij,ij->i", normal, points[point] - foot)
     face = np.einsum("ij,ij->i", directions[point], tangent)
     weight = bodies.masses[point] * face * np.exp(-(distance**2) / (2.0 * sigma**2))
-    if _ALONG:
-        along = np.einsum("ij,ij->i", tangent, points[point] - foot)
-        weight = weight * np.exp(-(along**2) / (2.0 * sigma**2))
-    return _Pulls(
-        point, bodies.body[point], keys % bodies.count, normal, foot, weight, len(pairs), stride
-    )
+    return _Pulls(point, bodies.body[point], keys % bodies.count, normal, foot, weight, len(pairs))
 
 
 def _jacobians(pulls: _Pulls, points: FloatArray, centres: FloatArray) -> FloatArray:
@@ -206,17 +205,12 @@ def _jacobians(pulls: _Pulls, points: FloatArray, centres: FloatArray) -> FloatA
 
 
 def joint_step(
-    pulls: _Pulls,
-    points: FloatArray,
-    centres: FloatArray,
-    free: BoolArray,
-    radii: FloatArray | None = None,
-    observed: float = 0.0,
-    jacobi: bool = False,
+    pulls: _Pulls, points: FloatArray, centres: FloatArray, free: BoolArray, alone: bool = False
 ) -> FloatArray:
     """(K, 3) every body's pose increment (x, y, θ about its centre) minimising the weighted
     squared distances of the pulls' quadratic model at once, the fixed bodies held (module
-    doc)."""
+    doc); ``alone``: each body's own Newton step, the others held where they are (its own 3×3
+    block of the same system)."""
     count = len(centres)
     jac = _jacobians(pulls, points, centres)
     distance = np.einsum("ij,ij->i", pulls.normal, points[pulls.point] - pulls.foot)
@@ -243,68 +237,19 @@ def joint_step(
     for x, body in enumerate((pulls.owner, pulls.other)):
         for c in range(3):
             gradient[c::3] += np.bincount(body, w * distance * jac[:, 3 * x + c], count)
-    if _WIDE == "jacobi" and jacobi:
-        diag = np.einsum("kii->ki", own.transpose(2, 0, 1))
-        blocks = own.transpose(2, 0, 1) + np.eye(3)[None] * (_DAMPING * diag + _FLOOR)[:, None, :]
-        out = -np.linalg.solve(blocks, gradient.reshape(count, 3)[:, :, None])[:, :, 0]
-        out[~free] = 0.0
-        return np.asarray(out)
+    if alone:
+        blocks = own.transpose(2, 0, 1)
+        diagonal = np.einsum("kii->ki", blocks)
+        blocks = blocks + np.eye(3)[None] * (_DAMPING * diagonal + _FLOOR)[:, None, :]
+        step = -np.linalg.solve(blocks, gradient.reshape(count, 3, 1))[:, :, 0]
+        return np.where(free[:, None], step, 0.0)
     moving = np.repeat(free, 3)
     system = matrix[np.ix_(moving, moving)]
     system += np.diag(_DAMPING * np.diag(system) + _FLOOR)
     step = np.zeros(3 * count)
-    if moving.any() and observed > 0.0 and radii is not None:
-        step[moving] = _observed_solve(
-            system, gradient[moving], np.repeat(radii, 3)[moving], observed / pulls.stride
-        )
-    elif moving.any():
+    if moving.any():
         step[moving] = np.linalg.solve(system, -gradient[moving])
     return step.reshape(count, 3)
-
-
-_MODE = __import__("os").environ.get("FFS_OBSERVED_MODE", "drop")
-
-
-def _observed_solve(
-    system: FloatArray, gradient: FloatArray, radii: FloatArray, threshold: float
-) -> FloatArray:
-    """The Gauss-Newton step of ``system`` (x, y, θ per body) restricted to the eigen-directions
-    whose curvature, the turns counted as arcs at the body's radius of gyration (metres for
-    every parameter), is at least ``threshold``: a direction no wall observes is no evidence."""
-    scale = np.ones(len(gradient))
-    scale[2::3] = 1.0 / radii[2::3]
-    scaled = system * scale[:, None] * scale[None, :]
-    values, vectors = np.linalg.eigh(scaled)
-    along = vectors.T @ (gradient * scale)
-    if _MODE == "floor":
-        along /= np.maximum(values, threshold)
-    else:
-        along = np.where(values >= threshold, along / np.maximum(values, 1e-300), 0.0)
-    return np.asarray(-(vectors @ along) * scale)
-
-
-def paper_step(
-    pulls: _Pulls,
-    points: FloatArray,
-    level: Bodies,
-    centres: FloatArray,
-    radii: FloatArray,
-    free: BoolArray,
-) -> FloatArray:
-    """(K, 3) Eq. 6-9's step: each body's force over its mass, torque over its moment of
-    inertia, from the same pulls' model (the gradient of the weighted squared distances)."""
-    count = len(centres)
-    jac = _jacobians(pulls, points, centres)
-    distance = np.einsum("ij,ij->i", pulls.normal, points[pulls.point] - pulls.foot)
-    force = np.zeros((count, 3))
-    for x, body in enumerate((pulls.owner, pulls.other)):
-        for c in range(3):
-            force[:, c] -= np.bincount(body, pulls.weight * distance * jac[:, 3 * x + c], count)
-    mass = np.maximum(np.bincount(level.body, level.masses, count), 1e-12) / pulls.stride
-    step = _GAIN * force / mass[:, None]
-    step[:, 2] /= radii**2
-    step[~free] = 0.0
-    return step
 
 
 def centres_and_radii(bodies: Bodies, points: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -386,13 +331,9 @@ def run_ffs_far(
         centres, radii = centres_and_radii(level, points)
         # Eq. 8-9: the step's share (Δt / Δt_0)², Δt cooling as the paper's (5 -> 1 there).
         share = max(_FINAL_STEP_SHARE, (dt / config.dt_start) ** 2)
-        observed = _OBSERVED * sigma / config.spacing
-        if 0.0 < _HANDOVER < sigma and _WIDE == "jacobi":
-            step = joint_step(pulls, points, centres, free, jacobi=True) * share
-        elif 0.0 < _HANDOVER < sigma:
-            step = paper_step(pulls, points, level, centres, radii, free) * share
-        else:
-            step = joint_step(pulls, points, centres, free, radii, observed) * share
+        # Each body on its own while σ is wider than _JOINT_WIDTH (module doc).
+        alone = sigma > _JOINT_WIDTH
+        step = joint_step(pulls, points, centres, free, alone) * share
         moved = bounded_move(poses, step, centres, radii, sigma)
         relocation = float(moved[free].max()) if free.any() else 0.0
         relocations.append(relocation)
