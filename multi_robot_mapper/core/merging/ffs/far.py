@@ -17,7 +17,10 @@ logs' keyframes (docs/decisions.md, "FFS from afar"):
   corridor, where the field barely resists; here the step is the one that minimises the
   potential's quadratic model over all bodies' poses together (Gauss-Newton on the weighted
   point-to-wall distances, frozen weights: the iteratively reweighted form of Eq. 4), the
-  fixed bodies held. It is bounded per body (below) as Δt bounds the paper's.
+  fixed bodies held. It is bounded per body (below) as Δt bounds the paper's. While σ is
+  wider than _JOINT_WIDTH (0.2 m) each body takes its own Newton step instead, the others
+  held: a wide field matches a few walls at the wrong place, and a joint step slides whole
+  runs of keyframes along their corridor by those few pulls (issue 51, docs/decisions.md).
 - **Bounded steps.** A body moves at most σ per iteration and turns at most σ / its radius
   of gyration: rotation from far-away points cannot throw a body further than the field's
   width (the issue's "rotation must not dominate").
@@ -75,6 +78,16 @@ _PAIRS = 60000
 # chain's soft modes (a corridor's length) converge in a few steps. It does not hold a body
 # whose walls all run one way (aces's corridors slid metres: docs/decisions.md).
 _DAMPING = 1e-4
+# The step is joint (Gauss-Newton over all bodies' poses) once σ is at most this (m); wider,
+# each body takes its own Newton step, the others held. A wide field's few pulls across a
+# corridor's length come from walls matched at the wrong place (aces at the reference poses:
+# the pulls holding keyframes 28-59 along their corridor sit 0.46 m off on average, points
+# pulled to another keyframe's wall end 1 m along the wall), and the joint step moves the whole
+# run by their mean, σ per iteration, 3 m in 15 iterations; each body alone feels its own
+# pulls, which cancel inside the run. Below it the joint step brings back what bodies alone do
+# not (a run of 30 keyframes of intel left 15-19 cm off with the hand-over at 0.08 m).
+# Screened on intel and aces at 0.08, 0.2 and 0.3 m (docs/decisions.md, issue 51).
+_JOINT_WIDTH = 0.2
 # The step's share of the model's at the end of the cooling: the whole step cycles by about
 # half a millimetre at the end (the synthetic building of the tests), half of it settles.
 _FINAL_STEP_SHARE = 0.5
@@ -192,11 +205,12 @@ def _jacobians(pulls: _Pulls, points: FloatArray, centres: FloatArray) -> FloatA
 
 
 def joint_step(
-    pulls: _Pulls, points: FloatArray, centres: FloatArray, free: BoolArray
+    pulls: _Pulls, points: FloatArray, centres: FloatArray, free: BoolArray, alone: bool = False
 ) -> FloatArray:
     """(K, 3) every body's pose increment (x, y, θ about its centre) minimising the weighted
     squared distances of the pulls' quadratic model at once, the fixed bodies held (module
-    doc)."""
+    doc); ``alone``: each body's own Newton step, the others held where they are (its own 3×3
+    block of the same system)."""
     count = len(centres)
     jac = _jacobians(pulls, points, centres)
     distance = np.einsum("ij,ij->i", pulls.normal, points[pulls.point] - pulls.foot)
@@ -223,6 +237,12 @@ def joint_step(
     for x, body in enumerate((pulls.owner, pulls.other)):
         for c in range(3):
             gradient[c::3] += np.bincount(body, w * distance * jac[:, 3 * x + c], count)
+    if alone:
+        blocks = own.transpose(2, 0, 1)
+        diagonal = np.einsum("kii->ki", blocks)
+        blocks = blocks + np.eye(3)[None] * (_DAMPING * diagonal + _FLOOR)[:, None, :]
+        step = -np.linalg.solve(blocks, gradient.reshape(count, 3, 1))[:, :, 0]
+        return np.where(free[:, None], step, 0.0)
     moving = np.repeat(free, 3)
     system = matrix[np.ix_(moving, moving)]
     system += np.diag(_DAMPING * np.diag(system) + _FLOOR)
@@ -311,7 +331,9 @@ def run_ffs_far(
         centres, radii = centres_and_radii(level, points)
         # Eq. 8-9: the step's share (Δt / Δt_0)², Δt cooling as the paper's (5 -> 1 there).
         share = max(_FINAL_STEP_SHARE, (dt / config.dt_start) ** 2)
-        step = joint_step(pulls, points, centres, free) * share
+        # Each body on its own while σ is wider than _JOINT_WIDTH (module doc).
+        alone = sigma > _JOINT_WIDTH
+        step = joint_step(pulls, points, centres, free, alone) * share
         moved = bounded_move(poses, step, centres, radii, sigma)
         relocation = float(moved[free].max()) if free.any() else 0.0
         relocations.append(relocation)
