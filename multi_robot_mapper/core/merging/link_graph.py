@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import Drawing
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.merging.compose import as_map, fuse_maps
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import (
@@ -410,7 +411,9 @@ def _global_map(
     for robot, T_map_robot in placed.items():
         moved = se2.transform_segments(T_map_robot, maps[robot])
         index = np.full(len(moved), robots.index(robot), dtype=np.int64)
-        segments, owner = fuse_maps(segments, owner, moved, index, config)
+        segments, owner = fuse_maps(
+            segments, owner, moved, index, pair_tolerance(config.integrate), config.fusion_tolerance
+        )
     return segments, owner
 
 

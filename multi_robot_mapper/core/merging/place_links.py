@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,7 +50,7 @@ from multi_robot_mapper.core.matching import IntegrateConfig, MatchResult, integ
 from multi_robot_mapper.core.matching.beams import BeamAgreement, Viewpoint
 from multi_robot_mapper.core.matching.confidence import MatchEvidence, confidence
 from multi_robot_mapper.core.matching.refine import match_information
-from multi_robot_mapper.core.matching.scoring import pair_tolerance
+from multi_robot_mapper.core.matching.scoring import PairTolerance, pair_tolerance
 from multi_robot_mapper.core.matching.shape import Shape
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.merging.config import MergeConfig
@@ -253,10 +254,13 @@ def match_place(
     )
     if best.value <= 0.0 or best.evidence is None:
         return []
-    found = [_candidate(place, own, unit, crop, best, 0, config)]
+    noise = LinkNoise(
+        pair_tolerance(config.integrate), config.graph.link_sigma, config.graph.link_angle_sigma
+    )
+    found = [_candidate(place, own, unit, crop, best, 0, noise)]
     rival = _best_rival(crop, own, hypotheses, best.T_1_2, best.evidence, sides, settings)
     if rival is not None:
-        found.append(_candidate(place, own, unit, crop, rival, 1, config))
+        found.append(_candidate(place, own, unit, crop, rival, 1, noise))
     return found
 
 
@@ -320,10 +324,11 @@ def _candidate(
     crop: SegmentMap,
     match: MatchResult,
     rank: int,
-    config: MergeConfig,
+    noise: LinkNoise,
 ) -> LinkCandidate:
     """The link of a verified placement of the place in the target map: to the target keyframe
-    nearest the placed centre, with the information of the match."""
+    nearest the placed centre, with the information of the match (``noise``: what it is
+    read with)."""
     T_row = match.T_1_2
     T_target_centre = se2.matrix_from_pose(float(T_row[1]), float(T_row[2]), float(T_row[0]))
     spot = T_target_centre[:2, 2]
@@ -335,9 +340,9 @@ def _candidate(
         se2.transform_segments(se2.invert(T_target_keyframe), crop.segments),
         own,
         np.array([theta, x, y]),
-        pair_tolerance(config.integrate),
-        config.graph.link_sigma,
-        (config.graph.link_sigma, config.graph.link_angle_sigma),
+        noise.tolerance,
+        noise.sigma,
+        (noise.sigma, noise.angle_sigma),
         (10.0, 1.0),
     )
     return LinkCandidate(
@@ -353,6 +358,15 @@ def _candidate(
         rank=rank,
         information=information,
     )
+
+
+class LinkNoise(NamedTuple):
+    """What a link's information is read with: INTEGRATE's pair tolerances and the joint
+    graph's link sigmas (m, rad: ``merge.graph.link_sigma``, ``link_angle_sigma``)."""
+
+    tolerance: PairTolerance
+    sigma: float
+    angle_sigma: float
 
 
 def _differs(row: FloatArray, other: FloatArray) -> bool:
