@@ -271,8 +271,9 @@ def seen_through_near(
     first, second = units[best.first], units[best.second]
     views_first, views_second = views_of(best.first), views_of(best.second)
     T_first_second = _link_placement(best, units)
+    limits = config.free_space_limits()
     whole = free_space_conflict(
-        first.segments, views_first, second.segments, views_second, T_first_second, config
+        first.segments, views_first, second.segments, views_second, T_first_second, limits
     )
     # The same walls both ways: those within twice place_radius of the linked keyframes.
     reach = 2.0 * config.place_radius
@@ -284,18 +285,18 @@ def seen_through_near(
         second.segments, _poses(second, [lk.k_second for lk in sides])[:, :2], reach
     )
     rigid = free_space_conflict(
-        walls_first, views_first, walls_second, views_second, T_first_second, config
+        walls_first, views_first, walls_second, views_second, T_first_second, limits
     )
     confident = [c for c in links if c.confidence >= config.link_confidence] or list(links)
     piecewise = 0.0
     if views_first is not None:
         by_second = [oriented(c, best.second) for c in confident]
         placed = _placed_by_nearest_link(walls_second, by_second, units)
-        piecewise = seen_through_length(views_first, placed, config)
+        piecewise = seen_through_length(views_first, placed, limits)
     if views_second is not None:
         by_first = [oriented(c, best.first) for c in confident]
         placed = _placed_by_nearest_link(walls_first, by_first, units)
-        piecewise = max(piecewise, seen_through_length(views_second, placed, config))
+        piecewise = max(piecewise, seen_through_length(views_second, placed, limits))
     return min(rigid, piecewise), whole
 
 

@@ -29,6 +29,7 @@ from multi_robot_mapper.core.merging.pairwise import (
     link_of,
     match_maps,
     no_match,
+    reuse_change,
 )
 from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.core.segment_map import SegmentMap
@@ -128,8 +129,8 @@ def pair_links(
             old = None if previous is None else previous.get((a, b))
             if (
                 old is not None
-                and signatures[a].close_to(old.signature_a, config)
-                and signatures[b].close_to(old.signature_b, config)
+                and signatures[a].close_to(old.signature_a, reuse_change(config))
+                and signatures[b].close_to(old.signature_b, reuse_change(config))
             ):
                 records[(a, b)] = dataclasses.replace(old, reused=True)
                 continue
@@ -231,7 +232,9 @@ def free_space_join(
                 if view_x is None and view_y is None:
                     continue
                 T_x_y = se2.invert(T_ga_x) @ T_ga_gb @ T_gb_y
-                through = free_space_conflict(maps[x], view_x, maps[y], view_y, T_x_y, config)
+                through = free_space_conflict(
+                    maps[x], view_x, maps[y], view_y, T_x_y, config.free_space_limits()
+                )
                 if through > allowed:
                     return False
         return True
@@ -352,7 +355,7 @@ def merge(
         raise ValueError(f"reference robot {chosen!r} has no map; robots: {', '.join(robots)}")
     if not robots:
         return _no_maps()
-    views = view_source(clean, viewpoints or {}, config)
+    views = view_source(clean, viewpoints or {}, config.view_fan())
     records, calls = pair_links(clean, config, None if previous is None else previous.pairs, views)
     pairs_done = time.perf_counter()
     lengths = {r: SegmentMap.of(clean[r]).total_length for r in robots}

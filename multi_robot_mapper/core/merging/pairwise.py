@@ -69,21 +69,29 @@ class MapSignature:
         segment_map = SegmentMap.of(segments)
         return MapSignature(len(segment_map), segment_map.total_length, segment_map.digest)
 
-    def close_to(self, earlier: MapSignature, config: MergeConfig) -> bool:
+    def close_to(self, earlier: MapSignature, change: tuple[float, float]) -> bool:
         """Did the map change little since ``earlier``? (Then a pair result is reused.)
 
-        Identical content, or: segment count within ``reuse_count_change`` % (at least 2
-        segments) and total length within ``reuse_length_change`` % of the earlier map's. A
-        growing map is re-matched once it grew by that much since the result was computed.
+        Identical content, or: segment count within ``change[0]`` % (at least 2 segments)
+        and total length within ``change[1]`` % of the earlier map's (``merge.pairwise``'s
+        ``reuse_count_change`` and ``reuse_length_change``: :func:`reuse_change`). A growing
+        map is re-matched once it grew by that much since the result was computed.
         """
         if self.digest == earlier.digest:
             return True
-        count_slack = max(2.0, config.pairwise.reuse_count_change / 100.0 * earlier.count)
-        length_slack = config.pairwise.reuse_length_change / 100.0 * earlier.length
+        count_change, length_change = change
+        count_slack = max(2.0, count_change / 100.0 * earlier.count)
+        length_slack = length_change / 100.0 * earlier.length
         return (
             abs(self.count - earlier.count) <= count_slack
             and abs(self.length - earlier.length) <= length_slack
         )
+
+
+def reuse_change(config: MergeConfig) -> tuple[float, float]:
+    """How much a map may change (%, segment count and total length) before a match found on
+    it is made again (:meth:`MapSignature.close_to`)."""
+    return config.pairwise.reuse_count_change, config.pairwise.reuse_length_change
 
 
 @dataclasses.dataclass(frozen=True)
@@ -244,7 +252,12 @@ def _judged_link(
     through = 0.0
     if valid and (views_a is not None or views_b is not None):
         through = free_space_conflict(
-            map_a.segments, views_a, map_b.segments, views_b, result.matrix, config
+            map_a.segments,
+            views_a,
+            map_b.segments,
+            views_b,
+            result.matrix,
+            config.free_space_limits(),
         )
         valid = through <= seen_through_allowance(
             result.value, config.link_max_seen_through, config.link_max_seen_through_fraction

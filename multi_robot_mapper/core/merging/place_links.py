@@ -121,7 +121,11 @@ class Target:
     @staticmethod
     def of(unit: MapUnit, config: MergeConfig, rows: ViewRows | None = None) -> Target:
         """``unit`` prepared (``rows``: views cast before, :meth:`MapViews.of`)."""
-        views = MapViews.of(unit.segments, unit.poses, config, rows) if len(unit.poses) else None
+        views = (
+            MapViews.of(unit.segments, unit.poses, config.view_fan(), rows)
+            if len(unit.poses)
+            else None
+        )
         drawing = draw_map(unit.segment_map, views, config)
         correlation = config.correlation()
         # A place (walls and free space) reaches place_radius from its centre: the grid must
@@ -239,7 +243,7 @@ def match_place(
         return []
     poses = target.view_poses
     near = _close_to_any(poses[:, :2], hypotheses[:, 1:], config.place_radius)
-    views = MapViews.of(crop.segments, poses[near], config)
+    views = MapViews.of(crop.segments, poses[near], config.view_fan())
     settings = place_config(config)
     reach = config.view_range
     sides = (_verify_views(views, reach) or None, _verify_views(place.views, reach) or None)

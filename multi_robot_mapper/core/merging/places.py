@@ -240,7 +240,7 @@ def _place(
         centre=int(unit.index[row]),
         T_unit_centre=unit.poses[row].copy(),
         segments=segments,
-        views=MapViews.of(segments, view_poses, config),
+        views=MapViews.of(segments, view_poses, config.view_fan()),
         length=length,
         digest=digest,
     )
