@@ -11,7 +11,7 @@ from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.merging.ffs.config import FfsConfig
-from multi_robot_mapper.core.merging.free_space import FreeSpaceLimits, ViewFan
+from multi_robot_mapper.core.merging.free_space import FreeDrawing, FreeSpaceLimits, ViewFan
 from multi_robot_mapper.core.merging.joint_graph_config import JointGraphConfig
 from multi_robot_mapper.core.merging.pairwise_config import PairwiseConfig
 
@@ -324,6 +324,13 @@ class MergeConfig:
         """What a wall in free space is (``free_space_min_length``, ``view_spread``,
         ``free_space_margin``)."""
         return FreeSpaceLimits(self.free_space_min_length, self.view_spread, self.free_space_margin)
+
+    def free_drawing(self) -> FreeDrawing:
+        """How free space is drawn for the correlation (``correlation_cell``, ``view_spread``,
+        ``free_space_margin``, ``view_range``)."""
+        return FreeDrawing(
+            self.correlation_cell, self.view_spread, self.free_space_margin, self.view_range
+        )
 
     def link_config(self, hypotheses: int | None = None, viewed: bool = False) -> IntegrateConfig:
         """``integrate`` with the whole-map merge's validity thresholds (``viewed``: those for

@@ -44,6 +44,19 @@ class FreeSpaceLimits(NamedTuple):
     margin: float
 
 
+class FreeDrawing(NamedTuple):
+    """How a map's free space is drawn for the correlation (:meth:`MapViews.free_points`): a
+    point every ``cell`` (m) along each bearing, out to ``margin`` (m) before the wall that
+    ends it (the nearest within ``spread`` bearings either side) and to ``reach`` (m) at
+    most. MergeConfig's ``correlation_cell``, ``view_spread``, ``free_space_margin`` and
+    ``view_range`` (:meth:`~core.merging.config.MergeConfig.free_drawing`)."""
+
+    cell: float
+    spread: int
+    margin: float
+    reach: float
+
+
 # A view's ranges by what they are cast from: the pose, the walls within reach of it, the fan.
 ViewRows = OrderedDict[tuple[str, tuple[float, float, int, float]], FloatArray]
 # Rows kept: 8 robots' maps of a few hundred views each, twice over.

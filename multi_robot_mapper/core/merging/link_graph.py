@@ -121,7 +121,7 @@ def pair_links(
 
     def drawing(robot: str) -> Drawing:  # once per robot, on first use
         if robot not in drawings:
-            drawings[robot] = draw_map(segment_maps[robot], view(robot), config)
+            drawings[robot] = draw_map(segment_maps[robot], view(robot), config.free_drawing())
         return drawings[robot]
 
     for i, a in enumerate(robots):

@@ -25,6 +25,7 @@ from multi_robot_mapper.core.matching import (
 from multi_robot_mapper.core.matching.scoring import pair_kept, pair_tolerance
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import (
+    FreeDrawing,
     MapViews,
     free_space_conflict,
     seen_through_allowance,
@@ -164,8 +165,8 @@ def match_maps(
     if len(map_a) == 0 or len(map_b) == 0:
         return no_match()
     drawing_a, drawing_b = drawings or (
-        draw_map(map_a, views_a, config),
-        draw_map(map_b, views_b, config),
+        draw_map(map_a, views_a, config.free_drawing()),
+        draw_map(map_b, views_b, config.free_drawing()),
     )
     judge_a = map_a.longest(config.pairwise.judge_segments)
     judge_b = map_b.longest(config.pairwise.judge_segments)
@@ -314,18 +315,11 @@ def _best_places(
     return refined, scores
 
 
-def draw_map(segments: MapLike, views: MapViews | None, config: MergeConfig) -> Drawing:
+def draw_map(segments: MapLike, views: MapViews | None, drawing: FreeDrawing) -> Drawing:
     """A map drawn for the correlation, with its free space when its views are known (one
     point per cell along each bearing marks every cell the beams cross)."""
-    cell = config.correlation_cell
-    free = (
-        np.zeros((0, 2))
-        if views is None
-        else views.free_points(
-            cell, config.view_spread, config.free_space_margin, config.view_range
-        )
-    )
-    return Drawing.of(segments, free, cell)
+    free = np.zeros((0, 2)) if views is None else views.free_points(*drawing)
+    return Drawing.of(segments, free, drawing.cell)
 
 
 def _candidates(

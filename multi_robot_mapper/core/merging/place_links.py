@@ -54,7 +54,7 @@ from multi_robot_mapper.core.matching.scoring import PairTolerance, pair_toleran
 from multi_robot_mapper.core.matching.shape import Shape
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.free_space import MapViews, ViewRows
+from multi_robot_mapper.core.merging.free_space import FreeDrawing, MapViews, ViewRows
 from multi_robot_mapper.core.merging.pairwise import MapSignature, draw_map, longest
 from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, thin, viewpoints
 from multi_robot_mapper.core.merging.shape_placements import shape_placements, view_shapes
@@ -126,7 +126,7 @@ class Target:
             if len(unit.poses)
             else None
         )
-        drawing = draw_map(unit.segment_map, views, config)
+        drawing = draw_map(unit.segment_map, views, config.free_drawing())
         correlation = config.correlation()
         # A place (walls and free space) reaches place_radius from its centre: the grid must
         # hold it without wrapping round (its middle may lie off its centre).
@@ -148,15 +148,12 @@ class Target:
         return scorer_rasters(self.drawing, EVIDENCE_CORRELATION.cell, EVIDENCE_CORRELATION.blur)
 
 
-def place_drawing(place: Place, config: MergeConfig) -> Drawing:
-    """A place drawn for the correlation, with its free space (within ``place_radius`` of its
-    centre, like its walls: the place is a disk)."""
-    cell = config.correlation_cell
-    free = place.views.free_points(
-        cell, config.view_spread, config.free_space_margin, config.view_range
-    )
-    free = free[np.hypot(free[:, 0], free[:, 1]) <= config.place_radius]
-    return Drawing.of(place.segment_map, free, cell)
+def place_drawing(place: Place, drawing: FreeDrawing, radius: float) -> Drawing:
+    """A place drawn for the correlation, with its free space (within ``radius``,
+    ``place_radius``, of its centre, like its walls: the place is a disk)."""
+    free = place.views.free_points(*drawing)
+    free = free[np.hypot(free[:, 0], free[:, 1]) <= radius]
+    return Drawing.of(place.segment_map, free, drawing.cell)
 
 
 def place_config(config: MergeConfig) -> IntegrateConfig:
@@ -199,7 +196,11 @@ def placement_hypotheses(
     nothing = np.zeros((0, 3))
     if len(unit.segments) == 0 or len(place.segments) == 0:
         return nothing, nothing
-    drawn = drawing if drawing is not None else place_drawing(place, config)
+    drawn = (
+        drawing
+        if drawing is not None
+        else place_drawing(place, config.free_drawing(), config.place_radius)
+    )
     correlation = config.correlation()
     rotations = rotation_candidates(unit.segment_map, place.segment_map, correlation.rotations)
     peaks, scores = correlation_peaks(

@@ -173,7 +173,9 @@ def match_places(
             break
         drawing = drawings.get(place.digest)
         if drawing is None:
-            drawing = drawings[place.digest] = place_drawing(place, config)
+            drawing = drawings[place.digest] = place_drawing(
+                place, config.free_drawing(), config.place_radius
+            )
         found = match_place(place, target_of(units[key[2]], config, targets), config, drawing)
         records[key] = MatchRecord(place.digest, signatures[key[2]], found)
         computed += 1
