@@ -23,10 +23,12 @@ from multi_robot_mapper.core.merging.free_space import (
 )
 from multi_robot_mapper.core.merging.pairwise import (
     Link,
+    LinkTests,
     MapSignature,
     PairRecord,
     draw_map,
     link_of,
+    link_tests,
     match_maps,
     no_match,
     reuse_change,
@@ -205,11 +207,11 @@ def spanning_tree(
 
 
 def free_space_join(
-    maps: Mapping[str, FloatArray], views: ViewSource, config: MergeConfig
+    maps: Mapping[str, FloatArray], views: ViewSource, tests: LinkTests
 ) -> JoinCheck:
     """A :func:`spanning_tree` join check: two groups of robots join only if no robot's walls
-    lie in the free space any robot of the other group saw (beyond the link's allowance,
-    ``link_max_seen_through`` or that fraction of its value).
+    lie in the free space any robot of the other group saw (as a link is judged, ``tests``:
+    beyond the link's allowance, ``link_max_seen_through`` or that fraction of its value).
 
     A pair's own link was judged on the two maps alone; a group has more viewpoints. A
     look-alike place can fit one robot's map and still cross rooms a third robot saw empty.
@@ -223,9 +225,7 @@ def free_space_join(
     ) -> bool:
         if len(group_a) == 1 and len(group_b) == 1:
             return True  # exactly the pair match_maps judged
-        allowed = seen_through_allowance(
-            link.value, config.link_max_seen_through, config.link_max_seen_through_fraction
-        )
+        allowed = seen_through_allowance(link.value, *tests.seen_through)
         for x, T_ga_x in group_a.items():
             for y, T_gb_y in group_b.items():
                 view_x, view_y = views(x), views(y)
@@ -233,7 +233,7 @@ def free_space_join(
                     continue
                 T_x_y = se2.invert(T_ga_x) @ T_ga_gb @ T_gb_y
                 through = free_space_conflict(
-                    maps[x], view_x, maps[y], view_y, T_x_y, config.free_space_limits()
+                    maps[x], view_x, maps[y], view_y, T_x_y, tests.free_space
                 )
                 if through > allowed:
                     return False
@@ -341,9 +341,9 @@ def merge(
     ``maps``: robot name -> (N, 4) segments in that robot's own map frame. ``viewpoints``:
     robot name -> (K, 3) keyframe poses in the same frame, where the robot's laser stood; a
     link putting either map in the free space the other robot saw is refused (a robot without
-    viewpoints is judged on segments alone). ``reference`` (or
-    ``config.reference``) names the robot whose frame becomes ``map``; by default the previous
-    run's reference is kept, else the largest map of the largest linked group is taken.
+    viewpoints is judged on segments alone). ``reference`` (or ``config.reference``) names
+    the robot whose frame becomes ``map``; by default the previous run's reference is kept,
+    else the largest map of the largest linked group is taken.
     ``previous`` (the last result) supplies pair results to reuse and the tree to keep.
     """
     config = config if config is not None else MergeConfig()
@@ -361,7 +361,7 @@ def merge(
     lengths = {r: SegmentMap.of(clean[r]).total_length for r in robots}
     kept = set() if previous is None else {(lk.robot_a, lk.robot_b) for lk in previous.links}
     all_links = [record.link for record in records.values()]
-    joins = free_space_join(clean, views, config) if viewpoints else None
+    joins = free_space_join(clean, views, link_tests(config)) if viewpoints else None
     tree = spanning_tree(robots, all_links, kept, config.pairwise.stability_margin, joins)
     if chosen is None:
         chosen = choose_reference(
