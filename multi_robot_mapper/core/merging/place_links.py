@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import time
 from typing import NamedTuple
 
 import numpy as np
@@ -416,12 +415,3 @@ def segments_near(segments: FloatArray, centres: FloatArray, radius: float) -> F
         segments[:, None, 3],
     )
     return np.asarray(segments[(distance <= radius).any(axis=1)])
-
-
-def timed_match(
-    place: Place, target: Target, config: MergeConfig, drawing: Drawing | None = None
-) -> tuple[list[LinkCandidate], float]:
-    """:func:`match_place` and the seconds it took."""
-    started = time.perf_counter()
-    found = match_place(place, target, config, drawing)
-    return found, time.perf_counter() - started
