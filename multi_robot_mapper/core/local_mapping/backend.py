@@ -28,6 +28,7 @@ from multi_robot_mapper.core.local_mapping.loop_closer import (
     LoopCloser,
     LostFrom,
 )
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.pose_graph import Edge
 from multi_robot_mapper.core.se2 import Pose
 
@@ -56,7 +57,9 @@ class Backend:
 
     def __init__(self, config: LocalMapperConfig) -> None:
         self.config = config
-        self.map = KeyframeMap(config.integrate, config.fusion_tolerance, config.fusion_radius)
+        self.map = KeyframeMap(
+            pair_tolerance(config.integrate), config.fusion_tolerance, config.fusion_radius
+        )
         self.closer = LoopCloser(config, self.map)
 
     def add_keyframe(self, job: KeyframeJob) -> Changes:
@@ -69,7 +72,7 @@ class Backend:
         """New settings from the next keyframe on; the graph and the map are kept."""
         self.config = config
         self.closer.config = config
-        self.map.config = config.integrate
+        self.map.pair = pair_tolerance(config.integrate)
         self.map.tolerance, self.map.radius = config.fusion_tolerance, config.fusion_radius
 
     @property

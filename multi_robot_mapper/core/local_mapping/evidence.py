@@ -30,7 +30,6 @@ from multi_robot_mapper.core.evidence.seen import SEEN_REACH, scan_free_points
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeMap
 from multi_robot_mapper.core.logistic import LogisticModel
-from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
@@ -83,7 +82,7 @@ def drawing_of(keyframes: KeyframeMap, members: IntArray, own_scans: bool = Fals
                 owner,
                 placed,
                 np.full(len(placed), k, dtype=np.int64),
-                pair_tolerance(keyframes.config),
+                keyframes.pair,
                 keyframes.tolerance,
             )
     else:

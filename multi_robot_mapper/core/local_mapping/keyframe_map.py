@@ -25,8 +25,7 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.geometry import point_segment_distance
-from multi_robot_mapper.core.matching import IntegrateConfig
-from multi_robot_mapper.core.matching.scoring import pair_tolerance
+from multi_robot_mapper.core.matching.scoring import PairTolerance
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.core.segment_map import SegmentMap
@@ -66,8 +65,8 @@ class KeyframeScan:
 class KeyframeMap:
     """Keyframes (scan, pose, piece) and the fused partial map they own."""
 
-    def __init__(self, config: IntegrateConfig, tolerance: float, radius: float) -> None:
-        self.config = config
+    def __init__(self, pair: PairTolerance, tolerance: float, radius: float) -> None:
+        self.pair = pair  # INTEGRATE's pair tolerances (scoring.pair_tolerance)
         self.tolerance = tolerance  # FUSIONTOLERANCE
         self.radius = radius  # fusion reach around a new keyframe
         self.scans: list[KeyframeScan] = []
@@ -208,7 +207,7 @@ class KeyframeMap:
             self._owner[near],
             placed,
             np.full(len(placed), index, dtype=np.int64),
-            pair_tolerance(self.config),
+            self.pair,
             self.tolerance,
         )
         local = se2.inverse_transform_segments_each(self._poses[fused_owner], fused)

@@ -23,8 +23,7 @@ from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.local_mapping.config import LocalMapperConfig
 from multi_robot_mapper.core.local_mapping.keyframe_map import KeyframeScan
 from multi_robot_mapper.core.matching.beams import Viewpoint
-from multi_robot_mapper.core.matching.config import IntegrateConfig
-from multi_robot_mapper.core.matching.scoring import pair_tolerance
+from multi_robot_mapper.core.matching.scoring import PairTolerance, pair_tolerance
 from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.core.segment_map import SegmentMap
 
@@ -46,11 +45,12 @@ def fused_keyframes(
     members: Sequence[int],
     pose: Callable[[int], Pose],
     scan: Callable[[int], KeyframeScan],
-    config: IntegrateConfig,
+    pair: PairTolerance,
     tolerance: float,
 ) -> tuple[FloatArray, list[Viewpoint]]:
     """The scans of keyframes ``members`` fused in keyframe ``center``'s frame (Alg. 5, in
-    the order of the keyframes), and their viewpoints there."""
+    the order of the keyframes, with INTEGRATE's ``pair`` tolerances and the fusion
+    ``tolerance``), and their viewpoints there."""
     T_center = se2.invert(se2.matrix_from_pose(*pose(center)))
     fused, owner = np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
     viewpoints = []
@@ -63,7 +63,7 @@ def fused_keyframes(
             owner,
             placed,
             np.full(len(placed), k, dtype=np.int64),
-            pair_tolerance(config),
+            pair,
             tolerance,
         )
         viewpoints.append(Viewpoint(member.view, T))
@@ -110,7 +110,7 @@ class LocalMaps:
                 members,
                 poses.__getitem__,
                 scans.__getitem__,
-                config.integrate,
+                pair_tolerance(config.integrate),
                 config.fusion_tolerance,
             )
             self._key, self._map = key, LocalMap(keyframe, segments, viewpoints)

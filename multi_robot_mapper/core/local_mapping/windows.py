@@ -115,7 +115,7 @@ class WindowMatcher:
             [int(k) for k in self._window_members(center)],
             self.keyframes.pose,
             self.keyframes.scans.__getitem__,
-            self.config.integrate,
+            pair_tolerance(self.config.integrate),
             self.config.fusion_tolerance,
         )
 

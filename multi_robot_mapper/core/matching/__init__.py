@@ -17,8 +17,9 @@ best. Transforms are ``(theta, tx, ty)`` rows: ``T_1_2`` maps S2 coordinates int
 
 Modules, in the order INTEGRATE runs them: ``config`` (IntegrateConfig), ``hypotheses``
 (landmarks and hypotheses, Alg. 2), ``scoring`` (Alg. 4 values, refusal, prescreen),
-``refine`` (Cox least squares), ``beams`` (free space), ``integrate`` (Alg. 1, the whole
-match).
+``refine`` (Cox least squares), ``beams`` (free space), ``ranking`` (the distinct candidates,
+their net scores, slides along corridors), ``integrate`` (Alg. 1, the whole match: it unpacks
+its config into the few numbers each step takes).
 """
 
 from multi_robot_mapper.core.geometry import Lines, lines_of, sample_segments

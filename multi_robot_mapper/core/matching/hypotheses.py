@@ -4,6 +4,7 @@ the heuristics of III-A, end-point hypotheses for corridors)."""
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +27,36 @@ class Landmarks:
     second: IntArray
     angle: FloatArray  # (A,) in [0, pi)
     vertex: FloatArray  # (A, 2) intersection of the two supporting lines
+
+
+class LandmarkSettings(NamedTuple):
+    """What the heuristics of III-A read of INTEGRATE's config: the shortest segment a landmark
+    takes (m), heuristic 1's share of the longest (%), heuristic 2's division factor and
+    rounds, heuristic 3's direction buckets, the set size up to which every pair is taken, and
+    the smallest angle a landmark may have (rad)."""
+
+    min_length: float
+    length_percentage: float
+    division_factor: float
+    random_rounds: int
+    histogram_slots: int
+    all_pairs_below: int
+    min_angle: float
+
+
+def landmark_settings(config: IntegrateConfig) -> LandmarkSettings:
+    """The landmark settings of ``config``: ``min_segment_length``,
+    ``segment_length_percentage``, ``segment_division_factor``, ``random_rounds``,
+    ``histogram_slots``, ``all_pairs_below``, ``min_landmark_angle``."""
+    return LandmarkSettings(
+        config.min_segment_length,
+        config.segment_length_percentage,
+        config.segment_division_factor,
+        config.random_rounds,
+        config.histogram_slots,
+        config.all_pairs_below,
+        config.min_landmark_angle,
+    )
 
 
 def landmarks_from_pairs(
@@ -120,28 +151,26 @@ def all_pairs(segments: MapLike, min_length: float) -> tuple[IntArray, IntArray]
 def landmarks(
     segments: MapLike,
     heuristics: tuple[str, ...],
-    config: IntegrateConfig,
+    settings: LandmarkSettings,
     ordered: bool,
     rng: np.random.Generator,
 ) -> Landmarks:
-    """The landmarks of one segment set under the chosen heuristics (their union); ``config``
-    unpacked into each heuristic's own settings."""
+    """The landmarks of one segment set under the chosen heuristics (their union), each
+    heuristic given its own ``settings``."""
     segments = SegmentMap.of(segments)
-    min_length = config.min_segment_length
+    min_length = settings.min_length
     firsts: list[IntArray] = []
     seconds: list[IntArray] = []
     for name in heuristics:
         if name == "consecutive":
-            a, b = consecutive_pairs(
-                segments, ordered, min_length, config.segment_length_percentage
-            )
+            a, b = consecutive_pairs(segments, ordered, min_length, settings.length_percentage)
         elif name == "random":
-            factor = config.segment_division_factor
-            a, b = random_pairs(segments, config.random_rounds, min_length, factor, rng)
+            factor = settings.division_factor
+            a, b = random_pairs(segments, settings.random_rounds, min_length, factor, rng)
         elif name == "histogram":
-            a, b = histogram_pairs(segments, min_length, config.histogram_slots)
+            a, b = histogram_pairs(segments, min_length, settings.histogram_slots)
         elif name == "all":
-            if len(segments) > config.all_pairs_below:
+            if len(segments) > settings.all_pairs_below:
                 continue
             a, b = all_pairs(segments, min_length)
         elif name == "endpoints":
@@ -152,7 +181,7 @@ def landmarks(
         seconds.append(b)
     first = np.concatenate(firsts) if firsts else np.zeros(0, dtype=np.int64)
     second = np.concatenate(seconds) if seconds else np.zeros(0, dtype=np.int64)
-    return landmarks_from_pairs(segments, first, second, config.min_landmark_angle)
+    return landmarks_from_pairs(segments, first, second, settings.min_angle)
 
 
 def hypotheses(
@@ -160,19 +189,22 @@ def hypotheses(
     marks1: Landmarks,
     segments2: MapLike,
     marks2: Landmarks,
-    config: IntegrateConfig,
+    angle_tolerance: float,
+    max_hypotheses: int,
 ) -> FloatArray:
-    """Every (theta, tx, ty) superimposing an angle of S2 on an equal angle of S1.
+    """Every (theta, tx, ty) superimposing an angle of S2 on an angle of S1 equal within
+    ``angle_tolerance`` (rad), of at most a budget of landmark pairs (``max_hypotheses``, see
+    :data:`PAIRS_PER_KEPT_HYPOTHESIS`).
 
     Lines have no sense, so each correspondence gives two rotations, theta and theta + pi;
     the translation maps the S2 vertex onto the S1 vertex.
     """
     if len(marks1.angle) == 0 or len(marks2.angle) == 0:
         return np.zeros((0, 3))
-    marks1, marks2 = _within_comparison_budget(segments1, marks1, segments2, marks2, config)
+    marks1, marks2 = _within_comparison_budget(segments1, marks1, segments2, marks2, max_hypotheses)
     diff = np.abs(marks1.angle[:, None] - marks2.angle[None, :])
     diff = np.minimum(diff, np.pi - diff)
-    a1, a2 = np.nonzero(diff <= config.angle_difference_tolerance)
+    a1, a2 = np.nonzero(diff <= angle_tolerance)
     if a1.size == 0:
         return np.zeros((0, 3))
     phi1 = SegmentMap.of(segments1).lines.angle
@@ -191,7 +223,7 @@ def hypotheses(
     return np.column_stack((se2.wrap_angle(theta), tx, ty))
 
 
-# Landmark pairs compared per distinct hypothesis kept (config.max_hypotheses): the votes that
+# Landmark pairs compared per distinct hypothesis kept (max_hypotheses): the votes that
 # rank the distinct hypotheses need many raw ones, but not unboundedly many. The largest
 # comparison on the shared logs is 0.25 M pairs (intel); a cluttered hall's submaps (250-300
 # segments each, thousands of perpendicular pairs by the histogram heuristic) reached 37 M,
@@ -204,13 +236,13 @@ def _within_comparison_budget(
     marks1: Landmarks,
     segments2: MapLike,
     marks2: Landmarks,
-    config: IntegrateConfig,
+    max_hypotheses: int,
 ) -> tuple[Landmarks, Landmarks]:
     """The two sets' landmarks, thinned (the same fraction of each) to at most
     ``PAIRS_PER_KEPT_HYPOTHESIS x max_hypotheses`` pairs to compare: the strongest kept, a
     landmark as strong as the shorter of its two segments (a long wall's corner is seen again;
     a chair leg's is not). Unchanged within the budget."""
-    budget = PAIRS_PER_KEPT_HYPOTHESIS * config.max_hypotheses
+    budget = PAIRS_PER_KEPT_HYPOTHESIS * max_hypotheses
     count1, count2 = len(marks1.angle), len(marks2.angle)
     if count1 * count2 <= budget:
         return marks1, marks2

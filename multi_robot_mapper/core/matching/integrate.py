@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import NamedTuple, TypeAlias
+from typing import TypeAlias
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,9 +30,11 @@ from multi_robot_mapper.core.matching.confidence import (
 from multi_robot_mapper.core.matching.config import IntegrateConfig
 from multi_robot_mapper.core.matching.hypotheses import (
     HEURISTICS,
+    LandmarkSettings,
     distinct_hypotheses,
     endpoint_hypotheses,
     hypotheses,
+    landmark_settings,
     landmarks,
 )
 from multi_robot_mapper.core.matching.prior import (
@@ -40,17 +42,23 @@ from multi_robot_mapper.core.matching.prior import (
     excluded_by,
     support_with_prior,
 )
+from multi_robot_mapper.core.matching.ranking import (
+    CandidateChoice,
+    NetScoring,
+    Ranked,
+    Ranking,
+    Slides,
+    distinct_candidates,
+    ranked,
+)
 from multi_robot_mapper.core.matching.refine import prior_weighs, refine_many
 from multi_robot_mapper.core.matching.scoring import (
-    information,
+    Prescreen,
     pair_kept,
     pair_tolerance,
     pruned_values,
     refusal,
-    refused,
-    score_pairs,
     support_and_slide,
-    transform_values,
 )
 from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.core.segment_map import MapLike, SegmentMap
@@ -62,10 +70,6 @@ BoolArray = NDArray[np.bool_]
 # How far (m) the best placement is slid either way along its least constrained direction to
 # probe for a rival: twice the correctness tolerance, so that the probe is a wrong answer.
 SLIDE_PROBE = 2.0 * RIGHT_DISTANCE
-
-# A refined slid hypothesis replaces the slid one unless its net score is this much lower (m):
-# the slide grid is coarse, the refinement is the precise answer.
-_POLISH_TOLERANCE = 0.25
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,12 +151,64 @@ def integrate(
         return _integrate(
             map1,
             map2,
-            config,
+            _settings(config),
             (heuristics, ordered, extra_hypotheses, hypothesis_sets),
             views,
             judged,
             prior,
         )
+
+
+@dataclasses.dataclass(frozen=True)
+class _Settings:
+    """What one match reads of INTEGRATE's config, step by step (:func:`_settings`): the
+    random heuristic's seed; the landmarks, the tolerance between two landmarks' angles (rad),
+    the number of distinct hypotheses kept and the (rad, m) cell that makes two hypotheses one;
+    the prescreen; the choice of candidates; their ranking; validity (``min_match_value``,
+    ``min_match_fraction``, ``min_cross_support``) and the beams the evidence is read by
+    (``confirm_margin``, ``free_space_spread``, ``view_point_length``)."""
+
+    seed: int
+    landmarks: LandmarkSettings
+    angle_tolerance: float
+    max_hypotheses: int
+    cells: tuple[float, float]
+    prescreen: Prescreen
+    choice: CandidateChoice
+    ranking: Ranking
+    validity: tuple[float, float, float]
+    evidence_beams: tuple[float, int, float]
+
+
+def _settings(config: IntegrateConfig) -> _Settings:
+    """``config`` unpacked for one match (as KISS-ICP's ``get_registration`` does)."""
+    scoring = NetScoring(
+        pair_tolerance(config),
+        beam_limits(config),
+        config.free_space_weight,
+        config.confirmed_weight,
+        config.cross_support_weight,
+    )
+    slides = Slides(
+        config.slide_candidates, config.slide_below_support, config.slide_range, config.slide_step
+    )
+    return _Settings(
+        config.seed,
+        landmark_settings(config),
+        config.angle_difference_tolerance,
+        config.max_hypotheses,
+        (config.hypothesis_angle_cell, config.hypothesis_distance_cell),
+        Prescreen(config.prescreen_match_angle, config.prescreen_segments, config.candidate_pool),
+        CandidateChoice(
+            config.candidate_pool,
+            config.refine_candidates,
+            config.candidate_separation,
+            config.candidate_angle_separation,
+        ),
+        Ranking(scoring, refusal(config), slides, config.refine_iterations),
+        (config.min_match_value, config.min_match_fraction, config.min_cross_support),
+        (config.confirm_margin, config.free_space_spread, config.view_point_length),
+    )
 
 
 # integrate's heuristics, ordered, extra hypotheses and hypothesis sets
@@ -164,7 +220,7 @@ _Generation: TypeAlias = tuple[
 def _integrate(
     map1: SegmentMap,
     map2: SegmentMap,
-    config: IntegrateConfig,
+    settings: _Settings,
     generation: _Generation,
     views: tuple[Views, Views],
     judged: Callable[[FloatArray], bool] | None,
@@ -173,29 +229,31 @@ def _integrate(
     """:func:`integrate` of two maps (``generation``: how it makes its hypotheses)."""
     heuristics, ordered, extra_hypotheses, hypothesis_sets = generation
     clock = _StageClock()
-    rng = np.random.default_rng(config.seed)
+    rng = np.random.default_rng(settings.seed)
     sources = (map1, map2) if hypothesis_sets is None else hypothesis_sets
     transforms, extras = _all_hypotheses(
-        sources, heuristics, ordered, extra_hypotheses, config, rng
+        sources, heuristics, ordered, extra_hypotheses, settings, rng
     )
     clock.lap("hypotheses")
     if len(transforms) == 0:
         return _no_match(0, 0, clock)
-    values, evaluated = pruned_values(map1, map2, transforms, config, extras)
+    ranking = settings.ranking
+    tolerance = ranking.scoring.tolerance
+    values, evaluated = pruned_values(map1, map2, transforms, tolerance, settings.prescreen, extras)
     # Alg. 4 l. 20-23 (keep the best), widened: the best few DISTINCT hypotheses are refused
     # (l. 6-7) or refined, then ranked by their net score (overlap and the scans' beams).
-    candidates = _distinct_candidates(map1, map2, transforms, values, config)
+    candidates = distinct_candidates(
+        map1, map2, transforms, values, settings.choice, ranking.refusal
+    )
     clock.lap("evaluation")
     if candidates.size == 0:
         return _no_match(len(transforms), evaluated, clock)
-    refined = refine_many(
-        map1, map2, transforms[candidates], pair_tolerance(config), config.refine_iterations, prior
-    )
+    refined = refine_many(map1, map2, transforms[candidates], tolerance, ranking.iterations, prior)
     clock.lap("refinement")
-    ranked = _ranked(map1, map2, transforms, candidates, refined, views, config, prior)
+    best = ranked(map1, map2, transforms, candidates, refined, views, ranking, prior)
     clock.lap("ranking")
-    setting = (views, config, prior)
-    return _judged_result(map1, map2, ranked, setting, judged, clock, transforms, evaluated)
+    setting = (views, settings, prior)
+    return _judged_result(map1, map2, best, setting, judged, clock, transforms, evaluated)
 
 
 def _no_match(hypotheses: int, evaluated: int, clock: _StageClock) -> MatchResult:
@@ -208,25 +266,26 @@ def _all_hypotheses(
     heuristics: tuple[str, ...],
     ordered: tuple[bool, bool],
     extra_hypotheses: FloatArray | None,
-    config: IntegrateConfig,
+    settings: _Settings,
     rng: np.random.Generator,
 ) -> tuple[FloatArray, int]:
     """The hypotheses (theta, tx, ty) to evaluate, the extra ones first, and how many extra
     ones there are: the extra ones (predictions), then the distinct ones of the landmarks of
     the two sets (Alg. 2 and the heuristics of III-A) and of their end points."""
     source1, source2 = SegmentMap.of(sources[0]), SegmentMap.of(sources[1])
-    marks1 = landmarks(source1, heuristics, config, ordered[0], rng) if len(source1) > 1 else None
-    marks2 = landmarks(source2, heuristics, config, ordered[1], rng) if len(source2) > 1 else None
+    marking = settings.landmarks
+    marks1 = landmarks(source1, heuristics, marking, ordered[0], rng) if len(source1) > 1 else None
+    marks2 = landmarks(source2, heuristics, marking, ordered[1], rng) if len(source2) > 1 else None
     raw = (
-        hypotheses(source1, marks1, source2, marks2, config)
+        hypotheses(
+            source1, marks1, source2, marks2, settings.angle_tolerance, settings.max_hypotheses
+        )
         if marks1 is not None and marks2 is not None
         else np.zeros((0, 3))
     )
     if "endpoints" in heuristics and len(source1) and len(source2):
-        raw = np.vstack((raw, endpoint_hypotheses(source1, source2, config.min_segment_length)))
-    transforms, _ = distinct_hypotheses(
-        raw, config.hypothesis_angle_cell, config.hypothesis_distance_cell, config.max_hypotheses
-    )
+        raw = np.vstack((raw, endpoint_hypotheses(source1, source2, marking.min_length)))
+    transforms, _ = distinct_hypotheses(raw, *settings.cells, settings.max_hypotheses)
     # Extra hypotheses (predictions) come first and are always evaluated in full.
     extra = (
         np.zeros((0, 3))
@@ -236,70 +295,11 @@ def _all_hypotheses(
     return np.vstack((extra, transforms)), len(extra)
 
 
-class _Ranked(NamedTuple):
-    """The refined candidates and the slid hypotheses, their values and net scores, and the
-    row of the best one."""
-
-    transforms: FloatArray
-    values: FloatArray
-    scores: FloatArray
-    pick: int
-
-
-def _ranked(
-    map1: SegmentMap,
-    map2: SegmentMap,
-    transforms: FloatArray,
-    candidates: IntArray,
-    refined: FloatArray,
-    views: tuple[Views, Views],
-    config: IntegrateConfig,
-    prior: MotionPrior | None = None,
-) -> _Ranked:
-    """The ``refined`` candidates (rows ``candidates`` of ``transforms``, refined) with the
-    hypotheses slid along corridors, ranked by their net score: a refined one that was refused
-    (or lost its overlap) falls back to its unrefined hypothesis, and the best one, when slid,
-    is refined too. With a motion ``prior`` nothing the walls leave unobserved is slid: the
-    prior decides the offset along the corridor."""
-    refined_values, scores, support, slide = _net_scores(map1, map2, refined, views, config)
-    if config.refine_iterations > 0:
-        # A refinement that slid into a crossing (or lost its overlap) falls back to the
-        # unrefined hypothesis, which passed the refusal test.
-        bad = refused(map1, map2, refined, *refusal(config)) | (refined_values <= 0.0)
-        if bad.any():
-            refined[bad] = transforms[candidates[bad]]
-            refined_values[bad], scores[bad], support[bad], slide[bad] = _net_scores(
-                map1, map2, refined[bad], views, config
-            )
-    # The prior decides the offset along a corridor where it counts: nothing to slide there.
-    support[prior_weighs(map1, map2, refined, pair_tolerance(config), prior)] = np.inf
-    slid, slid_values, slid_scores = _slide(
-        map1, map2, refined, scores, support, slide, views, config
-    )
-    refined = np.vstack((refined, slid))
-    refined_values = np.concatenate((refined_values, slid_values))
-    scores = np.concatenate((scores, slid_scores))
-    pick = int(np.argmax(scores))
-    if pick >= len(candidates) and config.refine_iterations > 0:
-        # A slid hypothesis sits on a grid along the corridor: refine it too (the damped
-        # steps leave it where it is along a bare corridor).
-        polished = refine_many(
-            map1, map2, refined[pick : pick + 1], pair_tolerance(config), config.refine_iterations
-        )
-        polished_value, polished_score, _, _ = _net_scores(map1, map2, polished, views, config)
-        if (
-            polished_score[0] >= scores[pick] - _POLISH_TOLERANCE
-            and not refused(map1, map2, polished, *refusal(config))[0]
-        ):
-            refined[pick], refined_values[pick] = polished[0], polished_value[0]
-    return _Ranked(refined, refined_values, scores, pick)
-
-
 def _judged_result(
     map1: SegmentMap,
     map2: SegmentMap,
-    ranked: _Ranked,
-    setting: tuple[tuple[Views, Views], IntegrateConfig, MotionPrior | None],
+    ranked: Ranked,
+    setting: tuple[tuple[Views, Views], _Settings, MotionPrior | None],
     judged: Callable[[FloatArray], bool] | None,
     clock: _StageClock,
     transforms: FloatArray,
@@ -307,22 +307,20 @@ def _judged_result(
 ) -> MatchResult:
     """The best ranked placement as the match: its validity (net value, fraction and cross
     support) and, where ``judged`` wants it, its confidence (of the ``transforms``
-    hypotheses, ``evaluated`` were evaluated in full; ``setting``: the views, the config and
+    hypotheses, ``evaluated`` were evaluated in full; ``setting``: the views, the settings and
     the motion prior)."""
-    views, config, _ = setting
+    views, settings, _ = setting
+    scoring = settings.ranking.scoring
+    min_value, min_fraction, min_support = settings.validity
     refined, pick = ranked.transforms, ranked.pick
     best_T, best_value = refined[pick], float(ranked.values[pick])
     # Validity on the net value: overlap that the other scan's free space contradicts counts
     # against it (two unrelated rectilinear places easily overlap by a third).
-    through, _ = seen_through_many(map1, map2, best_T[None, :], views, beam_limits(config))
-    best_score = best_value - config.free_space_weight * float(through[0])
+    through, _ = seen_through_many(map1, map2, best_T[None, :], views, scoring.beams)
+    best_score = best_value - scoring.free_space_weight * float(through[0])
     fraction = best_score / max(min(map1.total_length, map2.total_length), 1e-9)
-    best_support, slide, total = support_and_slide(map1, map2, best_T, pair_tolerance(config))
-    valid = (
-        best_score >= config.min_match_value
-        and fraction >= config.min_match_fraction
-        and best_support >= config.min_cross_support
-    )
+    best_support, slide, total = support_and_slide(map1, map2, best_T, scoring.tolerance)
+    valid = best_score >= min_value and fraction >= min_fraction and best_support >= min_support
     probability, evidence = 0.0, None
     if judged is None or judged(best_T):
         evidence = _evidence_of(
@@ -345,8 +343,8 @@ def _judged_result(
 
 def _evidence_of(
     sets: tuple[SegmentMap, SegmentMap],
-    ranked: _Ranked,
-    setting: tuple[tuple[Views, Views], IntegrateConfig, MotionPrior | None],
+    ranked: Ranked,
+    setting: tuple[tuple[Views, Views], _Settings, MotionPrior | None],
     spread: tuple[float, FloatArray, float],
     fraction: float,
 ) -> MatchEvidence:
@@ -354,12 +352,13 @@ def _evidence_of(
     on it, how far it beats its best rival (a distinct placement, beyond the correctness
     tolerance), the fit's ``spread`` (support, least constrained direction, matched length). A
     rival the motion prior rules out is none, nor is a slide along the direction it decides."""
-    (map1, map2), (views, config, prior) = sets, setting
+    (map1, map2), (views, settings, prior) = sets, setting
     refined, scores, pick = ranked.transforms, ranked.scores, ranked.pick
     best_T = refined[pick]
     support, slide, total = spread
     rivals = _distinct_from(refined, best_T)
-    counts = prior_weighs(map1, map2, best_T[None, :], pair_tolerance(config), prior)
+    tolerance = settings.ranking.scoring.tolerance
+    counts = prior_weighs(map1, map2, best_T[None, :], tolerance, prior)
     weighed = prior if counts.size and counts[0] else None
     if weighed is not None:
         rivals &= ~excluded_by(weighed, refined, slide)
@@ -368,7 +367,7 @@ def _evidence_of(
         map2,
         best_T,
         views,
-        (config.confirm_margin, config.free_space_spread, config.view_point_length),
+        settings.evidence_beams,
         score=float(scores[pick]),
         rival_score=float(scores[rivals].max()) if rivals.any() else 0.0,
         rival_T=refined[rivals][int(np.argmax(scores[rivals]))] if rivals.any() else None,
@@ -471,108 +470,3 @@ def _segment_returns(segments: FloatArray, spacing: float) -> tuple[FloatArray, 
         return np.zeros((0, 2)), np.zeros(0)
     points, _ = sample_segments(segments, spacing)
     return points, np.full(len(points), spacing)
-
-
-def _slide(
-    map1: SegmentMap,
-    map2: SegmentMap,
-    transforms: FloatArray,
-    scores: FloatArray,
-    support: FloatArray,
-    direction: FloatArray,
-    views: tuple[Views, Views],
-    config: IntegrateConfig,
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Hypotheses slid along the direction their matched walls leave free, with their values
-    and net scores.
-
-    In a corridor every wall is parallel: no angle fixes the offset along it and end points
-    rarely do, so the true offset may be missing from the hypotheses. The best
-    ``slide_candidates`` candidates whose cross support is below ``slide_below_support`` are
-    tried at every ``slide_step`` within ``slide_range`` along that direction; free space
-    (what each scan saw down the corridor) tells the offsets apart. Refused ones are dropped.
-    """
-    top = np.argsort(-scores, kind="stable")[: config.slide_candidates]
-    top = top[support[top] < config.slide_below_support]
-    if top.size == 0 or config.slide_range <= 0.0:
-        return np.zeros((0, 3)), np.zeros(0), np.zeros(0)
-    offsets = np.arange(-config.slide_range, config.slide_range + 1e-9, config.slide_step)
-    offsets = offsets[np.abs(offsets) > 1e-9]
-    shifted = np.repeat(transforms[top], offsets.size, axis=0)
-    step = np.tile(offsets, top.size)
-    shifted[:, 1] += step * np.repeat(direction[top, 0], offsets.size)
-    shifted[:, 2] += step * np.repeat(direction[top, 1], offsets.size)
-    keep = ~refused(map1, map2, shifted, *refusal(config))
-    shifted = shifted[keep]
-    values, net, _, _ = _net_scores(map1, map2, shifted, views, config)
-    return shifted, values, net
-
-
-def _net_scores(
-    map1: SegmentMap,
-    map2: SegmentMap,
-    transforms: FloatArray,
-    views: tuple[Views, Views],
-    config: IntegrateConfig,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Value, net score, cross support and least constrained direction of each transform.
-
-    The net score is the overlap (Alg. 4 l. 18) minus the length seen through in the other
-    scan's free space plus ``cross_support_weight`` x the cross support: in a corridor the
-    overlap of the long walls barely changes with the offset along them (standing still even
-    wins, the visible stretch of wall moving with the robot), and what tells the offsets
-    apart is the little that crosses the corridor (door jambs, its end).
-    """
-    scores = score_pairs(map1, map2, transforms, pair_tolerance(config))
-    count = len(transforms)
-    values = transform_values(scores, count)
-    support, direction = information(map1, scores, count)
-    through, confirmed = seen_through_many(map1, map2, transforms, views, beam_limits(config))
-    net = (
-        values
-        - config.free_space_weight * through
-        + config.confirmed_weight * confirmed
-        + config.cross_support_weight * support
-    )
-    return values, net, support, direction
-
-
-def _distinct_candidates(
-    map1: SegmentMap,
-    map2: SegmentMap,
-    transforms: FloatArray,
-    values: FloatArray,
-    config: IntegrateConfig,
-    limit: int | None = None,
-) -> IntArray:
-    """Indices of the best ``limit`` (``refine_candidates``) hypotheses, near-duplicates
-    suppressed.
-
-    Hypotheses are taken best first (Alg. 4 l. 20-23); one within ``candidate_separation``
-    (and ``candidate_angle_separation``) of a hypothesis already taken is the same answer
-    and is skipped; a refused one (long walls crossing, Alg. 4 l. 6-7) is skipped too.
-    """
-    order = np.argsort(-values, kind="stable")
-    order = order[values[order] > 0.0][: config.candidate_pool]
-    if order.size == 0:
-        return order
-    pool = transforms[order]
-    free = np.ones(len(order), dtype=bool)
-    allowed = np.zeros(len(order), dtype=bool)
-    checked, chunk = 0, 8  # the refusal test runs on the pool best first, in growing chunks
-    taken: list[int] = []
-    limit = config.refine_candidates if limit is None else limit
-    while len(taken) < limit and free.any():
-        k = int(np.argmax(free))  # best remaining, the pool being sorted
-        if k >= checked:
-            end = min(len(order), k + chunk)
-            allowed[k:end] = ~refused(map1, map2, pool[k:end], *refusal(config))
-            checked, chunk = end, 2 * chunk
-        if not allowed[k]:
-            free[k] = False
-            continue
-        taken.append(int(order[k]))
-        turn = np.abs(se2.wrap_angle(pool[:, 0] - pool[k, 0]))
-        shift = np.hypot(pool[:, 1] - pool[k, 1], pool[:, 2] - pool[k, 2])
-        free &= (turn > config.candidate_angle_separation) | (shift > config.candidate_separation)
-    return np.asarray(taken, dtype=np.int64)

@@ -20,7 +20,7 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
-# The prescreen's rough cut (half the segments) keeps this many times candidate_pool.
+# The prescreen's rough cut (half the segments) keeps this many times its pool.
 _ROUGH_CUT = 10
 
 
@@ -40,6 +40,16 @@ def pair_tolerance(config: IntegrateConfig) -> PairTolerance:
     return PairTolerance(
         config.max_match_angle, config.match_distance, config.point_distance_tolerance
     )
+
+
+class Prescreen(NamedTuple):
+    """What the prescreen (:func:`pruned_values`) reads of INTEGRATE's config besides the pair
+    tolerances: the largest angle between two segments it counts as matching (rad), how many
+    of the longest segments it values, and how many hypotheses it passes on in full."""
+
+    match_angle: float
+    segments: int
+    pool: int
 
 
 @dataclasses.dataclass(frozen=True)
@@ -540,34 +550,32 @@ def pruned_values(
     map1: MapLike,
     map2: MapLike,
     transforms: FloatArray,
-    config: IntegrateConfig,
+    tolerance: PairTolerance,
+    screen: Prescreen,
     forced: int = 0,
 ) -> tuple[FloatArray, int]:
     """Values of the hypotheses worth a full evaluation, 0 for the others (Amigoni III-B).
 
     Long segments carry most of a good transformation's value, and the work of Alg. 4 grows
-    with hypotheses x segments x segments. When there are more than ``candidate_pool``
+    with hypotheses x segments x segments. When there are more than ``screen.pool``
     hypotheses, each is first valued roughly (:func:`_prescreen_values`) on the longest
-    segments of both sets: half of ``prescreen_segments`` for a rough cut to
-    10 x ``candidate_pool``, then ``prescreen_segments``; the ``candidate_pool`` best are
-    evaluated in full (Alg. 4 l. 5-19), and so are the first ``forced`` hypotheses.
+    segments of both sets: half of ``screen.segments`` for a rough cut to
+    10 x ``screen.pool``, then ``screen.segments``; the ``screen.pool`` best are
+    evaluated in full (Alg. 4 l. 5-19, by the pair ``tolerance``), and so are the first
+    ``forced`` hypotheses.
     """
     first, second = SegmentMap.of(map1), SegmentMap.of(map2)
     count = len(transforms)
     pool = np.arange(forced, count)
-    tolerances = (
-        config.prescreen_match_angle,
-        config.match_distance,
-        config.point_distance_tolerance,
-    )
+    tolerances = (screen.match_angle, tolerance.match_distance, tolerance.point_tolerance)
     for segments_used, keep in (
-        (max(1, config.prescreen_segments // 2), _ROUGH_CUT * config.candidate_pool),
-        (config.prescreen_segments, config.candidate_pool),
+        (max(1, screen.segments // 2), _ROUGH_CUT * screen.pool),
+        (screen.segments, screen.pool),
     ):
         best = best_prescreened(first, second, transforms[pool], keep, segments_used, tolerances)
         pool = pool[best]
     pool = np.concatenate((np.arange(forced), pool))
     values = np.zeros(count)
-    scores = score_pairs(first, second, transforms[pool], pair_tolerance(config))
+    scores = score_pairs(first, second, transforms[pool], tolerance)
     values[pool] = transform_values(scores, pool.size)
     return values, int(pool.size)

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -174,9 +175,24 @@ class _Groups:
     ending: IntArray  # (max_group + 1, n): the group of c polylines whose last is j (-1: none)
 
 
-def _groups(shape: Shape, config: ShapeConfig) -> _Groups:
-    n, m = len(shape), config.tangent_samples
-    counts = np.arange(1, min(config.max_group, n) + 1)
+class Grouping(NamedTuple):
+    """What a shape's groups (:func:`_groups`) read of ShapeConfig: the samples of each
+    group's turning function (``tangent_samples``), the most polylines in one group
+    (``max_group``) and the skip penalty per metre (``skip_penalty``, Eq. 4's P)."""
+
+    tangent_samples: int
+    max_group: int
+    skip_penalty: float
+
+
+def grouping(config: ShapeConfig) -> Grouping:
+    """The grouping settings of ``config``."""
+    return Grouping(config.tangent_samples, config.max_group, config.skip_penalty)
+
+
+def _groups(shape: Shape, settings: Grouping) -> _Groups:
+    n, m = len(shape), settings.tangent_samples
+    counts = np.arange(1, min(settings.max_group, n) + 1)
     first = np.concatenate([np.arange(n - c + 1) for c in counts]).astype(np.int64)
     count = np.concatenate([np.full(n - c + 1, c) for c in counts]).astype(np.int64)
     a, b = shape.start[first], shape.stop[first + count - 1]  # vertex range [a, b]
@@ -204,10 +220,10 @@ def _groups(shape: Shape, config: ShapeConfig) -> _Groups:
     complexity = np.where(b - a >= 2, complexity, 0.5 * chord)
     own = cumulative[shape.stop] - cumulative[shape.start]  # each polyline's length alone
     own_sum = np.concatenate(([0.0], np.cumsum(own)))
-    penalty = config.skip_penalty * (own_sum[first + count] - own_sum[first])
-    row = np.full((config.max_group + 1, n), -1, dtype=np.int64)
+    penalty = settings.skip_penalty * (own_sum[first + count] - own_sum[first])
+    row = np.full((settings.max_group + 1, n), -1, dtype=np.int64)
     row[count, first] = np.arange(len(first))
-    ending = np.full((config.max_group + 1, n), -1, dtype=np.int64)
+    ending = np.full((settings.max_group + 1, n), -1, dtype=np.int64)
     ending[count, first + count - 1] = np.arange(len(first))
     centre = points.mean(axis=1)
     return _Groups(first, count, length, angles, points, complexity, penalty, centre, row, ending)
@@ -237,7 +253,8 @@ def shared_shape(reference: Shape, perceived: Shape, config: ShapeConfig) -> flo
     of which a few match."""
     if len(reference) == 0 or len(perceived) == 0:
         return 0.0
-    groups_1, groups_2 = _groups(reference, config), _groups(perceived, config)
+    settings = grouping(config)
+    groups_1, groups_2 = _groups(reference, settings), _groups(perceived, settings)
     total, _ = correspond(similarity(groups_1, groups_2), groups_1, groups_2)
     skip_all = groups_1.penalty[groups_1.row[1]].sum() + groups_2.penalty[groups_2.row[1]].sum()
     return float((skip_all - total) / skip_all) if skip_all > 0.0 else 0.0
@@ -262,9 +279,13 @@ def induced_alignments(reference: _Groups, perceived: _Groups) -> tuple[FloatArr
 
 
 def _deviation(
-    theta: FloatArray, translation: FloatArray, perceived: _Groups, T_est: Pose, config: ShapeConfig
+    theta: FloatArray,
+    translation: FloatArray,
+    perceived: _Groups,
+    T_est: Pose,
+    scale: tuple[float, float],
 ) -> FloatArray:
-    """How far each pair's induced alignment is from the estimate, in units of
+    """How far each pair's induced alignment is from the estimate, in units of ``scale``
     (``alignment_distance``, ``alignment_angle``), squared: measured at the perceived group's
     centre, so that it does not depend on where the frame's origin is."""
     centre = perceived.centre
@@ -274,8 +295,9 @@ def _deviation(
     estimated = se2.transform_points(se2.matrix_from_pose(*T_est), centre)
     distance = np.hypot(moved_x - estimated[None, :, 0], moved_y - estimated[None, :, 1])
     turn = se2.wrap_angle(theta - T_est[2])
-    squared: FloatArray = (distance / config.alignment_distance) ** 2
-    squared += (turn / config.alignment_angle) ** 2
+    alignment_distance, alignment_angle = scale
+    squared: FloatArray = (distance / alignment_distance) ** 2
+    squared += (turn / alignment_angle) ** 2
     return squared
 
 
@@ -429,7 +451,8 @@ def match_shapes(reference: Shape, perceived: Shape, config: ShapeConfig) -> Sha
     identity: Pose = (0.0, 0.0, 0.0)
     if len(reference) == 0 or len(perceived) == 0:
         return ShapeMatch(identity, False, (), float("inf"), float("inf"), seconds)
-    groups_1, groups_2 = _groups(reference, config), _groups(perceived, config)
+    settings = grouping(config)
+    groups_1, groups_2 = _groups(reference, settings), _groups(perceived, settings)
     dissimilarity = similarity(groups_1, groups_2)
     theta, translation = induced_alignments(groups_1, groups_2)
     seconds["similarity"] = time.perf_counter() - started
@@ -445,9 +468,10 @@ def match_shapes(reference: Shape, perceived: Shape, config: ShapeConfig) -> Sha
     # (Sec. 5.1); each candidate's aligned result is judged by Eq. 4 once more, with the
     # alignment term taken from where it ended: the least wins.
     skips = groups_1.penalty[:, None] + groups_2.penalty[None, :]
+    scale = (config.alignment_distance, config.alignment_angle)
 
     def second_pass(estimate: Pose) -> tuple[float, list[tuple[int, int]]]:
-        deviation = _deviation(theta, translation, groups_2, estimate, config)
+        deviation = _deviation(theta, translation, groups_2, estimate, scale)
         cost = dissimilarity + skips * np.minimum(deviation, 1.0)
         return correspond(cost, groups_1, groups_2)
 

@@ -9,8 +9,7 @@ from scipy.sparse.csgraph import connected_components
 
 from multi_robot_mapper.core.fusion import fuse
 from multi_robot_mapper.core.geometry import point_segment_distance
-from multi_robot_mapper.core.matching.scoring import pair_tolerance
-from multi_robot_mapper.core.merging.config import MergeConfig
+from multi_robot_mapper.core.matching.scoring import PairTolerance
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -22,9 +21,11 @@ def fuse_maps(
     owner1: IntArray,
     segments2: FloatArray,
     owner2: IntArray,
-    config: MergeConfig,
+    pair: PairTolerance,
+    tolerance: float,
 ) -> tuple[FloatArray, IntArray]:
-    """S1 fused with S2 (already in S1's frame), Amigoni Alg. 5 (core.fusion), wall by wall.
+    """S1 fused with S2 (already in S1's frame), Amigoni Alg. 5 (core.fusion), wall by wall,
+    with INTEGRATE's ``pair`` tolerances and the fusion ``tolerance`` (``fusion_tolerance``).
 
     Fusion compares every pair of segments it is given, yet a segment only ever fuses with
     (or is covered by) segments of the other set lying within the fusion distance (three
@@ -38,8 +39,8 @@ def fuse_maps(
             np.vstack((segments1.reshape(-1, 4), segments2.reshape(-1, 4))),
             np.concatenate((owner1, owner2)).astype(np.int64),
         )
-    limit = 3.0 * config.fusion_tolerance  # fuse()'s default max_distance
-    first, second = _related_pairs(segments1, segments2, limit, config.integrate.max_match_angle)
+    limit = 3.0 * tolerance  # fuse()'s default max_distance
+    first, second = _related_pairs(segments1, segments2, limit, pair.max_angle)
     n1, n2 = len(segments1), len(segments2)
     graph = coo_matrix((np.ones(first.size), (first, n1 + second)), shape=(n1 + n2, n1 + n2))
     _, label = connected_components(graph, directed=False)
@@ -66,8 +67,8 @@ def fuse_maps(
             owner1[in1],
             segments2[in2],
             owner2[in2],
-            pair_tolerance(config.integrate),
-            config.fusion_tolerance,
+            pair,
+            tolerance,
         )
         parts.append(fused)
         owners.append(owner)

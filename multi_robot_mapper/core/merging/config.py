@@ -11,6 +11,7 @@ from multi_robot_mapper.core.config import param, validate
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig
 from multi_robot_mapper.core.matching import IntegrateConfig
 from multi_robot_mapper.core.merging.ffs.config import FfsConfig
+from multi_robot_mapper.core.merging.free_space import FreeDrawing, FreeSpaceLimits, ViewFan
 from multi_robot_mapper.core.merging.joint_graph_config import JointGraphConfig
 from multi_robot_mapper.core.merging.pairwise_config import PairwiseConfig
 
@@ -310,6 +311,25 @@ class MergeConfig:
         """The map correlation's settings from this config."""
         return CorrelationConfig(
             cell=self.correlation_cell, free_space_weight=self.free_space_weight
+        )
+
+    def view_fan(self) -> ViewFan:
+        """How a map's views are cast (``view_spacing``, ``max_views``, ``view_beams``,
+        ``view_field``, ``view_range``)."""
+        return ViewFan(
+            self.view_spacing, self.max_views, self.view_beams, self.view_field, self.view_range
+        )
+
+    def free_space_limits(self) -> FreeSpaceLimits:
+        """What a wall in free space is (``free_space_min_length``, ``view_spread``,
+        ``free_space_margin``)."""
+        return FreeSpaceLimits(self.free_space_min_length, self.view_spread, self.free_space_margin)
+
+    def free_drawing(self) -> FreeDrawing:
+        """How free space is drawn for the correlation (``correlation_cell``, ``view_spread``,
+        ``free_space_margin``, ``view_range``)."""
+        return FreeDrawing(
+            self.correlation_cell, self.view_spread, self.free_space_margin, self.view_range
         )
 
     def link_config(self, hypotheses: int | None = None, viewed: bool = False) -> IntegrateConfig:

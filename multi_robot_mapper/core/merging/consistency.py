@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -270,8 +271,9 @@ def seen_through_near(
     first, second = units[best.first], units[best.second]
     views_first, views_second = views_of(best.first), views_of(best.second)
     T_first_second = _link_placement(best, units)
+    limits = config.free_space_limits()
     whole = free_space_conflict(
-        first.segments, views_first, second.segments, views_second, T_first_second, config
+        first.segments, views_first, second.segments, views_second, T_first_second, limits
     )
     # The same walls both ways: those within twice place_radius of the linked keyframes.
     reach = 2.0 * config.place_radius
@@ -283,18 +285,18 @@ def seen_through_near(
         second.segments, _poses(second, [lk.k_second for lk in sides])[:, :2], reach
     )
     rigid = free_space_conflict(
-        walls_first, views_first, walls_second, views_second, T_first_second, config
+        walls_first, views_first, walls_second, views_second, T_first_second, limits
     )
     confident = [c for c in links if c.confidence >= config.link_confidence] or list(links)
     piecewise = 0.0
     if views_first is not None:
         by_second = [oriented(c, best.second) for c in confident]
         placed = _placed_by_nearest_link(walls_second, by_second, units)
-        piecewise = seen_through_length(views_first, placed, config)
+        piecewise = seen_through_length(views_first, placed, limits)
     if views_second is not None:
         by_first = [oriented(c, best.first) for c in confident]
         placed = _placed_by_nearest_link(walls_first, by_first, units)
-        piecewise = max(piecewise, seen_through_length(views_second, placed, config))
+        piecewise = max(piecewise, seen_through_length(views_second, placed, limits))
     return min(rigid, piecewise), whole
 
 
@@ -370,13 +372,24 @@ def cycle_error(
     return float(np.hypot(x, y)), abs(theta), path
 
 
+class JoinLimits(NamedTuple):
+    """What accepting pairs over the groups reads of the merge config: the slack a cycle of
+    links may miss closing by, per metre run inside the maps (m, rad: ``link_pair_slack``,
+    ``link_pair_angle_slack``; the first is also a robot's allowance beyond ``max_speed``),
+    and the probability a join of groups must keep (``join_probability``)."""
+
+    distance_slack: float
+    angle_slack: float
+    join_probability: float
+
+
 def closes(
-    chain: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit], config: MergeConfig
+    chain: Sequence[OrientedLink], units: Mapping[UnitKey, MapUnit], limits: JoinLimits
 ) -> bool:
     """Does a cycle of links close within the tolerance (per metre run inside the maps)?"""
     shift, turn, path = cycle_error(chain, units)
-    return shift <= RIGHT_DISTANCE + config.link_pair_slack * path and turn <= (
-        RIGHT_ANGLE + config.link_pair_angle_slack * path
+    return shift <= RIGHT_DISTANCE + limits.distance_slack * path and turn <= (
+        RIGHT_ANGLE + limits.angle_slack * path
     )
 
 
@@ -426,11 +439,13 @@ def accept_pairs(
     tree: dict[UnitKey, list[tuple[UnitKey, PairVerdict]]] = {key: [] for key in units}
     taken: list[PairVerdict] = []
     refused: list[PairVerdict] = []
-
+    limits = JoinLimits(
+        config.link_pair_slack, config.link_pair_angle_slack, config.join_probability
+    )
     for verdict in order:
         a, b = verdict.pair
         if _root(parent, a) == _root(parent, b):
-            if _closes_cycle(verdict, tree, units, config):
+            if _closes_cycle(verdict, tree, units, limits):
                 taken.append(verdict)
             else:
                 refused.append(
@@ -445,7 +460,7 @@ def accept_pairs(
             joined,
             (group_a, group_b, T_ra_rb),
             units,
-            config,
+            limits,
             model,
             reaches,
             group_conflict,
@@ -475,13 +490,13 @@ def _closes_cycle(
     verdict: PairVerdict,
     tree: Mapping[UnitKey, list[tuple[UnitKey, PairVerdict]]],
     units: Mapping[UnitKey, MapUnit],
-    config: MergeConfig,
+    limits: JoinLimits,
 ) -> bool:
     """Does the pair of ``verdict``, between two maps of one group, close the cycle through
     the group's ``tree`` (:func:`closes`)?"""
     a, b = verdict.pair
     chain = _tree_path(tree, b, a)  # b ... a through the tree, then the new link a -> b
-    return closes([_best(v, x) for x, v in chain] + [_best(verdict, a)], units, config)
+    return closes([_best(v, x) for x, v in chain] + [_best(verdict, a)], units, limits)
 
 
 def _ordered_groups(
@@ -499,7 +514,7 @@ def _judge_join(
     joined: Mapping[UnitKey, FloatArray],
     groups: tuple[Mapping[UnitKey, FloatArray], Mapping[UnitKey, FloatArray], FloatArray],
     units: Mapping[UnitKey, MapUnit],
-    config: MergeConfig,
+    limits: JoinLimits,
     model: LogisticModel,
     reaches: Mapping[str, RobotReach] | None,
     group_conflict: GroupConflict | None,
@@ -508,9 +523,9 @@ def _judge_join(
     root's frame and T_roota_rootb; ``joined``: every map of both in A's root frame, as the
     join places them): refused when a robot would have to drive too fast, or, for groups of
     more than one map, when the pair's evidence with the walls it puts in the free space of
-    every map of both falls below ``join_probability``."""
+    every map of both falls below ``limits.join_probability``."""
     excess = (
-        0.0 if reaches is None else motion_excess(joined, units, reaches, config.link_pair_slack)
+        0.0 if reaches is None else motion_excess(joined, units, reaches, limits.distance_slack)
     )
     if excess > 0.0:
         reason = f"{TOO_FAST} {excess:.1f} m beyond max_speed"
@@ -525,7 +540,7 @@ def _judge_join(
     # groups (pair_evidence.group_conflict).
     conflict = max(verdict.conflict, group_conflict(group_a, group_b, T_ra_rb))
     probability = model.probability(evidence.features(conflict))
-    doubted = doubt(probability, evidence, conflict, config.join_probability)
+    doubted = doubt(probability, evidence, conflict, limits.join_probability)
     return dataclasses.replace(
         verdict,
         accepted=not doubted,

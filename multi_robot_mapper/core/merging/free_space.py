@@ -6,16 +6,55 @@ import dataclasses
 import hashlib
 from collections import OrderedDict
 from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.geometry import lines_of, point_segment_distance, sample_segments
-from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.simulation import raycast_fans
 
 FloatArray = NDArray[np.float64]
+
+
+class ViewFan(NamedTuple):
+    """How a map's views are cast (:meth:`MapViews.of`): viewpoints at least ``spacing`` (m)
+    apart, at most ``most`` of them, a full turn cut into ``beams`` bearings of which those
+    within ``field`` (rad) around each heading are cast, out to ``reach`` (m). MergeConfig's
+    ``view_spacing``, ``max_views``, ``view_beams``, ``view_field`` and ``view_range``
+    (:meth:`~core.merging.config.MergeConfig.view_fan`)."""
+
+    spacing: float
+    most: int
+    beams: int
+    field: float
+    reach: float
+
+
+class FreeSpaceLimits(NamedTuple):
+    """What a wall in free space is (:func:`seen_through_length`): a wall at least
+    ``min_length`` (m) long, nearer a viewpoint than the map's own wall (the nearest within
+    ``spread`` bearings either side) by ``margin`` (m). MergeConfig's
+    ``free_space_min_length``, ``view_spread`` and ``free_space_margin``
+    (:meth:`~core.merging.config.MergeConfig.free_space_limits`)."""
+
+    min_length: float
+    spread: int
+    margin: float
+
+
+class FreeDrawing(NamedTuple):
+    """How a map's free space is drawn for the correlation (:meth:`MapViews.free_points`): a
+    point every ``cell`` (m) along each bearing, out to ``margin`` (m) before the wall that
+    ends it (the nearest within ``spread`` bearings either side) and to ``reach`` (m) at
+    most. MergeConfig's ``correlation_cell``, ``view_spread``, ``free_space_margin`` and
+    ``view_range`` (:meth:`~core.merging.config.MergeConfig.free_drawing`)."""
+
+    cell: float
+    spread: int
+    margin: float
+    reach: float
 
 
 # A view's ranges by what they are cast from: the pose, the walls within reach of it, the fan.
@@ -84,30 +123,27 @@ class MapViews:
     def of(
         segments: FloatArray,
         keyframe_poses: FloatArray,
-        config: MergeConfig,
+        fan: ViewFan,
         rows: ViewRows | None = None,
     ) -> MapViews:
-        """The views of a map from its keyframe poses, at least ``view_spacing`` apart and at
-        most ``max_views`` of them, ``view_field`` wide around each heading. ``rows``: rows
-        cast before, by pose and the walls within ``view_range`` of it (:func:`_cast`)."""
+        """The views of a map from its keyframe poses, at least ``fan.spacing`` apart and at
+        most ``fan.most`` of them, ``fan.field`` wide around each heading. ``rows``: rows
+        cast before, by pose and the walls within ``fan.reach`` of it (:func:`_cast`)."""
         poses = np.asarray(keyframe_poses, dtype=np.float64).reshape(-1, 3)
         kept: list[int] = []
         for index in range(len(poses)):  # greedy thinning over keyframes (a few hundred)
-            if (
-                not kept
-                or np.min(np.hypot(*(poses[kept, :2] - poses[index, :2]).T)) >= config.view_spacing
-            ):
+            if not kept or np.min(np.hypot(*(poses[kept, :2] - poses[index, :2]).T)) >= fan.spacing:
                 kept.append(index)
-        if len(kept) > config.max_views:
-            kept = [kept[i] for i in np.linspace(0, len(kept) - 1, config.max_views).astype(int)]
+        if len(kept) > fan.most:
+            kept = [kept[i] for i in np.linspace(0, len(kept) - 1, fan.most).astype(int)]
         chosen = poses[kept]
-        step = 2.0 * np.pi / config.view_beams
-        beams = max(2, round(config.view_field / step) + 1)
+        step = 2.0 * np.pi / fan.beams
+        beams = max(2, round(fan.field / step) + 1)
         first = -0.5 * step * (beams - 1)
-        fan = (first, step, beams, config.view_range)
+        cast_fan = (first, step, beams, fan.reach)
         if rows is None:
-            return MapViews(chosen, raycast_fans(segments, chosen, *fan), first, step)
-        return MapViews(chosen, _cast(segments, chosen, fan, rows), first, step)
+            return MapViews(chosen, raycast_fans(segments, chosen, *cast_fan), first, step)
+        return MapViews(chosen, _cast(segments, chosen, cast_fan, rows), first, step)
 
     def free_limits(self, spread: int) -> FloatArray:
         """(K, B) how far free space reaches along each bearing: the nearest wall within
@@ -143,27 +179,27 @@ class MapViews:
         )
 
 
-def seen_through_length(views: MapViews, segments: FloatArray, config: MergeConfig) -> float:
+def seen_through_length(views: MapViews, segments: FloatArray, limits: FreeSpaceLimits) -> float:
     """Length of the walls among ``segments`` (in the views' map frame; those at least
-    ``free_space_min_length`` long) lying in the free space of ``views``: nearer some
-    viewpoint than the map's own wall on that bearing by ``free_space_margin``."""
+    ``limits.min_length`` long) lying in the free space of ``views``: nearer some
+    viewpoint than the map's own wall on that bearing by ``limits.margin``."""
     spacing = 0.2  # m between the points tested along each wall
-    walls = segments[lines_of(segments).length >= config.free_space_min_length]
+    walls = segments[lines_of(segments).length >= limits.min_length]
     if len(walls) == 0 or len(views.poses) == 0:
         return 0.0
     points, owner = sample_segments(walls, spacing)
     # Each point stands for its wall's length over its points (a wall's two ends both count).
     weight = (lines_of(walls).length / np.bincount(owner, minlength=len(walls)))[owner]
-    limits = views.free_limits(config.view_spread)
+    reaches = views.free_limits(limits.spread)
     # Every point in every viewpoint's frame at once: (K, P) bearings and distances.
     dx = points[None, :, 0] - views.poses[:, 0, None]
     dy = points[None, :, 1] - views.poses[:, 1, None]
     bearing = se2.wrap_angle(np.arctan2(dy, dx) - views.poses[:, 2, None])
     distance = np.hypot(dx, dy)
     column = np.rint((bearing - views.angle_min) / views.angle_increment).astype(np.int64)
-    inside = (column >= 0) & (column < limits.shape[1])
-    reach = np.take_along_axis(limits, np.where(inside, column, 0), axis=1)
-    seen = inside & (distance < reach - config.free_space_margin)
+    inside = (column >= 0) & (column < reaches.shape[1])
+    reach = np.take_along_axis(reaches, np.where(inside, column, 0), axis=1)
+    seen = inside & (distance < reach - limits.margin)
     return float(weight[seen.any(axis=0)].sum())
 
 
@@ -175,7 +211,7 @@ def no_views(robot: str) -> MapViews | None:
 
 
 def view_source(
-    maps: Mapping[str, FloatArray], viewpoints: Mapping[str, FloatArray], config: MergeConfig
+    maps: Mapping[str, FloatArray], viewpoints: Mapping[str, FloatArray], fan: ViewFan
 ) -> ViewSource:
     """Each robot's :class:`MapViews` (None without viewpoints or without a map: no free
     space known), cast on first use: a re-run whose pairs are all reused casts none."""
@@ -185,7 +221,7 @@ def view_source(
         if robot not in cache:
             poses = np.asarray(viewpoints.get(robot, np.zeros((0, 3))), dtype=np.float64)
             known = len(poses.reshape(-1, 3)) > 0 and len(maps[robot]) > 0
-            cache[robot] = MapViews.of(maps[robot], poses, config) if known else None
+            cache[robot] = MapViews.of(maps[robot], poses, fan) if known else None
         return cache[robot]
 
     return views
@@ -204,13 +240,14 @@ def free_space_conflict(
     map_b: FloatArray,
     views_b: MapViews | None,
     T_a_b: FloatArray,
-    config: MergeConfig,
+    limits: FreeSpaceLimits,
 ) -> float:
-    """The larger of: map b (moved by ``T_a_b``) in a's free space, map a in b's (metres)."""
+    """The larger of: map b (moved by ``T_a_b``) in a's free space, map a in b's (metres;
+    ``limits``: what a wall in free space is)."""
     through = 0.0
     if views_a is not None:
-        through = seen_through_length(views_a, se2.transform_segments(T_a_b, map_b), config)
+        through = seen_through_length(views_a, se2.transform_segments(T_a_b, map_b), limits)
     if views_b is not None:
         back = se2.transform_segments(se2.invert(T_a_b), map_a)
-        through = max(through, seen_through_length(views_b, back, config))
+        through = max(through, seen_through_length(views_b, back, limits))
     return through

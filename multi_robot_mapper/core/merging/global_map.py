@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.merging.compose import fuse_maps
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
@@ -99,7 +100,14 @@ def fuse_keyframes(
         if len(unit.segments):
             stacked = np.vstack(unit.local)
             moved = se2.transform_segments_each(placed[unit.owner], stacked)
-            segments, owner = fuse_maps(segments, owner, moved, ids.astype(np.int64), config)
+            segments, owner = fuse_maps(
+                segments,
+                owner,
+                moved,
+                ids.astype(np.int64),
+                pair_tolerance(config.integrate),
+                config.fusion_tolerance,
+            )
         states.append(_Fused(key, content, placed, segments, owner))
     if cache is not None:
         cache.last = (tuple(robots), config, tuple(states))

@@ -61,7 +61,7 @@ from multi_robot_mapper.core.merging.consistency import (
 )
 from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.global_map import FusionCache, fuse_keyframes
-from multi_robot_mapper.core.merging.joint_graph import Solution, solved
+from multi_robot_mapper.core.merging.joint_graph import Solution, graph_model, solved
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.motion import robot_reaches
 from multi_robot_mapper.core.merging.pair_evidence import (
@@ -163,7 +163,7 @@ def merge_joint(
         group,
         ref_unit,
         accepted,
-        config,
+        graph_model(config.graph),
         state.solution if state is not None else None,
         new_state.intra,
     )

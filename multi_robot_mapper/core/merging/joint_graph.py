@@ -10,13 +10,12 @@ import dataclasses
 import hashlib
 from collections import OrderedDict
 from collections.abc import Mapping
-from typing import Any, cast
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.consistency import Accepted, placement
 from multi_robot_mapper.core.merging.joint_graph_config import JointGraphConfig
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
@@ -46,23 +45,23 @@ def solved(
     group: list[UnitKey],
     ref_unit: UnitKey | None,
     accepted: Accepted,
-    config: MergeConfig,
+    model: GraphModel,
     last: tuple[Any, Solution] | None,
     intra: OrderedDict[Any, Any],
 ) -> tuple[Any, Solution]:
     """:func:`_solve`, or ``last`` (the last update's solution and what it was solved from)
     where the graph is the same; with what it was solved from. ``intra``: each map's edges
-    kept per content, from one update to the next."""
+    kept per content, from one update to the next; ``model``: :func:`graph_model`."""
     key = (
         tuple((k, content_digest(units[k])) for k in sorted(group)),
         ref_unit,
         tuple(tuple(c.identity() for c in verdict.links) for verdict in accepted.pairs),
         tuple((k, tuple((o, v.pair) for o, v in accepted.tree[k])) for k in sorted(accepted.tree)),
-        config,
+        model,
     )
     if last is not None and last[0] == key:
         return last
-    return key, _solve(units, group, ref_unit, accepted, config, intra)
+    return key, _solve(units, group, ref_unit, accepted, model, intra)
 
 
 def _solve(
@@ -70,7 +69,7 @@ def _solve(
     group: list[UnitKey],
     ref_unit: UnitKey | None,
     accepted: Accepted,
-    config: MergeConfig,
+    model: GraphModel,
     intra: OrderedDict[Any, Any],
 ) -> Solution:
     """The graph of every keyframe of the maps joined to ``ref_unit``, solved (module doc)
@@ -86,7 +85,7 @@ def _solve(
     for key in order:
         offsets[key] = total
         total += len(units[key].index)
-    graph = PoseGraph(robust_scale=config.graph.link_robust_scale, kernel="dcs")
+    graph = PoseGraph(robust_scale=model.link_robust_scale, kernel="dcs")
     for key in order:
         unit = units[key]
         start = [se2.pose_from_matrix(rigid[key] @ se2.matrix_from_pose(*p)) for p in unit.poses]
@@ -94,7 +93,7 @@ def _solve(
             anchored = key == ref_unit and row == 0
             x, y, theta = (float(v) for v in placed)
             graph.add_node(offsets[key] + row, (x, y, theta), anchored=anchored)
-        for edge in _intra_edges(unit, offsets[key], _edge_model(config.graph), intra):
+        for edge in _intra_edges(unit, offsets[key], model.edges, intra):
             graph.add_edge(edge)
     accepted_links = _add_links(graph, accepted, units, offsets)
     iterations = graph.solve() if accepted_links else 0
@@ -180,9 +179,18 @@ def _intra_pairs(unit: MapUnit, radius: float) -> list[tuple[int, int]]:
 _EdgeModel = tuple[float, float, float, float, float]
 
 
-def _edge_model(graph: JointGraphConfig) -> _EdgeModel:
-    """What the edges inside a map read of ``graph``."""
-    return (graph.radius, graph.sigma, graph.drift, graph.angle_sigma, graph.angle_drift)
+class GraphModel(NamedTuple):
+    """What the joint graph reads of its config (``merge.graph``): the scale of the links'
+    robust kernel, and what the edges inside a map read (:data:`_EdgeModel`)."""
+
+    link_robust_scale: float
+    edges: _EdgeModel
+
+
+def graph_model(graph: JointGraphConfig) -> GraphModel:
+    """The joint graph's settings of ``graph``."""
+    edges = (graph.radius, graph.sigma, graph.drift, graph.angle_sigma, graph.angle_drift)
+    return GraphModel(graph.link_robust_scale, edges)
 
 
 def _intra_edges(

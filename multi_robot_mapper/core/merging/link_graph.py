@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import Drawing
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.merging.compose import as_map, fuse_maps
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import (
@@ -22,12 +23,15 @@ from multi_robot_mapper.core.merging.free_space import (
 )
 from multi_robot_mapper.core.merging.pairwise import (
     Link,
+    LinkTests,
     MapSignature,
     PairRecord,
     draw_map,
     link_of,
+    link_tests,
     match_maps,
     no_match,
+    reuse_change,
 )
 from multi_robot_mapper.core.se2 import Pose
 from multi_robot_mapper.core.segment_map import SegmentMap
@@ -119,7 +123,7 @@ def pair_links(
 
     def drawing(robot: str) -> Drawing:  # once per robot, on first use
         if robot not in drawings:
-            drawings[robot] = draw_map(segment_maps[robot], view(robot), config)
+            drawings[robot] = draw_map(segment_maps[robot], view(robot), config.free_drawing())
         return drawings[robot]
 
     for i, a in enumerate(robots):
@@ -127,8 +131,8 @@ def pair_links(
             old = None if previous is None else previous.get((a, b))
             if (
                 old is not None
-                and signatures[a].close_to(old.signature_a, config)
-                and signatures[b].close_to(old.signature_b, config)
+                and signatures[a].close_to(old.signature_a, reuse_change(config))
+                and signatures[b].close_to(old.signature_b, reuse_change(config))
             ):
                 records[(a, b)] = dataclasses.replace(old, reused=True)
                 continue
@@ -203,11 +207,11 @@ def spanning_tree(
 
 
 def free_space_join(
-    maps: Mapping[str, FloatArray], views: ViewSource, config: MergeConfig
+    maps: Mapping[str, FloatArray], views: ViewSource, tests: LinkTests
 ) -> JoinCheck:
     """A :func:`spanning_tree` join check: two groups of robots join only if no robot's walls
-    lie in the free space any robot of the other group saw (beyond the link's allowance,
-    ``link_max_seen_through`` or that fraction of its value).
+    lie in the free space any robot of the other group saw (as a link is judged, ``tests``:
+    beyond the link's allowance, ``link_max_seen_through`` or that fraction of its value).
 
     A pair's own link was judged on the two maps alone; a group has more viewpoints. A
     look-alike place can fit one robot's map and still cross rooms a third robot saw empty.
@@ -221,16 +225,16 @@ def free_space_join(
     ) -> bool:
         if len(group_a) == 1 and len(group_b) == 1:
             return True  # exactly the pair match_maps judged
-        allowed = seen_through_allowance(
-            link.value, config.link_max_seen_through, config.link_max_seen_through_fraction
-        )
+        allowed = seen_through_allowance(link.value, *tests.seen_through)
         for x, T_ga_x in group_a.items():
             for y, T_gb_y in group_b.items():
                 view_x, view_y = views(x), views(y)
                 if view_x is None and view_y is None:
                     continue
                 T_x_y = se2.invert(T_ga_x) @ T_ga_gb @ T_gb_y
-                through = free_space_conflict(maps[x], view_x, maps[y], view_y, T_x_y, config)
+                through = free_space_conflict(
+                    maps[x], view_x, maps[y], view_y, T_x_y, tests.free_space
+                )
                 if through > allowed:
                     return False
         return True
@@ -337,9 +341,9 @@ def merge(
     ``maps``: robot name -> (N, 4) segments in that robot's own map frame. ``viewpoints``:
     robot name -> (K, 3) keyframe poses in the same frame, where the robot's laser stood; a
     link putting either map in the free space the other robot saw is refused (a robot without
-    viewpoints is judged on segments alone). ``reference`` (or
-    ``config.reference``) names the robot whose frame becomes ``map``; by default the previous
-    run's reference is kept, else the largest map of the largest linked group is taken.
+    viewpoints is judged on segments alone). ``reference`` (or ``config.reference``) names
+    the robot whose frame becomes ``map``; by default the previous run's reference is kept,
+    else the largest map of the largest linked group is taken.
     ``previous`` (the last result) supplies pair results to reuse and the tree to keep.
     """
     config = config if config is not None else MergeConfig()
@@ -351,13 +355,13 @@ def merge(
         raise ValueError(f"reference robot {chosen!r} has no map; robots: {', '.join(robots)}")
     if not robots:
         return _no_maps()
-    views = view_source(clean, viewpoints or {}, config)
+    views = view_source(clean, viewpoints or {}, config.view_fan())
     records, calls = pair_links(clean, config, None if previous is None else previous.pairs, views)
     pairs_done = time.perf_counter()
     lengths = {r: SegmentMap.of(clean[r]).total_length for r in robots}
     kept = set() if previous is None else {(lk.robot_a, lk.robot_b) for lk in previous.links}
     all_links = [record.link for record in records.values()]
-    joins = free_space_join(clean, views, config) if viewpoints else None
+    joins = free_space_join(clean, views, link_tests(config)) if viewpoints else None
     tree = spanning_tree(robots, all_links, kept, config.pairwise.stability_margin, joins)
     if chosen is None:
         chosen = choose_reference(
@@ -410,7 +414,9 @@ def _global_map(
     for robot, T_map_robot in placed.items():
         moved = se2.transform_segments(T_map_robot, maps[robot])
         index = np.full(len(moved), robots.index(robot), dtype=np.int64)
-        segments, owner = fuse_maps(segments, owner, moved, index, config)
+        segments, owner = fuse_maps(
+            segments, owner, moved, index, pair_tolerance(config.integrate), config.fusion_tolerance
+        )
     return segments, owner
 
 

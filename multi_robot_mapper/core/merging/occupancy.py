@@ -181,7 +181,9 @@ def occupancy_grid(
     )
     for own, poses in _thinned(views, config.view_spacing):
         reach_of = (view_config.view_spread, view_config.free_space_margin, view_config.view_range)
-        _mark_free(cells, origin, resolution, MapViews.of(own, poses, view_config), reach_of)
+        _mark_free(
+            cells, origin, resolution, MapViews.of(own, poses, view_config.view_fan()), reach_of
+        )
     if config.path_radius > 0.0:
         for _, poses in views:
             _mark_path(cells, origin, resolution, poses, config.path_radius)

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from multi_robot_mapper.core import se2
+from multi_robot_mapper.core.matching.scoring import pair_tolerance
 from multi_robot_mapper.core.merging.compose import as_map, fuse_maps
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.pairwise import Link, link_of, match_maps
@@ -72,7 +73,12 @@ def merge_sequential(maps: Sequence[FloatArray], config: MergeConfig | None = No
         placed[i] = result.matrix
         moved = se2.transform_segments(placed[i], clean[i])
         segments, owner = fuse_maps(
-            segments, owner, moved, np.full(len(moved), i, dtype=np.int64), config
+            segments,
+            owner,
+            moved,
+            np.full(len(moved), i, dtype=np.int64),
+            pair_tolerance(config.integrate),
+            config.fusion_tolerance,
         )
     return _ordered_result("sequential", len(clean), placed, links, segments, owner, started)
 
@@ -116,7 +122,14 @@ def merge_tree(maps: Sequence[FloatArray], config: MergeConfig | None = None) ->
             for index, T_right_map in right.members.items():
                 members.setdefault(index, T_left_right @ T_right_map)
             moved = se2.transform_segments(T_left_right, right.segments)
-            segments, owner = fuse_maps(left.segments, left.owner, moved, right.owner, config)
+            segments, owner = fuse_maps(
+                left.segments,
+                left.owner,
+                moved,
+                right.owner,
+                pair_tolerance(config.integrate),
+                config.fusion_tolerance,
+            )
             level.append(_Node(segments, owner, members, left.first))
         nodes = level
     root = nodes[0]
@@ -150,7 +163,12 @@ def merge_pivot(maps: Sequence[FloatArray], config: MergeConfig | None = None) -
         placed[i] = placed[pivot] @ result.matrix  # t_1,i = t_1,pivot t_pivot,i
         moved = se2.transform_segments(placed[i], clean[i])
         segments, owner = fuse_maps(
-            segments, owner, moved, np.full(len(moved), i, dtype=np.int64), config
+            segments,
+            owner,
+            moved,
+            np.full(len(moved), i, dtype=np.int64),
+            pair_tolerance(config.integrate),
+            config.fusion_tolerance,
         )
         pivot = i
     return _ordered_result("pivot", len(clean), placed, links, segments, owner, started)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,9 +23,11 @@ from multi_robot_mapper.core.matching import (
     refused,
     score_pairs,
 )
-from multi_robot_mapper.core.matching.scoring import pair_kept, pair_tolerance
+from multi_robot_mapper.core.matching.scoring import PairTolerance, pair_kept, pair_tolerance
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import (
+    FreeDrawing,
+    FreeSpaceLimits,
     MapViews,
     free_space_conflict,
     seen_through_allowance,
@@ -69,21 +72,29 @@ class MapSignature:
         segment_map = SegmentMap.of(segments)
         return MapSignature(len(segment_map), segment_map.total_length, segment_map.digest)
 
-    def close_to(self, earlier: MapSignature, config: MergeConfig) -> bool:
+    def close_to(self, earlier: MapSignature, change: tuple[float, float]) -> bool:
         """Did the map change little since ``earlier``? (Then a pair result is reused.)
 
-        Identical content, or: segment count within ``reuse_count_change`` % (at least 2
-        segments) and total length within ``reuse_length_change`` % of the earlier map's. A
-        growing map is re-matched once it grew by that much since the result was computed.
+        Identical content, or: segment count within ``change[0]`` % (at least 2 segments)
+        and total length within ``change[1]`` % of the earlier map's (``merge.pairwise``'s
+        ``reuse_count_change`` and ``reuse_length_change``: :func:`reuse_change`). A growing
+        map is re-matched once it grew by that much since the result was computed.
         """
         if self.digest == earlier.digest:
             return True
-        count_slack = max(2.0, config.pairwise.reuse_count_change / 100.0 * earlier.count)
-        length_slack = config.pairwise.reuse_length_change / 100.0 * earlier.length
+        count_change, length_change = change
+        count_slack = max(2.0, count_change / 100.0 * earlier.count)
+        length_slack = length_change / 100.0 * earlier.length
         return (
             abs(self.count - earlier.count) <= count_slack
             and abs(self.length - earlier.length) <= length_slack
         )
+
+
+def reuse_change(config: MergeConfig) -> tuple[float, float]:
+    """How much a map may change (%, segment count and total length) before a match found on
+    it is made again (:meth:`MapSignature.close_to`)."""
+    return config.pairwise.reuse_count_change, config.pairwise.reuse_length_change
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,8 +167,8 @@ def match_maps(
     if len(map_a) == 0 or len(map_b) == 0:
         return no_match()
     drawing_a, drawing_b = drawings or (
-        draw_map(map_a, views_a, config),
-        draw_map(map_b, views_b, config),
+        draw_map(map_a, views_a, config.free_drawing()),
+        draw_map(map_b, views_b, config.free_drawing()),
     )
     judge_a = map_a.longest(config.pairwise.judge_segments)
     judge_b = map_b.longest(config.pairwise.judge_segments)
@@ -178,7 +189,7 @@ def match_maps(
         if result.value <= 0.0:
             return MapMatch(result, 0.0, False, _INTEGRATE_CALLS, 0.0, uniqueness)
         return _judged_link(
-            map_a, map_b, judge_a, judge_b, views_a, views_b, result, uniqueness, config
+            map_a, map_b, judge_a, judge_b, views_a, views_b, result, uniqueness, link_tests(config)
         )
 
 
@@ -218,6 +229,39 @@ def _uniqueness(scores: FloatArray, best: int, rivals: NDArray[np.bool_]) -> flo
     return score / rival if rival > 0.0 else (np.inf if score > 0.0 else 0.0)
 
 
+class LinkTests(NamedTuple):
+    """What judging a whole-map link reads of the merge config (:func:`link_tests`): the pair
+    tolerances of the tight overlap (INTEGRATE's, the match distance ``tight_distance``), the
+    least tight fraction without and with both robots' views (``link_min_tight_fraction``,
+    ``viewed_link_min_tight_fraction``), the least uniqueness (``link_min_uniqueness``), what
+    a wall in free space is, and the wall in free space a link tolerates
+    (``link_max_seen_through`` m, or that fraction of its value:
+    ``link_max_seen_through_fraction``)."""
+
+    tight: PairTolerance
+    min_tight_fraction: tuple[float, float]
+    min_uniqueness: float
+    free_space: FreeSpaceLimits
+    seen_through: tuple[float, float]
+
+
+def link_tests(config: MergeConfig) -> LinkTests:
+    """The link tests of ``config``."""
+    tight = dataclasses.replace(
+        config.integrate,
+        segment_distance_threshold=config.pairwise.tight_distance
+        / config.integrate.point_distance_tolerance,
+    )
+    pairwise = config.pairwise
+    return LinkTests(
+        pair_tolerance(tight),
+        (pairwise.link_min_tight_fraction, pairwise.viewed_link_min_tight_fraction),
+        pairwise.link_min_uniqueness,
+        config.free_space_limits(),
+        (config.link_max_seen_through, config.link_max_seen_through_fraction),
+    )
+
+
 def _judged_link(
     map_a: SegmentMap,
     map_b: SegmentMap,
@@ -227,28 +271,27 @@ def _judged_link(
     views_b: MapViews | None,
     result: MatchResult,
     uniqueness: float,
-    config: MergeConfig,
+    tests: LinkTests,
 ) -> MapMatch:
     """INTEGRATE's evaluation of the chosen place (on the longest segments ``judge_a`` and
     ``judge_b``) as a link, judged (:func:`match_maps`, step 3): the ``link_*`` thresholds,
     the tight overlap, uniqueness with both robots' views, free space with either's."""
     viewed = views_a is not None and views_b is not None
-    tight = tight_fraction(judge_a, judge_b, result.T_1_2, config)
-    valid = result.valid and tight >= (
-        config.pairwise.viewed_link_min_tight_fraction
-        if viewed
-        else config.pairwise.link_min_tight_fraction
-    )
+    tight = tight_fraction(judge_a, judge_b, result.T_1_2, tests.tight)
+    valid = result.valid and tight >= tests.min_tight_fraction[1 if viewed else 0]
     if viewed:
-        valid = valid and uniqueness >= config.pairwise.link_min_uniqueness
+        valid = valid and uniqueness >= tests.min_uniqueness
     through = 0.0
     if valid and (views_a is not None or views_b is not None):
         through = free_space_conflict(
-            map_a.segments, views_a, map_b.segments, views_b, result.matrix, config
+            map_a.segments,
+            views_a,
+            map_b.segments,
+            views_b,
+            result.matrix,
+            tests.free_space,
         )
-        valid = through <= seen_through_allowance(
-            result.value, config.link_max_seen_through, config.link_max_seen_through_fraction
-        )
+        valid = through <= seen_through_allowance(result.value, *tests.seen_through)
     return MapMatch(result, tight, valid, _INTEGRATE_CALLS, through, uniqueness)
 
 
@@ -301,18 +344,11 @@ def _best_places(
     return refined, scores
 
 
-def draw_map(segments: MapLike, views: MapViews | None, config: MergeConfig) -> Drawing:
+def draw_map(segments: MapLike, views: MapViews | None, drawing: FreeDrawing) -> Drawing:
     """A map drawn for the correlation, with its free space when its views are known (one
     point per cell along each bearing marks every cell the beams cross)."""
-    cell = config.correlation_cell
-    free = (
-        np.zeros((0, 2))
-        if views is None
-        else views.free_points(
-            cell, config.view_spread, config.free_space_margin, config.view_range
-        )
-    )
-    return Drawing.of(segments, free, cell)
+    free = np.zeros((0, 2)) if views is None else views.free_points(*drawing)
+    return Drawing.of(segments, free, drawing.cell)
 
 
 def _candidates(
@@ -344,17 +380,13 @@ def _candidates(
 
 
 def tight_fraction(
-    segments1: MapLike, segments2: MapLike, T_1_2: FloatArray, config: MergeConfig
+    segments1: MapLike, segments2: MapLike, T_1_2: FloatArray, tight: PairTolerance
 ) -> float:
-    """Overlap of matching segments within ``tight_distance`` under ``T_1_2`` (INTEGRATE's
-    row), as a fraction of the shorter set's total length."""
-    tight = dataclasses.replace(
-        config.integrate,
-        segment_distance_threshold=config.pairwise.tight_distance
-        / config.integrate.point_distance_tolerance,
-    )
+    """Overlap of matching segments within the ``tight`` tolerances (match distance
+    ``tight_distance``: :func:`link_tests`) under ``T_1_2`` (INTEGRATE's row), as a fraction
+    of the shorter set's total length."""
     map1, map2 = SegmentMap.of(segments1), SegmentMap.of(segments2)
-    scores = score_pairs(map1, map2, np.asarray(T_1_2)[None, :], pair_tolerance(tight))
+    scores = score_pairs(map1, map2, np.asarray(T_1_2)[None, :], tight)
     shorter = min(map1.total_length, map2.total_length)
     return float(scores.value.sum()) / max(shorter, 1e-9)
 

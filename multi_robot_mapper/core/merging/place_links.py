@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import time
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,11 +49,11 @@ from multi_robot_mapper.core.matching import IntegrateConfig, MatchResult, integ
 from multi_robot_mapper.core.matching.beams import BeamAgreement, Viewpoint
 from multi_robot_mapper.core.matching.confidence import MatchEvidence, confidence
 from multi_robot_mapper.core.matching.refine import match_information
-from multi_robot_mapper.core.matching.scoring import pair_tolerance
+from multi_robot_mapper.core.matching.scoring import PairTolerance, pair_tolerance
 from multi_robot_mapper.core.matching.shape import Shape
 from multi_robot_mapper.core.matching.shape_config import ShapeConfig
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.free_space import MapViews, ViewRows
+from multi_robot_mapper.core.merging.free_space import FreeDrawing, MapViews, ViewRows
 from multi_robot_mapper.core.merging.pairwise import MapSignature, draw_map, longest
 from multi_robot_mapper.core.merging.places import MapUnit, Place, UnitKey, thin, viewpoints
 from multi_robot_mapper.core.merging.shape_placements import shape_placements, view_shapes
@@ -120,8 +120,12 @@ class Target:
     @staticmethod
     def of(unit: MapUnit, config: MergeConfig, rows: ViewRows | None = None) -> Target:
         """``unit`` prepared (``rows``: views cast before, :meth:`MapViews.of`)."""
-        views = MapViews.of(unit.segments, unit.poses, config, rows) if len(unit.poses) else None
-        drawing = draw_map(unit.segment_map, views, config)
+        views = (
+            MapViews.of(unit.segments, unit.poses, config.view_fan(), rows)
+            if len(unit.poses)
+            else None
+        )
+        drawing = draw_map(unit.segment_map, views, config.free_drawing())
         correlation = config.correlation()
         # A place (walls and free space) reaches place_radius from its centre: the grid must
         # hold it without wrapping round (its middle may lie off its centre).
@@ -143,15 +147,12 @@ class Target:
         return scorer_rasters(self.drawing, EVIDENCE_CORRELATION.cell, EVIDENCE_CORRELATION.blur)
 
 
-def place_drawing(place: Place, config: MergeConfig) -> Drawing:
-    """A place drawn for the correlation, with its free space (within ``place_radius`` of its
-    centre, like its walls: the place is a disk)."""
-    cell = config.correlation_cell
-    free = place.views.free_points(
-        cell, config.view_spread, config.free_space_margin, config.view_range
-    )
-    free = free[np.hypot(free[:, 0], free[:, 1]) <= config.place_radius]
-    return Drawing.of(place.segment_map, free, cell)
+def place_drawing(place: Place, drawing: FreeDrawing, radius: float) -> Drawing:
+    """A place drawn for the correlation, with its free space (within ``radius``,
+    ``place_radius``, of its centre, like its walls: the place is a disk)."""
+    free = place.views.free_points(*drawing)
+    free = free[np.hypot(free[:, 0], free[:, 1]) <= radius]
+    return Drawing.of(place.segment_map, free, drawing.cell)
 
 
 def place_config(config: MergeConfig) -> IntegrateConfig:
@@ -194,7 +195,11 @@ def placement_hypotheses(
     nothing = np.zeros((0, 3))
     if len(unit.segments) == 0 or len(place.segments) == 0:
         return nothing, nothing
-    drawn = drawing if drawing is not None else place_drawing(place, config)
+    drawn = (
+        drawing
+        if drawing is not None
+        else place_drawing(place, config.free_drawing(), config.place_radius)
+    )
     correlation = config.correlation()
     rotations = rotation_candidates(unit.segment_map, place.segment_map, correlation.rotations)
     peaks, scores = correlation_peaks(
@@ -238,7 +243,7 @@ def match_place(
         return []
     poses = target.view_poses
     near = _close_to_any(poses[:, :2], hypotheses[:, 1:], config.place_radius)
-    views = MapViews.of(crop.segments, poses[near], config)
+    views = MapViews.of(crop.segments, poses[near], config.view_fan())
     settings = place_config(config)
     reach = config.view_range
     sides = (_verify_views(views, reach) or None, _verify_views(place.views, reach) or None)
@@ -253,10 +258,13 @@ def match_place(
     )
     if best.value <= 0.0 or best.evidence is None:
         return []
-    found = [_candidate(place, own, unit, crop, best, 0, config)]
+    noise = LinkNoise(
+        pair_tolerance(config.integrate), config.graph.link_sigma, config.graph.link_angle_sigma
+    )
+    found = [_candidate(place, own, unit, crop, best, 0, noise)]
     rival = _best_rival(crop, own, hypotheses, best.T_1_2, best.evidence, sides, settings)
     if rival is not None:
-        found.append(_candidate(place, own, unit, crop, rival, 1, config))
+        found.append(_candidate(place, own, unit, crop, rival, 1, noise))
     return found
 
 
@@ -320,10 +328,11 @@ def _candidate(
     crop: SegmentMap,
     match: MatchResult,
     rank: int,
-    config: MergeConfig,
+    noise: LinkNoise,
 ) -> LinkCandidate:
     """The link of a verified placement of the place in the target map: to the target keyframe
-    nearest the placed centre, with the information of the match."""
+    nearest the placed centre, with the information of the match (``noise``: what it is
+    read with)."""
     T_row = match.T_1_2
     T_target_centre = se2.matrix_from_pose(float(T_row[1]), float(T_row[2]), float(T_row[0]))
     spot = T_target_centre[:2, 2]
@@ -335,9 +344,9 @@ def _candidate(
         se2.transform_segments(se2.invert(T_target_keyframe), crop.segments),
         own,
         np.array([theta, x, y]),
-        pair_tolerance(config.integrate),
-        config.graph.link_sigma,
-        (config.graph.link_sigma, config.graph.link_angle_sigma),
+        noise.tolerance,
+        noise.sigma,
+        (noise.sigma, noise.angle_sigma),
         (10.0, 1.0),
     )
     return LinkCandidate(
@@ -353,6 +362,15 @@ def _candidate(
         rank=rank,
         information=information,
     )
+
+
+class LinkNoise(NamedTuple):
+    """What a link's information is read with: INTEGRATE's pair tolerances and the joint
+    graph's link sigmas (m, rad: ``merge.graph.link_sigma``, ``link_angle_sigma``)."""
+
+    tolerance: PairTolerance
+    sigma: float
+    angle_sigma: float
 
 
 def _differs(row: FloatArray, other: FloatArray) -> bool:
@@ -397,12 +415,3 @@ def segments_near(segments: FloatArray, centres: FloatArray, radius: float) -> F
         segments[:, None, 3],
     )
     return np.asarray(segments[(distance <= radius).any(axis=1)])
-
-
-def timed_match(
-    place: Place, target: Target, config: MergeConfig, drawing: Drawing | None = None
-) -> tuple[list[LinkCandidate], float]:
-    """:func:`match_place` and the seconds it took."""
-    started = time.perf_counter()
-    found = match_place(place, target, config, drawing)
-    return found, time.perf_counter() - started

@@ -20,7 +20,7 @@ from typing import Any, cast
 from multi_robot_mapper.core.evidence.correlation import Drawing
 from multi_robot_mapper.core.merging.config import MergeConfig
 from multi_robot_mapper.core.merging.free_space import ViewRows
-from multi_robot_mapper.core.merging.pairwise import MapSignature
+from multi_robot_mapper.core.merging.pairwise import MapSignature, reuse_change
 from multi_robot_mapper.core.merging.place_links import (
     LinkCandidate,
     Target,
@@ -159,7 +159,7 @@ def match_places(
                     signatures[target.key],
                     records,
                     work,
-                    config,
+                    reuse_change(config),
                 )
     work.sort(key=lambda item: item[:4])
     started = time.perf_counter()
@@ -173,7 +173,9 @@ def match_places(
             break
         drawing = drawings.get(place.digest)
         if drawing is None:
-            drawing = drawings[place.digest] = place_drawing(place, config)
+            drawing = drawings[place.digest] = place_drawing(
+                place, config.free_drawing(), config.place_radius
+            )
         found = match_place(place, target_of(units[key[2]], config, targets), config, drawing)
         records[key] = MatchRecord(place.digest, signatures[key[2]], found)
         computed += 1
@@ -196,10 +198,11 @@ def _plan_matches(
     signature: MapSignature,
     records: dict[MatchKey, MatchRecord],
     work: list[Work],
-    config: MergeConfig,
+    change: tuple[float, float],
 ) -> None:
     """Each place of ``source`` on ``target``: its record kept in ``records`` when still
-    fresh, else queued in ``work`` (and its old record kept until it is matched again)."""
+    fresh, else queued in ``work`` (and its old record kept until it is matched again;
+    ``change``: how much the target may change, :func:`~core.merging.pairwise.reuse_change`)."""
     for rank, place in enumerate(places):
         key = (source, place.centre, target)
         record = old.get(key)
@@ -207,7 +210,7 @@ def _plan_matches(
             priority = 0
         elif record.place != place.digest:
             priority = 1
-        elif not signature.close_to(record.target, config):
+        elif not signature.close_to(record.target, change):
             priority = 2
         else:
             records[key] = record  # fresh

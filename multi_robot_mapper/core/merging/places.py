@@ -31,7 +31,7 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.matching.beams import Viewpoint
 from multi_robot_mapper.core.merging.config import MergeConfig
-from multi_robot_mapper.core.merging.free_space import MapViews
+from multi_robot_mapper.core.merging.free_space import MapViews, ViewFan
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.segment_map import SegmentMap
 
@@ -214,7 +214,7 @@ def places_of(unit: MapUnit, config: MergeConfig, index: PlaceIndex | None = Non
         key = (unit.key, int(unit.index[row]), hashlib.sha1(inputs.tobytes()).hexdigest(), config)
         place = index.get(key) if index is not None else None
         if place is None:
-            place = _place(unit, row, segments, view_poses, length, config)
+            place = _place(unit, row, segments, view_poses, length, config.view_fan())
         if index is not None:
             index[key] = place
             index.move_to_end(key)  # the oldest unused are dropped first (the caller's cap)
@@ -228,10 +228,11 @@ def _place(
     segments: FloatArray,
     view_poses: FloatArray,
     length: float,
-    config: MergeConfig,
+    fan: ViewFan,
 ) -> Place:
     """The place of ``unit``'s keyframe ``row``: its walls (``segments``, ``length`` m) and
-    viewpoints (``view_poses``) in the centre's frame, ray cast (:meth:`MapViews.of`)."""
+    viewpoints (``view_poses``) in the centre's frame, ray cast (:meth:`MapViews.of` with
+    ``fan``)."""
     digest = hashlib.sha1(
         np.round(segments, 3).tobytes() + np.round(view_poses, 3).tobytes()
     ).hexdigest()
@@ -240,7 +241,7 @@ def _place(
         centre=int(unit.index[row]),
         T_unit_centre=unit.poses[row].copy(),
         segments=segments,
-        views=MapViews.of(segments, view_poses, config),
+        views=MapViews.of(segments, view_poses, fan),
         length=length,
         digest=digest,
     )

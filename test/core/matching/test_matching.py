@@ -28,9 +28,10 @@ from multi_robot_mapper.core.matching.confidence import is_right
 from multi_robot_mapper.core.matching.hypotheses import (
     PAIRS_PER_KEPT_HYPOTHESIS,
     _within_comparison_budget,
+    landmark_settings,
 )
-from multi_robot_mapper.core.matching.integrate import _distinct_candidates
-from multi_robot_mapper.core.matching.scoring import pair_tolerance
+from multi_robot_mapper.core.matching.ranking import CandidateChoice, distinct_candidates
+from multi_robot_mapper.core.matching.scoring import pair_tolerance, refusal
 from multi_robot_mapper.core.scan import LaserScanData
 from multi_robot_mapper.core.segment_map import SegmentMap
 from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
@@ -146,9 +147,11 @@ def test_landmarks_of_a_cluttered_place_are_thinned_to_the_strongest() -> None:
     config = dataclasses.replace(CONFIG, max_hypotheses=100)
     budget = PAIRS_PER_KEPT_HYPOTHESIS * config.max_hypotheses
     cluttered = _cluttered(ROOM, 150, seed=3)
-    marks = landmarks(cluttered, HEURISTICS, config, False, np.random.default_rng(0))
+    marks = landmarks(
+        cluttered, HEURISTICS, landmark_settings(config), False, np.random.default_rng(0)
+    )
     assert len(marks.angle) ** 2 > 10 * budget
-    thin, _ = _within_comparison_budget(cluttered, marks, cluttered, marks, config)
+    thin, _ = _within_comparison_budget(cluttered, marks, cluttered, marks, config.max_hypotheses)
     assert len(thin.angle) ** 2 <= budget
     walls = {tuple(p) for p in np.column_stack((marks.first, marks.second)) if max(p) < len(ROOM)}
     long_walls = lines_of(ROOM).length >= 1.0
@@ -259,8 +262,11 @@ def test_distinct_candidates_are_apart() -> None:
         [[0.0, 0.0, 0.0], [0.01, 0.05, 0.0], [0.0, 1.0, 0.0], [np.pi, 0.0, 0.0], [0.0, 1.1, 0.0]]
     )
     values = np.array([5.0, 4.0, 3.0, 2.0, 1.0])
-    config = dataclasses.replace(CONFIG, refine_candidates=10)
-    picked = _distinct_candidates(np.zeros((0, 4)), np.zeros((0, 4)), transforms, values, config)
+    choice = CandidateChoice(
+        CONFIG.candidate_pool, 10, CONFIG.candidate_separation, CONFIG.candidate_angle_separation
+    )
+    empty = SegmentMap.of(np.zeros((0, 4)))
+    picked = distinct_candidates(empty, empty, transforms, values, choice, refusal(CONFIG))
     assert list(picked) == [0, 2, 3]
 
 

@@ -101,15 +101,17 @@ def test_similarity_ignores_where_a_polyline_is_and_how_it_is_turned() -> None:
     longer = np.array([[0.0, 0.0], [3.0, 0.0]])
     big_l = np.array([[0.0, 0.0], [1.5, 0.0], [1.5, 1.5]])
     singles = dataclasses.replace(CONFIG, max_group=1)
-    groups_a = shape_matching._groups(_shape(l_shape), singles)
-    groups_b = shape_matching._groups(_shape(moved, straight, longer, big_l), singles)
+    groups_a = shape_matching._groups(_shape(l_shape), shape_matching.grouping(singles))
+    groups_b = shape_matching._groups(
+        _shape(moved, straight, longer, big_l), shape_matching.grouping(singles)
+    )
     s = similarity(groups_a, groups_b)[0]
     assert s[0] == pytest.approx(0.0, abs=1e-12)
     assert s[1] == pytest.approx((np.pi / 4) ** 2)  # T steps 0 -> pi/2 halfway: variance
     # Straight lines are alike in tangent space whatever their direction (lengths 2 and 3
     # differ, but the variance is 0); a straight wall (2 m) against a larger L (3 m): the
     # L's variance times 1 + (2 - 3)^2.
-    straight_groups = shape_matching._groups(_shape(straight), singles)
+    straight_groups = shape_matching._groups(_shape(straight), shape_matching.grouping(singles))
     s = similarity(straight_groups, groups_b)[0]
     assert s[2] == pytest.approx(0.0, abs=1e-12)
     assert s[3] == pytest.approx(2.0 * (np.pi / 4) ** 2)
@@ -125,10 +127,11 @@ def test_correspondence_keeps_the_order_and_groups_a_split_polyline() -> None:
     )
     perceived = _shape(*split, ROOM_POLYLINES[1], ROOM_POLYLINES[3])
     reference = _shape(first, *ROOM_POLYLINES[1:])
-    groups_1 = shape_matching._groups(reference, CONFIG)
-    groups_2 = shape_matching._groups(perceived, CONFIG)
+    groups_1 = shape_matching._groups(reference, shape_matching.grouping(CONFIG))
+    groups_2 = shape_matching._groups(perceived, shape_matching.grouping(CONFIG))
     theta, translation = shape_matching.induced_alignments(groups_1, groups_2)
-    deviation = shape_matching._deviation(theta, translation, groups_2, (0.0, 0.0, 0.0), CONFIG)
+    scale = (CONFIG.alignment_distance, CONFIG.alignment_angle)
+    deviation = shape_matching._deviation(theta, translation, groups_2, (0.0, 0.0, 0.0), scale)
     skips = groups_1.penalty[:, None] + groups_2.penalty[None, :]
     cost = similarity(groups_1, groups_2) + skips * np.minimum(deviation, 1.0)
     _, pairs = correspond(cost, groups_1, groups_2)

@@ -421,7 +421,7 @@ def test_a_placement_that_puts_walls_in_the_other_robots_free_space_is_measured(
     # are a feature of the join model (its conflict).
     frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.0, 0.0)}
     units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
-    views = {key: MapViews.of(u.segments, u.poses, CONFIG) for key, u in units.items()}
+    views = {key: MapViews.of(u.segments, u.poses, CONFIG.view_fan()) for key, u in units.items()}
 
     def seen_through(links: Sequence[LinkCandidate]) -> tuple[float, float]:
         return seen_through_near(links, units, views.get, CONFIG)
@@ -459,7 +459,7 @@ def test_a_map_that_bends_between_its_places_keeps_its_walls_out_of_free_space()
         for kf in keyframes["b"]
     ]
     units = units_of(keyframes)
-    views = {key: MapViews.of(u.segments, u.poses, CONFIG) for key, u in units.items()}
+    views = {key: MapViews.of(u.segments, u.poses, CONFIG.view_fan()) for key, u in units.items()}
     right = [link(truth, frames, "b", k, "a", k + 3, 0.97) for k in (2, 6, 12, 15)]
     verdict = weighed(
         (("a", 0), ("b", 0)),

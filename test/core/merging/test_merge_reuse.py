@@ -105,10 +105,10 @@ def test_a_grown_maps_views_are_cast_again_only_near_its_new_walls() -> None:
     shorter = units_of({"b": keyframes[:-4]})[("b", 0)]
     full = units_of({"b": keyframes})[("b", 0)]
     rows: ViewRows = OrderedDict()
-    MapViews.of(shorter.segments, shorter.poses, CONFIG, rows)
+    MapViews.of(shorter.segments, shorter.poses, CONFIG.view_fan(), rows)
     cast_before = len(rows)
-    views = MapViews.of(full.segments, full.poses, CONFIG, rows)
-    fresh = MapViews.of(full.segments, full.poses, CONFIG)
+    views = MapViews.of(full.segments, full.poses, CONFIG.view_fan(), rows)
+    fresh = MapViews.of(full.segments, full.poses, CONFIG.view_fan())
     np.testing.assert_array_equal(views.poses, fresh.poses)
     np.testing.assert_array_equal(views.ranges, fresh.ranges)  # bit for bit
     # Views far from the new keyframes' walls were not cast again.

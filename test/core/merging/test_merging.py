@@ -264,14 +264,14 @@ def test_a_look_alike_building_is_refused_by_the_free_space_the_robots_saw() -> 
     wrong = [r.link for k, r in blind.pairs.items() if "lookalike" in k and r.link.valid]
     assert wrong
     for link in wrong:
-        views_of = {name: MapViews.of(maps[name], views[name], CONFIG) for name in names}
+        views_of = {name: MapViews.of(maps[name], views[name], CONFIG.view_fan()) for name in names}
         through = free_space_conflict(
             maps[link.robot_a],
             views_of[link.robot_a],
             maps[link.robot_b],
             views_of[link.robot_b],
             link.matrix,
-            CONFIG,
+            CONFIG.free_space_limits(),
         )
         assert through > CONFIG.link_max_seen_through
     # With free space, every placement of it is refused: none is both free of conflict and
@@ -294,20 +294,22 @@ def test_a_look_alike_building_is_refused_by_the_free_space_the_robots_saw() -> 
 def test_free_space_is_what_the_laser_could_see_of_its_own_map() -> None:
     # A closed 10 m x 10 m room seen from its centre, facing +x, with a 180 degree view.
     room = polygon([(-5.0, -5.0), (5.0, -5.0), (5.0, 5.0), (-5.0, 5.0)])
-    views = MapViews.of(room, np.array([[0.0, 0.0, 0.0]]), CONFIG)
+    views = MapViews.of(room, np.array([[0.0, 0.0, 0.0]]), CONFIG.view_fan())
     ahead = np.array([[1.0, -2.0, 1.0, 2.0]])  # 4 m of wall in front: all in free space
-    assert seen_through_length(views, ahead, CONFIG) == pytest.approx(4.0, abs=0.21)
+    assert seen_through_length(views, ahead, CONFIG.free_space_limits()) == pytest.approx(
+        4.0, abs=0.21
+    )
     behind = np.array([[-1.0, -2.0, -1.0, 2.0]])  # behind the laser: never seen
     outside = np.array([[6.0, -2.0, 6.0, 2.0]])  # beyond the room's own wall
     along = np.array([[4.7, -2.0, 4.7, 2.0]])  # within free_space_margin of the wall
     short = np.array([[1.0, 0.0, 1.0, 0.5]])  # furniture-sized: not tested
     for segments in (behind, outside, along, short):
-        assert seen_through_length(views, segments, CONFIG) == 0.0
+        assert seen_through_length(views, segments, CONFIG.free_space_limits()) == 0.0
     # Map b is moved into a's frame by T_a_b first: to x = 4.8 (margin) or x = 2 (free).
     T_a_b = se2.matrix_from_pose(3.8, 0.0, 0.0)
-    assert free_space_conflict(room, views, ahead, None, T_a_b, CONFIG) == 0.0
+    assert free_space_conflict(room, views, ahead, None, T_a_b, CONFIG.free_space_limits()) == 0.0
     T_a_b = se2.matrix_from_pose(1.0, 0.0, 0.0)
-    assert free_space_conflict(room, views, ahead, None, T_a_b, CONFIG) > 3.9
+    assert free_space_conflict(room, views, ahead, None, T_a_b, CONFIG.free_space_limits()) > 3.9
 
 
 def test_a_wrong_looking_link_below_the_threshold_is_refused() -> None:
