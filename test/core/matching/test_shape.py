@@ -13,7 +13,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from multi_robot_mapper.core import se2
-from multi_robot_mapper.core.config import ConfigError
 from multi_robot_mapper.core.matching import shape as shape_matching
 from multi_robot_mapper.core.matching.shape import (
     Shape,
@@ -187,10 +186,3 @@ def test_nothing_to_match_gives_an_invalid_identity() -> None:
     found = match_shapes(empty, _shape(*ROOM_POLYLINES), CONFIG)
     assert not found.valid and found.T_1_2 == (0.0, 0.0, 0.0) and found.correspondences == ()
     assert len(shape_of_points(np.zeros((1, 2)), CONFIG)) == 0
-
-
-def test_config_is_validated_on_load() -> None:
-    with pytest.raises(ConfigError, match="max_group"):
-        ShapeConfig(max_group=0)
-    with pytest.raises(ConfigError, match="group_distance"):
-        ShapeConfig(group_distance=-1.0)
