@@ -1,6 +1,6 @@
 """Odometry-free local mapping, the front end: known answers on simulated drives (tracking,
-search, confidence in context, bad scans). The back end (loop closures, pieces, joins) is
-in `test_loop_closures_and_pieces.py`."""
+bad scans). The match attempts (tracking, search, confidence in context) are in
+`test_attempts.py`; the back end in `test_loop_closer.py` and `test_joins.py`."""
 
 from __future__ import annotations
 
