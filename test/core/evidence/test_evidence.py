@@ -4,7 +4,7 @@ how sure it is.
 
 Buildings are drawn here by hand so that their symmetry is exact: a corridor with equal rooms
 either side that a half turn about its middle maps onto itself, and a row of equal rooms.
-Keyframes are made as a robot's ``partial_map`` carries them (test_joint_merging's
+Keyframes are made as a robot's ``partial_map`` carries them (test_joint's
 ``keyframes_along``), each robot's map frame anywhere (``random_frames``).
 """
 
@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 import pytest
-from test_joint_merging import drives, keyframes_along, moved, stranger_keyframes
+from test_joint import drives, keyframes_along, moved, stranger_keyframes
 from test_merging import random_frames
 
 from multi_robot_mapper.core import se2

@@ -6,7 +6,7 @@ in one process: nothing shared."""
 from __future__ import annotations
 
 import numpy as np
-from test_joint_merging import CONFIG, drives, moved
+from test_joint import CONFIG, drives, moved
 from test_merging import random_frames
 
 from multi_robot_mapper.core.local_mapping import Keyframe
