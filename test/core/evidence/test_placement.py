@@ -1,6 +1,6 @@
 """The evidence model of place matches (issue 46) with known answers: buildings that fit two
 ways are never placed, one wall that tells them apart is enough, and what is published says
-how sure it is.
+how sure it is. The models themselves: `test_model.py`.
 
 Buildings are drawn here by hand so that their symmetry is exact: a corridor with equal rooms
 either side that a half turn about its middle maps onto itself, and a row of equal rooms.
@@ -11,7 +11,6 @@ Keyframes are made as a robot's ``partial_map`` carries them (test_joint's
 from __future__ import annotations
 
 import functools
-import math
 
 import numpy as np
 import pytest
@@ -21,16 +20,11 @@ from test_merging import random_frames
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig, Drawing
 from multi_robot_mapper.core.evidence.model import (
-    CLOSURE_MODEL_FILE,
     FEATURES,
-    PIECE_JOIN_MODEL_FILE,
-    PRIOR_FEATURE,
-    graph_prior,
     installed_model,
     join_features,
-    load_join_model,
 )
-from multi_robot_mapper.core.evidence.placement import PlacementEvidence, placement_evidence
+from multi_robot_mapper.core.evidence.placement import placement_evidence
 from multi_robot_mapper.core.logistic import LogisticModel
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult
 from multi_robot_mapper.core.merging.joint import merge_joint
@@ -188,80 +182,6 @@ def test_what_is_published_carries_its_probability() -> None:
             assert CONFIG.join_probability <= result.probabilities[robot] <= 1.0
 
 
-def test_the_join_model_is_data_the_package_ships() -> None:
-    model = installed_model()
-    assert model.features and len(model.weights) == len(model.features)
-    assert load_join_model(model.dumps()) == model
-    # More wall that no rival explains never makes a placement less likely.
-    weak = {
-        "margin": 2.0,
-        "log_margin": math.log1p(2.0),
-        "log_score": 3.0,
-        "rival_ratio": 0.9,
-        "conflict": 0.0,
-        "conflict_share": 0.0,
-    }
-    strong = dict(weak, margin=40.0, log_margin=math.log1p(40.0), rival_ratio=0.3)
-    assert model.probability(strong) > model.probability(weak)
-
-
-def test_the_back_end_weighs_a_join_of_pieces_below_a_loop_closure() -> None:
-    # The back end's models (fitted on its own closures and joins, judged by the truth): the
-    # same evidence makes a loop closure, found where the robot's own graph predicts it,
-    # likelier right than a join of two pieces after a loss, found only within the robot's
-    # reach; and more wall no rival explains makes either likelier.
-    closure = installed_model(CLOSURE_MODEL_FILE)
-    join = installed_model(PIECE_JOIN_MODEL_FILE)
-    for model in (closure, join):
-        assert load_join_model(model.dumps()) == model
-        assert set(model.features) <= {*FEATURES, PRIOR_FEATURE}
-    assert PRIOR_FEATURE not in join.features  # nothing predicts a join after a loss
-    evidence = PlacementEvidence(20.0, 5.0, 20.0, np.zeros(3), None, 0.0, 20.0)
-    rivalled = PlacementEvidence(20.0, 20.0, 20.0, np.zeros(3), None, 0.0, 20.0)
-    predicted = graph_prior(np.zeros(3), np.diag([0.1, 0.1, 0.01]), 5.0)
-    features = join_features([evidence], prior=predicted)
-    assert join.probability(features) < closure.probability(features)
-    for model in (closure, join):
-        rival = join_features([rivalled], prior=predicted)
-        assert model.probability(rival) < model.probability(features)
-
-
-def test_the_graph_prior_is_the_likelihood_ratio_of_the_graph_against_a_look_alike() -> None:
-    # Known answer: a closure exactly where the graph predicts it, sigma 0.1 m / 0.1 rad, in a
-    # search disc of 5 m: log N(0; 0, S) - log(1 / (pi 5^2 2 pi)).
-    sigma = np.diag([0.01, 0.01, 0.01])
-    expected = -0.5 * math.log((2 * math.pi) ** 3 * 1e-6) + math.log(2 * math.pi**2 * 25.0)
-    assert graph_prior(np.zeros(3), sigma, 5.0) == pytest.approx(expected)
-    # A closure far from the prediction, a loose graph or a wide search says less; the
-    # Mahalanobis distance costs what it costs a Gaussian (d^2 / 2).
-    at = graph_prior(np.array([0.2, 0.0, 0.0]), sigma, 5.0)
-    assert at == pytest.approx(expected - 0.5 * 4.0)
-    assert graph_prior(np.zeros(3), 100 * sigma, 5.0) < expected
-    assert graph_prior(np.zeros(3), sigma, 1.0) < expected
-    with pytest.raises(ValueError, match="not positive definite"):
-        graph_prior(np.zeros(3), np.zeros((3, 3)), 5.0)
-
-
-def test_a_closure_model_fitted_with_the_graph_prior_weighs_the_robots_own_graph() -> None:
-    # A closure model that has the graph prior (ac8e217's fit: 0.25 per nat) believes the same
-    # walls less when found 10 m and 90 deg from where a loose graph predicts them (a
-    # look-alike, generated building 119) than where a stiff graph predicts them. The shipped
-    # model is fitted without it (decisions.md: it refused right closures of the dense intel
-    # bag and caught no wrong one held out); it reads the prior by name and ignores it.
-    evidence = PlacementEvidence(3.0, 1.0, 4.0, np.zeros(3), None, 0.0, 3.0)
-    stiff = graph_prior(np.array([0.05, 0.0, 0.01]), np.diag([0.01, 0.01, 0.001]), 5.0)
-    loose = graph_prior(np.array([10.0, 0.0, math.pi / 2]), np.diag([9.0, 9.0, 0.3]), 30.0)
-    with_prior = LogisticModel((*FEATURES, PRIOR_FEATURE), 4.9, (0.0,) * len(FEATURES) + (0.25,))
-    believed = with_prior.probability(join_features([evidence], prior=stiff))
-    doubted = with_prior.probability(join_features([evidence], prior=loose))
-    assert doubted < believed
-    shipped = installed_model(CLOSURE_MODEL_FILE)
-    assert PRIOR_FEATURE not in shipped.features
-    assert shipped.probability(join_features([evidence], prior=loose)) == pytest.approx(
-        shipped.probability(join_features([evidence]))
-    )
-
-
 def test_a_wrong_join_does_not_move_the_reference() -> None:
     # A model that believes every placement joins a robot of another building to the office
     # robots through whatever its places matched (a wrong join). The reference robot's map is
@@ -284,22 +204,3 @@ def test_a_wrong_join_does_not_move_the_reference() -> None:
     other = "r2" if reference == "r1" else "r1"
     if reference != "stranger":
         assert placement_error(result, frames, other) < 0.10
-
-
-def test_a_closure_is_weighed_without_the_robot_s_own_approach() -> None:
-    """A robot drives out along y = 0 (keyframes 0-10, 3 m apart), turns round at 30 m and
-    comes back 2.5 m a keyframe: keyframe 20 (at 5 m) closes on the way out. Its approach
-    (keyframes 15-17, within APPROACH_RADIUS = 14 m and mapped with the drift the closure
-    corrects) leaves the target; the way out, however near, and the far end stay."""
-    from multi_robot_mapper.core.local_mapping.evidence import APPROACH_RADIUS, without_approach
-
-    assert APPROACH_RADIUS == 14.0
-    out = [(float(x), 0.0, 0.0) for x in range(0, 31, 3)]  # keyframes 0-10
-    back = [(30.0 - 2.5 * k, 0.0, np.pi) for k in range(1, 11)]  # keyframes 11-20
-    poses = np.array(out + back)
-    older = np.arange(0, 18)  # before the recent stretch (keyframes 18-20)
-    target = without_approach(poses, older, first_stretch_end=5, mine=20)
-    assert target.tolist() == list(range(15))
-    # Nothing up to the end of the stretch the closure returns to is ever taken.
-    target = without_approach(poses, older, first_stretch_end=16, mine=20)
-    assert target.tolist() == list(range(17))

@@ -32,7 +32,7 @@ from multi_robot_mapper.core.matching.integrate import hypotheses_of
 # The simulated office repeats its rooms: the join model (calibrated on generated buildings,
 # issue 46) gives the right joins of these short drives' pieces P 0.98 (36-54 m of wall, no
 # rival within the robot's reach), below the default 0.99. These tests are about pieces,
-# losses and bounds, so their joins are made at 0.9 (test_evidence.py tests the model).
+# losses and bounds, so their joins are made at 0.9 (test_model.py tests the model).
 PIECES = dataclasses.replace(LocalMapperConfig(), join_probability=0.9)
 
 

@@ -76,7 +76,7 @@ def line_units(names: list[str], frames: list[np.ndarray]) -> dict[str, list[Key
 def certain(probability: float = 0.999) -> LogisticModel:
     """A join model that gives every placement ``probability`` (its evidence aside): the
     tests of sets, cycles and motion below are about links, not the evidence model
-    (test_evidence.py)."""
+    (test_model.py)."""
     return LogisticModel(
         FEATURES, float(np.log(probability / (1.0 - probability))), (0.0,) * len(FEATURES), ""
     )
@@ -106,7 +106,7 @@ def test_the_consistent_set_is_the_placement_several_places_agree_on() -> None:
     # placement unsure, confidence 0.4-0.45). The true placements agree with each other; the
     # rivals agree with nothing (each is off by another amount along the corridor): the
     # pair's hypothesis is the true placements (whether to believe it is the evidence
-    # model's, test_evidence.py).
+    # model's, test_model.py).
     frames = {"a": se2.matrix_from_pose(0.0, 0.0, 0.0), "b": se2.matrix_from_pose(3.0, 0.5, 0.2)}
     units = units_of(line_units(["a", "b"], [frames["a"], frames["b"]]))
     right = [link(units, frames, "b", k, "a", k + 3, 0.45) for k in (2, 7, 12)]

@@ -45,7 +45,7 @@ CONFIG = MergeConfig()
 # The simulated worlds repeat their rooms and corridors, and their robots share a few metres of
 # drive: the join model (calibrated on generated buildings, issue 46) gives their right joins
 # P 0.96-0.98, below the default 0.99. Tests about links, sets, the graph, nodes and bad input
-# merge them at 0.9 (test_evidence.py tests the model and its default threshold).
+# merge them at 0.9 (test_model.py and test_placement.py test the model and its default threshold).
 SIMULATED_WORLD_JOIN_PROBABILITY = 0.9
 LASER = LaserModel(beams=361, range_noise=0.01, dropout=0.0, range_max=10.0)
 TOLERANCE_M, TOLERANCE_RAD = 0.02, np.radians(0.5)
