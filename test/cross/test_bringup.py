@@ -15,7 +15,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
+from test_link_graph import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.core.config import ConfigError, config_to_flat, user_specs
 from multi_robot_mapper.core.simulation import LaserModel, simulate_robots
@@ -149,7 +149,7 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(
     command = [sys.executable, "-m", "multi_robot_mapper.cli.main", "run"]
     command += ["--robots", ",".join(robots), "--params-file", str(PARAMS)]
     # The simulated office's right join gets P 0.95-0.99 from 30 s of driving: merged at
-    # test_merging's SIMULATED_WORLD_JOIN_PROBABILITY (-p reaches the merger).
+    # test_link_graph's SIMULATED_WORLD_JOIN_PROBABILITY (-p reaches the merger).
     command += ["-p", f"merge.join_probability:={SIMULATED_WORLD_JOIN_PROBABILITY}"]
     command += ["--in-process"] if in_process else []
     # A session of its own, so that the signal can go to its whole process group, as a

@@ -21,7 +21,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
-from test_merging import in_own_frames, poses_in_own_frames, random_frames, world_runs
+from test_link_graph import in_own_frames, poses_in_own_frames, random_frames, world_runs
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping import Keyframe

@@ -24,7 +24,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
-from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
+from test_link_graph import SIMULATED_WORLD_JOIN_PROBABILITY
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core import se2
@@ -67,13 +67,13 @@ TIME_LIMIT = 45.0  # s from the first scan until every office robot is merged
 
 
 def stranger_run(duration: float, seed: int) -> SimulatedRobot:
-    """A drive through another building (test_merging's ``stranger_walls``).
+    """A drive through another building (test_link_graph's ``stranger_walls``).
 
     Not the built-in ``rooms`` or ``corridors`` worlds: those are drawn on the same grid of
     right angles as the office, where segment overlap alone links look-alike places and only
-    the free-space test separates them (test_merging's look-alike test covers that case).
+    the free-space test separates them (test_link_graph's look-alike test covers that case).
     """
-    from test_merging import stranger_walls
+    from test_link_graph import stranger_walls
 
     walls = stranger_walls()
     laser = LaserModel()
@@ -349,7 +349,7 @@ def test_a_robot_whose_map_never_overlaps_ends_unmerged(outcome: Outcome) -> Non
 def test_a_robot_whose_map_never_overlaps_is_never_linked(outcome: Outcome) -> None:
     # Not even for a while. On segment overlap alone, some runs linked the stranger at an
     # intermediate stage of the growing maps (fraction 0.4-0.7); links are now also judged on
-    # the free space the robots saw from their keyframes (test_merging's look-alike test) and
+    # the free space the robots saw from their keyframes (test_link_graph's look-alike test) and
     # on the match confidence. Before any link exists the largest map is the reference, and
     # that may be the stranger's: its frame is then `map` itself, the identity, until the
     # office robots' linked group outgrows it. Any other frame would come from a wrong link.
@@ -424,7 +424,7 @@ def test_a_merge_in_the_worker_process_is_the_merge_in_the_node(ros_context, met
     # and in the node's own thread, by either method, the placements are the same and where
     # the truth has them (every place matched in one update and FFS run to its end: a time
     # budget would make the two differ).
-    from test_merging import in_own_frames, poses_in_own_frames, random_frames, world_runs
+    from test_link_graph import in_own_frames, poses_in_own_frames, random_frames, world_runs
 
     runs = world_runs("office", 2)
     frames = random_frames(2, seed=5)
@@ -469,7 +469,7 @@ def test_a_merge_cut_short_by_destroy_node_ends_quietly_without_a_new_worker(ros
     # it. The merge ends there: not counted as a failed merge, no fallback merges (each would
     # start a new interpreter while Python waits for the executor's threads: `mrm run` once
     # took over 20 s to exit), no process left behind.
-    from test_merging import in_own_frames, poses_in_own_frames, random_frames, world_runs
+    from test_link_graph import in_own_frames, poses_in_own_frames, random_frames, world_runs
 
     runs = world_runs("office", 2)
     names = ["alpha", "bravo"]

@@ -15,7 +15,7 @@ import functools
 import numpy as np
 import pytest
 from test_joint import drives, keyframes_along, moved, stranger_keyframes
-from test_merging import random_frames
+from test_link_graph import random_frames
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.evidence.correlation import CorrelationConfig, Drawing

@@ -14,7 +14,7 @@ import functools
 
 import numpy as np
 import pytest
-from test_merging import LASER, SIMULATED_WORLD_JOIN_PROBABILITY, random_frames, stranger_walls
+from test_link_graph import LASER, SIMULATED_WORLD_JOIN_PROBABILITY, random_frames, stranger_walls
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.extraction import extract_scan
@@ -90,7 +90,7 @@ def drives(world: str, robots: int) -> tuple[tuple[np.ndarray, ...], tuple[list[
 
 @functools.cache
 def stranger_keyframes() -> list[Keyframe]:
-    """Keyframes of a drive through another building (test_merging's ``stranger_walls``)."""
+    """Keyframes of a drive through another building (test_link_graph's ``stranger_walls``)."""
     route = np.array([(2.5, 5.5), (5.0, 6.5), (8.0, 5.0), (11.0, 3.5)])
     return keyframes_along(stranger_walls(), drive_path(route, 0.8, 1.0, 12.0), seed=7)
 

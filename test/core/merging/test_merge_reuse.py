@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 from test_joint import CONFIG, drives, moved
-from test_merging import random_frames
+from test_link_graph import random_frames
 
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging import MergeResult

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
+from test_link_graph import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.merging.ffs import (
