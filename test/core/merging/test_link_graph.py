@@ -1,4 +1,6 @@
-"""Map merging with known answers: partial maps moved by known rigid motions are put back.
+"""Map merging with known answers (``merge``: every pair, the spanning tree, placement): partial
+maps moved by known rigid motions are put back. The paper's three methods on a known order are
+in `test_ordered.py`, free space in `test_free_space.py`.
 
 Partial maps are built the way a robot builds one: simulated scans along a route, each placed
 at its true pose and fused (or, for exact answers, world walls clipped to a region). Each map
@@ -31,10 +33,6 @@ from multi_robot_mapper.core.merging import (
     MergeResult,
     free_space_conflict,
     merge,
-    merge_pivot,
-    merge_sequential,
-    merge_tree,
-    seen_through_length,
     spanning_tree,
 )
 from multi_robot_mapper.core.merging.pairwise_config import PairwiseConfig
@@ -291,25 +289,6 @@ def test_a_look_alike_building_is_refused_by_the_free_space_the_robots_saw() -> 
     assert all(lk.seen_through <= 0.5 for lk in result.links)
 
 
-def test_free_space_is_what_the_laser_could_see_of_its_own_map() -> None:
-    # A closed 10 m x 10 m room seen from its centre, facing +x, with a 180 degree view.
-    room = polygon([(-5.0, -5.0), (5.0, -5.0), (5.0, 5.0), (-5.0, 5.0)])
-    views = MapViews.of(room, np.array([[0.0, 0.0, 0.0]]), CONFIG)
-    ahead = np.array([[1.0, -2.0, 1.0, 2.0]])  # 4 m of wall in front: all in free space
-    assert seen_through_length(views, ahead, CONFIG) == pytest.approx(4.0, abs=0.21)
-    behind = np.array([[-1.0, -2.0, -1.0, 2.0]])  # behind the laser: never seen
-    outside = np.array([[6.0, -2.0, 6.0, 2.0]])  # beyond the room's own wall
-    along = np.array([[4.7, -2.0, 4.7, 2.0]])  # within free_space_margin of the wall
-    short = np.array([[1.0, 0.0, 1.0, 0.5]])  # furniture-sized: not tested
-    for segments in (behind, outside, along, short):
-        assert seen_through_length(views, segments, CONFIG) == 0.0
-    # Map b is moved into a's frame by T_a_b first: to x = 4.8 (margin) or x = 2 (free).
-    T_a_b = se2.matrix_from_pose(3.8, 0.0, 0.0)
-    assert free_space_conflict(room, views, ahead, None, T_a_b, CONFIG) == 0.0
-    T_a_b = se2.matrix_from_pose(1.0, 0.0, 0.0)
-    assert free_space_conflict(room, views, ahead, None, T_a_b, CONFIG) > 3.9
-
-
 def test_a_wrong_looking_link_below_the_threshold_is_refused() -> None:
     # A map of another building that shares one corner of the office (two walls, 10 m): the
     # best transformation overlaps by that corner, a small fraction of the map.
@@ -436,41 +415,6 @@ def test_the_config_is_validated_and_loads_from_flat_names() -> None:
 
 
 # --- Known order: sequential, tree and pivot (Amigoni IV) ----------------------------------
-
-
-@pytest.mark.parametrize(
-    ("method", "integrations", "placed"),
-    [(merge_sequential, 3, 3), (merge_tree, 6, 3), (merge_pivot, 3, 4)],
-)
-def test_the_three_methods_on_a_known_order(method: object, integrations: int, placed: int) -> None:
-    """Pivot places every map; sequential and tree (the paper's IV-A, IV-B) integrate a
-    small map with a large one, or large maps full of duplicates, and leave one out here
-    (the problems the paper names) but never place one wrongly."""
-    frames = random_frames(4, seed=6)
-    maps = list(in_own_frames(world_maps("office", 4), frames, list("abcd")).values())
-    result = method(maps, CONFIG)  # type: ignore[operator]
-    assert result.integrations == integrations
-    assert sum(pose is not None for pose in result.placements) >= placed
-    for k, pose in enumerate(result.placements):
-        if pose is None:
-            continue
-        error, turn = pose_error(se2.invert(frames[0]) @ frames[k], pose)
-        assert error < TOLERANCE_M and turn < TOLERANCE_RAD, (result.method, k, error, turn)
-
-
-def test_pivot_leaves_out_a_map_it_cannot_integrate_and_goes_on() -> None:
-    frames = random_frames(4, seed=7)
-    office = world_maps("office", 3)
-    maps = list(
-        in_own_frames((office[0], stranger_map(), *office[1:]), frames, list("abcd")).values()
-    )
-    result = merge_pivot(maps, CONFIG)
-    assert result.placements[1] is None
-    for k in (2, 3):
-        pose = result.placements[k]
-        assert pose is not None
-        error, turn = pose_error(se2.invert(frames[0]) @ frames[k], pose)
-        assert error < TOLERANCE_M and turn < TOLERANCE_RAD
 
 
 # --- Real data -----------------------------------------------------------------------------
