@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 import pytest
-from test_cli import frame_segments, read_mcap
+from test_replay import frame_segments, read_mcap
 
 from multi_robot_mapper.cli.demo import DemoScenario, run_demo
 from multi_robot_mapper.io.results import read_results
