@@ -18,7 +18,7 @@ from geometry_msgs.msg import Point, PoseStamped
 from rclpy.parameter import Parameter
 from std_msgs.msg import Header
 from test_link_graph import SIMULATED_WORLD_JOIN_PROBABILITY
-from test_map_merger_node import _partial_map_message
+from test_map_merger import _partial_map_message
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core.config import config_from_flat

@@ -21,8 +21,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from local_mapping_drives import feed, stranger_scan
 from rclpy.parameter import Parameter
-from test_robot_mapper_node import DRIVE_EVERY, Harness, assert_pose_close, drive
-from test_robot_mapper_node import truth_in_robot_map as truth_at
+from test_robot_mapper import DRIVE_EVERY, Harness, assert_pose_close, drive
+from test_robot_mapper import truth_in_robot_map as truth_at
 
 from multi_robot_mapper.core.extraction_config import ExtractionConfig
 from multi_robot_mapper.core.local_mapping import LocalMapper

@@ -62,7 +62,7 @@ pytestmark = pytest.mark.ros
 OFFICE_ROBOTS = ("robot1", "robot2", "robot3")
 STRANGER = "robot4"
 DURATION = 20.0  # s of driving per robot (about 16 m; neighbours share about 5 m of it)
-EVERY = 4  # every 4th scan of the 40 Hz drive: 10 Hz, as test_robot_mapper_node feeds it
+EVERY = 4  # every 4th scan of the 40 Hz drive: 10 Hz, as test_robot_mapper feeds it
 TIME_LIMIT = 45.0  # s from the first scan until every office robot is merged
 
 
