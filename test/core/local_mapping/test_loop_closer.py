@@ -27,7 +27,6 @@ from multi_robot_mapper.core.local_mapping import (
 )
 from multi_robot_mapper.core.local_mapping import joins as piece_joins
 from multi_robot_mapper.core.matching.confidence import RIGHT_ANGLE
-from multi_robot_mapper.core.matching.integrate import hypotheses_of
 
 # The simulated office repeats its rooms: the join model (calibrated on generated buildings,
 # issue 46) gives the right joins of these short drives' pieces P 0.98 (36-54 m of wall, no
@@ -236,45 +235,3 @@ def test_two_closures_agree_in_heading_within_the_drift_of_their_cycle(
     beyond = RIGHT_ANGLE + np.radians(0.1 * path)
     assert local.backend.closer._pairwise(closure(0, last, inside), other) is True
     assert local.backend.closer._pairwise(closure(0, last, beyond), other) is False
-
-
-def test_a_closure_edge_is_the_windows_placement_between_the_members_that_see_most(
-    office_drive,  # type: ignore[no-untyped-def]
-    monkeypatch,  # type: ignore[no-untyped-def]
-) -> None:
-    # Two keyframes' windows agree on a placement; the closure's edge keeps it as it is (the
-    # two scans alone refined it to worse placements on the shared logs), expressed between
-    # one member of each window through their poses in the windows: the pair whose own scans
-    # constrain it most, with the information of their walls.
-    stamps, scans, _ = office_drive
-    local = mapped(stamps, scans)
-    closer = local.backend.closer
-    pose = closer.keyframes.pose
-    last = len(closer.keyframes.scans) - 1
-    first_window, last_window = closer._window_members(0), closer._window_members(last)
-    assert not set(first_window.tolist()) & set(last_window.tolist())
-
-    def no_match(*args: object, **kwargs: object) -> None:
-        raise AssertionError("the closure edge must not match the scans again")
-
-    monkeypatch.setattr(closer, "_match", no_match)
-    # The windows' placement as the graph has it: every member pair's edge is then the graph's
-    # own relative pose of the two members.
-    placement = se2.between(pose(0), pose(last))
-    edge = closer._scan_edge(0, last, placement)
-    assert edge.first in first_window and edge.second in last_window
-    np.testing.assert_allclose(
-        edge.T_first_second, se2.between(pose(edge.first), pose(edge.second)), atol=1e-9
-    )
-    assert edge.robust
-    volume = np.linalg.slogdet(edge.information)[1]
-    for i in first_window.tolist():
-        for j in last_window.tolist():
-            T_i_j = hypotheses_of([se2.between(pose(i), pose(j))])[0]
-            other = closer._edge(i, j, T_i_j, robust=True)
-            assert np.linalg.slogdet(other.information)[1] <= volume + 1e-9
-    # Walls of both scans overlap there: tighter than the ceiling of an unconstrained edge
-    # (10 m, 1 rad), in every direction; 40 m away nothing overlaps.
-    assert np.all(np.linalg.eigvalsh(edge.information) > 1.0)
-    apart = closer._scan_edge(0, last, (placement[0] + 40.0, placement[1], placement[2]))
-    assert np.linalg.eigvalsh(apart.information).min() < np.linalg.eigvalsh(edge.information).min()
