@@ -53,6 +53,6 @@ def test_a_number_outside_its_range_is_one_line_naming_the_option_and_the_range(
     check_limits(argparse.Namespace(robots=high, noise=0.0), "robots", "noise")
 
 
-def test_a_missing_input_has_one_wording() -> None:
+def test_a_missing_input_is_no_such_kind_then_the_path() -> None:
     error = missing_input("/data/intel.bag", "bag")
     assert isinstance(error, CliError) and str(error) == "no such bag: /data/intel.bag"
