@@ -63,7 +63,7 @@ from multi_robot_mapper.ros.processes import (  # noqa: E402
 from multi_robot_mapper.ros.testing import default_domain_id, isolated_context  # noqa: E402
 
 ROBOTS = ("robot1", "robot2", "robot3")
-# The office's right joins get P 0.95-0.99 (test_merging.SIMULATED_WORLD_JOIN_PROBABILITY).
+# The office's right joins get P 0.95-0.99 (test_link_graph.SIMULATED_WORLD_JOIN_PROBABILITY).
 JOIN_PROBABILITY = 0.9
 TARGET_S = 5.0
 DRIVE_S = 150.0  # long enough for most restarts to come while the robots drive

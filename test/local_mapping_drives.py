@@ -1,5 +1,6 @@
-"""Simulated drives and fakes shared by the local-mapping tests (`test_local_mapping.py`:
-the front end; `test_loop_closures_and_pieces.py`: the back end)."""
+"""Simulated drives and fakes shared by the local-mapping tests (test/core/local_mapping:
+`test_mapper.py` and `test_attempts.py`, the front end; `test_loop_closer.py`, `test_joins.py`
+and `test_windows.py`, the back end)."""
 
 from __future__ import annotations
 

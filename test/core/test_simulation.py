@@ -1,9 +1,7 @@
-"""The laser simulator: worlds, collision-free partly overlapping paths, exact ray casting,
-determinism, and ``mrm simulate`` writing a readable multi-robot bag."""
+"""The laser simulator: collision-free partly overlapping paths, exact ray casting and
+determinism. The worlds: `test_worlds.py`; ``mrm simulate``: test/cli/test_simulate.py."""
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,8 +17,7 @@ from multi_robot_mapper.core.simulation import (
     simulate_robots,
     simulate_scan,
 )
-from multi_robot_mapper.core.worlds import ROUTES, WORLDS, office_world, polygon
-from multi_robot_mapper.io.bags import read_recordings
+from multi_robot_mapper.core.worlds import ROUTES, WORLDS, polygon
 
 CLEARANCE_M = 0.3
 
@@ -81,24 +78,6 @@ def path_segments(poses: np.ndarray) -> np.ndarray:
 
 
 # --- worlds and routes ------------------------------------------------------------------------
-
-
-def test_office_world_is_unchanged() -> None:
-    walls = office_world()
-    assert walls.shape == (62, 4)
-    np.testing.assert_array_equal(walls[0], [0, 0, 20, 0])
-    np.testing.assert_allclose([walls[3, :2], walls[34, 2:]], [[20, 0], [20, 14]], atol=1e-12)
-    np.testing.assert_array_equal(walls[35:38], [[0, 5, 4, 5], [5.2, 5, 11, 5], [12.2, 5, 17, 5]])
-    assert WORLDS["office"] is office_world
-
-
-@pytest.mark.parametrize("world", ["office", "corridors", "rooms"])
-def test_every_world_has_a_wall_free_route(world: str) -> None:
-    walls = WORLDS[world]()
-    tour = polygon(ROUTES[world])  # closed
-    assert not segments_cross(tour, walls).any()
-    along = np.vstack([np.linspace(leg[:2], leg[2:], 200) for leg in tour])
-    assert point_wall_distance(along, walls).min() >= CLEARANCE_M
 
 
 def test_segment_cross_check_finds_crossings() -> None:
@@ -233,80 +212,3 @@ def test_runs_start_together_and_have_noise_and_dropouts() -> None:
         assert 0.02 < np.isnan(scan.ranges).mean() < 0.09  # 5 % dropouts
         assert np.std(error[kept]) == pytest.approx(0.01, rel=0.15)
     assert len({tuple(r.T_world_laser[0]) for r in runs}) == 3  # different places
-
-
-# --- mrm simulate -------------------------------------------------------------------------------
-
-
-def test_mrm_simulate_writes_a_readable_bag(
-    mrm, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    args = ["--world", "corridors", "--beams", "361", "--rate", "20", "--duration", "2"]
-    assert mrm(["simulate", "--robots", "3", "--out", str(tmp_path / "a"), *args]) == 0
-    assert "wrote" in capsys.readouterr().out
-    recordings = read_recordings(tmp_path / "a")
-    assert list(recordings) == ["robot1", "robot2", "robot3"]
-    for name, rec in recordings.items():
-        assert len(rec.scans) == len(rec.ground_truth) == 40
-        assert rec.scans[0].stamp == pytest.approx(SIM_START_S)
-        assert {s.frame_id for s in rec.scans} == {f"{name}/laser"}
-        assert {g.frame_id for g in rec.ground_truth} == {"world"}
-        assert rec.scans[0].scan.ranges.size == 361
-        assert rec.scans[1].stamp - rec.scans[0].stamp == pytest.approx(0.05, abs=1e-6)
-    # Same seed, other storage: the same ranges, byte for byte.
-    more = ["--storage", "sqlite3"]
-    assert mrm(["simulate", "--robots", "3", "--out", str(tmp_path / "b"), *args, *more]) == 0
-    again = read_recordings(tmp_path / "b")
-    for name in recordings:
-        first = [s.scan.ranges.tobytes() for s in recordings[name].scans]
-        assert first == [s.scan.ranges.tobytes() for s in again[name].scans]
-
-
-def test_mrm_simulate_clutter_puts_objects_between_the_robot_and_its_walls(
-    mrm, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    # Same seed, same route: with clutter, some beams end short of the walls they reach in
-    # the empty building, and none ends beyond them.
-    args = ["--robots", "1", "--beams", "361", "--rate", "10", "--duration", "4"]
-    assert mrm(["simulate", "--out", str(tmp_path / "empty"), *args, "--noise", "0"]) == 0
-    crowd = ["--clutter", "0.5", "--noise", "0"]
-    assert mrm(["simulate", "--out", str(tmp_path / "crowd"), *args, *crowd]) == 0
-    assert "clutter 0.5 objects/m^2" in capsys.readouterr().out
-    empty = read_recordings(tmp_path / "empty")["robot1"]
-    crowded = read_recordings(tmp_path / "crowd")["robot1"]
-    shorter = 0
-    for a, b in zip(empty.scans, crowded.scans, strict=True):
-        both = np.isfinite(a.scan.ranges) & np.isfinite(b.scan.ranges)
-        assert np.all(b.scan.ranges[both] <= a.scan.ranges[both] + 1e-9)
-        shorter += int(np.count_nonzero(b.scan.ranges[both] < a.scan.ranges[both] - 0.05))
-    assert shorter > 0.01 * sum(len(a.scan.ranges) for a in empty.scans)
-
-
-@pytest.mark.parametrize(
-    ("extra", "words"),
-    [
-        (["--robots", "0"], "--robots"),
-        (["--robots", "2", "--world", "moon"], "unknown world"),
-        (["--robots", "2", "--rate", "0"], "--rate"),
-        (["--robots", "2", "--beams", "1"], "--beams"),
-        (["--robots", "2", "--noise", "-1"], "--noise"),
-        (["--robots", "2", "--duration", "0"], "--duration"),
-        (["--robots", "2", "--clutter", "3"], "--clutter"),
-    ],
-)
-def test_mrm_simulate_errors_are_one_line(
-    mrm, tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], words: str
-) -> None:
-    assert mrm(["simulate", "--out", str(tmp_path / "bag"), *extra]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and err.startswith("mrm simulate: error: ") and words in err
-    assert not (tmp_path / "bag").exists()
-
-
-def test_mrm_simulate_never_overwrites(
-    mrm, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    (tmp_path / "bag").mkdir()
-    assert mrm(["simulate", "--robots", "1", "--out", str(tmp_path / "bag")]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "already exists" in err

@@ -17,8 +17,8 @@ import pytest
 from geometry_msgs.msg import Point, PoseStamped
 from rclpy.parameter import Parameter
 from std_msgs.msg import Header
-from test_map_merger_node import _partial_map_message
-from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
+from test_link_graph import SIMULATED_WORLD_JOIN_PROBABILITY
+from test_map_merger import _partial_map_message
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core.config import config_from_flat
@@ -41,7 +41,7 @@ NAMES = ("alpha", "bravo", "charlie")
 def good_maps() -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """alpha and bravo: two office robots that overlap (each in its own frame); charlie: a
     third office robot, its map used for the bad inputs."""
-    from test_merging import in_own_frames, poses_in_own_frames, random_frames, world_runs
+    from test_link_graph import in_own_frames, poses_in_own_frames, random_frames, world_runs
 
     runs = world_runs("office", 3)
     frames = random_frames(3, seed=5)
@@ -64,6 +64,9 @@ def merger(ros_context) -> Iterator[MapMerger]:
             Parameter("merge_worker", value=False),  # merges in this process: deterministic
             Parameter("merge.update_budget", value=0.0),  # every place matched: deterministic
             Parameter("merge.join_probability", value=SIMULATED_WORLD_JOIN_PROBABILITY),
+            # One warning per kind for the whole test, however long its merges take on a
+            # loaded machine (the default period, 10 s, ran out mid-test under load).
+            Parameter("warning_period", value=3600.0),
         ],
         # Fixed constants (not ROS parameters) lowered so that small maps reach the limits.
         config=MapMergerConfig(max_keyframes_per_map=500, max_segments_per_map=5000),

@@ -21,7 +21,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
-from test_robot_mapper_node import (
+from test_robot_mapper import (
     DRIVE_EVERY,
     Harness,
     assert_pose_close,

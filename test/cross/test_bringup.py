@@ -1,4 +1,6 @@
-"""Bringup without launch (``mrm run``), the params file of both nodes, and the launch file."""
+"""Bringup without launch (``mrm run``), the params file applied to every node, and the launch
+file. How -p is shared out: test/cli/test_run.py; the params file as generated:
+test/ros/test_params_files.py."""
 
 from __future__ import annotations
 
@@ -15,17 +17,14 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
+from test_link_graph import SIMULATED_WORLD_JOIN_PROBABILITY
 
-from multi_robot_mapper.core.config import ConfigError, config_to_flat, user_specs
+from multi_robot_mapper.core.config import ConfigError
 from multi_robot_mapper.core.simulation import LaserModel, simulate_robots
 from multi_robot_mapper.io.bags import recording_of
-from multi_robot_mapper.io.config_files import parameters_from_yaml
 from multi_robot_mapper.ros.bringup import build_system, robot_names
 from multi_robot_mapper.ros.live import Observer, ScanPlayer, timeline
-from multi_robot_mapper.ros.mapper_config import RobotMapperConfig
-from multi_robot_mapper.ros.merger_config import MapMergerConfig
-from multi_robot_mapper.ros.params_files import SYSTEM_PARAMS_FILE, system_params_file
+from multi_robot_mapper.ros.params_files import SYSTEM_PARAMS_FILE
 from multi_robot_mapper.ros.testing import default_domain_id, isolated_context, spin_until
 
 REPO = Path(__file__).resolve().parents[2]
@@ -38,18 +37,6 @@ def test_robot_names_are_namespaces() -> None:
     for bad in ("", " , ", "1robot", "robot-1", "a//b"):
         with pytest.raises(ConfigError):
             robot_names(bad)
-
-
-def test_the_system_params_file_is_generated_and_holds_both_nodes_defaults() -> None:
-    assert PARAMS.read_text(encoding="utf-8") == system_params_file(), "run `make config`"
-    for node, config_class in (
-        ("robot_mapper", RobotMapperConfig),
-        ("map_merger", MapMergerConfig),
-    ):
-        users = {spec.name for spec in user_specs(config_class)}  # its ROS parameters only
-        defaults = config_to_flat(config_class())
-        expected = {name: value for name, value in defaults.items() if name in users}
-        assert parameters_from_yaml(PARAMS, node_name=node) == expected, node
 
 
 @pytest.mark.ros
@@ -105,21 +92,6 @@ def test_mrm_run_refuses_unknown_methods_and_missing_params_files_with_exit_2(
     assert "neither robot_mapper nor map_merger" in capsys.readouterr().err
 
 
-def test_dash_p_goes_to_the_nodes_that_have_the_parameter() -> None:
-    from multi_robot_mapper.cli.run import node_parameters
-
-    mapper, merger = node_parameters(
-        ["max_scan_rate:=10", "merge_period:=2.5", "warning_period:=3", "grid.enabled:=false"]
-    )
-    assert {p.name: p.value for p in mapper} == {"max_scan_rate": 10.0, "warning_period": 3.0}
-    assert all(isinstance(p.value, float) for p in mapper)
-    assert {p.name: p.value for p in merger} == {
-        "merge_period": 2.5,
-        "warning_period": 3,
-        "grid.enabled": False,
-    }
-
-
 def _communicate_or_dump(process: subprocess.Popen[bytes], timeout: float) -> tuple[bytes, bytes]:
     """The process's output once it exits; if it does not within ``timeout``, its threads'
     stacks (SIGUSR1, faulthandler: run_nodes registers it) in the failure message."""
@@ -149,7 +121,7 @@ def test_mrm_run_maps_and_merges_live_and_stops_cleanly(
     command = [sys.executable, "-m", "multi_robot_mapper.cli.main", "run"]
     command += ["--robots", ",".join(robots), "--params-file", str(PARAMS)]
     # The simulated office's right join gets P 0.95-0.99 from 30 s of driving: merged at
-    # test_merging's SIMULATED_WORLD_JOIN_PROBABILITY (-p reaches the merger).
+    # test_link_graph's SIMULATED_WORLD_JOIN_PROBABILITY (-p reaches the merger).
     command += ["-p", f"merge.join_probability:={SIMULATED_WORLD_JOIN_PROBABILITY}"]
     command += ["--in-process"] if in_process else []
     # A session of its own, so that the signal can go to its whole process group, as a
@@ -220,20 +192,6 @@ def test_mrm_run_ends_with_exit_2_when_a_node_process_refuses_its_parameters(mrm
     os.environ.setdefault("ROS_DOMAIN_ID", str(default_domain_id()))
     assert mrm(["run", "--robots", "robot1", "-p", "max_scan_rate:=-5"]) == 2
     assert "robot1 ended with exit code 2" in capsys.readouterr().err
-
-
-def test_mrm_run_gives_each_node_process_its_own_parameters_typed() -> None:
-    from multi_robot_mapper.cli.run import node_commands, node_parameters
-
-    items = ["max_scan_rate:=10", "merge_period:=2", "map_file:=/tmp/m.json"]
-    mapper, merger = node_parameters(items)
-    commands = node_commands(["r1", "r2"], ["--params-file", "p.yaml"], mapper, merger)
-    assert list(commands) == ["r1", "r2", "map_merger"]
-    shared = ["--params-file", "p.yaml"]
-    assert commands["r2"][-6:] == ["-r", "__ns:=/r2", *shared, "-p", "max_scan_rate:=10.0"]
-    merger_args = commands["map_merger"][commands["map_merger"].index("--ros-args") :]
-    own = ["-p", "merge_period:=2.0", "-p", 'map_file:="/tmp/m.json"']
-    assert merger_args == ["--ros-args", *shared, *own]
 
 
 def test_the_launch_file_parses_and_is_installed() -> None:

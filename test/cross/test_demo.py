@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 import pytest
-from test_cli import frame_segments, read_mcap
+from test_replay import frame_segments, read_mcap
 
 from multi_robot_mapper.cli.demo import DemoScenario, run_demo
 from multi_robot_mapper.io.results import read_results
@@ -24,7 +24,7 @@ def test_the_demo_places_robots_right_live_and_writes_its_files(tmp_path: Path) 
     result = run_demo(tmp_path, scenario)
     # The merger places a robot only where the join model is sure (P >= 0.99): in the
     # simulated office, whose rooms repeat, the robots' few shared metres give P 0.95-0.998
-    # (test_merging.SIMULATED_WORLD_JOIN_PROBABILITY), so a robot may stay unmerged, with its
+    # (test_link_graph.SIMULATED_WORLD_JOIN_PROBABILITY), so a robot may stay unmerged, with its
     # reason. Whatever is placed is placed right, live and at the end.
     assert result.merged and set(result.merged) <= set(result.metrics.merged_robots), result.table
     assert result.live.observer.merged() == result.merged

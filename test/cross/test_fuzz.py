@@ -40,8 +40,8 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 from test_bad_maps_node import NAMES, message
-from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
-from test_robot_mapper_node import room_scan
+from test_link_graph import SIMULATED_WORLD_JOIN_PROBABILITY
+from test_robot_mapper import room_scan
 from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.io.messages import scan_to_msg, stamp_from_seconds

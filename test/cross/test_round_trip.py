@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 from conftest import carmen_log
 from test_bags import raw_bag
-from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
+from test_link_graph import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.cli.main import main
 
@@ -101,7 +101,7 @@ def replayed_and_evaluated(capsys, tmp_path: Path, method: str) -> tuple[Path, d
     args = ("--robots", 2, "--out", bag, "--duration", 20, "--rate", 10, "--seed", 3)
     assert mrm(capsys, "simulate", *args)[0] == 0
     out = tmp_path / method
-    # 20 s in the simulated office give the right join P 0.95 (test_merging's
+    # 20 s in the simulated office give the right join P 0.95 (test_link_graph's
     # SIMULATED_WORLD_JOIN_PROBABILITY): merged at 0.9 through --set.
     bar = f"merge.join_probability={SIMULATED_WORLD_JOIN_PROBABILITY}"
     code, _, err = mrm(capsys, "replay", bag, "--out", out, "--method", method, "--set", bar)

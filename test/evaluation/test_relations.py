@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_bag_inputs import ros1_scan, scan_reading, write_ros1_bag
+from test_recordings import ros1_scan, scan_reading, write_ros1_bag
 
 from multi_robot_mapper.cli.main import main
 from multi_robot_mapper.core import se2

@@ -1,4 +1,5 @@
-"""Never lose the map: the merger's faults and services with real nodes, in-process.
+"""Never lose the map: the merger's faults with real nodes, in-process (its save and load
+services: test_saved_map_services.py).
 
 Robots here are small nodes that publish a partial map exactly as robot_mapper does
 (``partial_map`` reliable + transient local, depth 1; ``pose``), built from simulated office
@@ -11,7 +12,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterator
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +21,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
-from test_merging import in_own_frames, poses_in_own_frames, random_frames, world_runs
+from test_link_graph import in_own_frames, poses_in_own_frames, random_frames, world_runs
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.local_mapping import Keyframe
@@ -33,7 +33,6 @@ from multi_robot_mapper.io.messages import (
     seconds_from_stamp,
     stamp_from_seconds,
 )
-from multi_robot_mapper.io.saved_map import read_saved_map
 from multi_robot_mapper.ros.diagnostics import OK, STALE, WARN
 from multi_robot_mapper.ros.live import Observer
 from multi_robot_mapper.ros.map_merger import MapMerger
@@ -181,84 +180,6 @@ def assert_right_placements(merger: MapMerger, robots: list[str], tolerance: flo
         want = se2.pose_from_matrix(truth_in_reference(reference, robot.split("_session")[0]))
         assert math.hypot(got[0] - want[0], got[1] - want[1]) < tolerance, (robot, got, want)
         assert abs(math.remainder(got[2] - want[2], math.tau)) < math.radians(1.0), robot
-
-
-def test_save_and_load_services_bring_the_map_back_into_a_merger_without_robots(
-    rig: Rig, tmp_path: Path
-) -> None:
-    maps, views = office_maps()
-    map_file = tmp_path / "maps" / "global.json"
-    merger = rig.start_merger(map_file=str(map_file))
-    for name in NAMES:
-        rig.add_robot(name, maps[name], views[name])
-    assert rig.spin_until(lambda: rig.merged(*NAMES)), merger.result
-    placements = dict(merger.result.placements)
-    answer = rig.call("/save_map")
-    assert answer.success and str(map_file) in answer.message
-    saved = read_saved_map(map_file)
-    assert sorted(saved.robots) == NAMES and saved.reference == merger.result.reference
-    assert len(saved.segments) == len(merger.result.segments)
-
-    # Every robot gone, the merger restarted: load_map gives the map back and merges it.
-    for name in NAMES:
-        rig.remove_robot(name)
-    rig.stop_merger()
-    merger = rig.start_merger(map_file=str(map_file))
-    assert merger.result is None
-    answer = rig.call("/load_map")
-    assert answer.success and "alpha" in answer.message and "bravo" in answer.message
-    assert rig.spin_until(lambda: rig.merged(*NAMES))
-    # The saved map holds each robot's map and placement, not its keyframes: merged again
-    # as whole maps, the robots land within millimetres of where the keyframe graph put them.
-    for name in NAMES:
-        got, before = merger.result.placements[name], placements[name]
-        assert got is not None and before is not None
-        assert np.hypot(got[0] - before[0], got[1] - before[1]) < 0.01
-        assert abs(got[2] - before[2]) < 0.002
-    assert_right_placements(merger, NAMES)
-
-    # load_on_start does the same at start-up; a missing file is an answer, not a crash.
-    rig.stop_merger()
-    merger = rig.start_merger(map_file=str(map_file), load_on_start=True)
-    assert sorted(r for r in merger.robots if len(merger.robots[r].segments)) == NAMES
-    assert rig.spin_until(lambda: rig.merged(*NAMES))
-    rig.stop_merger()
-    rig.start_merger(map_file=str(tmp_path / "none.json"))
-    answer = rig.call("/load_map")
-    assert not answer.success and "no such saved map" in answer.message
-
-
-def test_the_merger_saves_as_it_merges_and_a_restart_publishes_the_saved_placements_at_once(
-    rig: Rig, tmp_path: Path
-) -> None:
-    maps, views = office_maps()
-    map_file = tmp_path / "on_exit.json"
-    rig.start_merger(map_file=str(map_file), save_on_shutdown=True)
-    for name in NAMES:
-        rig.add_robot(name, maps[name], views[name])
-    assert rig.spin_until(lambda: rig.merged(*NAMES))
-    assert map_file.exists()  # saved after a merge: a killed merger leaves a recent file
-    rig.stop_merger()  # and on shutdown
-    saved = read_saved_map(map_file)
-    assert all(saved.robots[n].placement is not None for n in NAMES)
-    other = next(n for n in NAMES if n != saved.reference)
-    assert 0.0 < (saved.robots[other].probability or 0.0) <= 1.0
-
-    # Started again with no robot left and no merge to come (merge_period of an hour): the
-    # saved placements are published from the file alone, each with its probability.
-    for name in NAMES:
-        rig.remove_robot(name)
-        rig.observer.frames[name].clear()
-    rig.observer.probabilities.clear()
-    merger = rig.start_merger(map_file=str(map_file), load_on_start=True, merge_period=3600.0)
-    assert rig.spin_until(lambda: all(rig.observer.frames[n] for n in NAMES), 10.0)
-    assert rig.spin_until(lambda: len(rig.observer.probabilities) == len(NAMES), 10.0)
-    assert merger.merges == 0
-    for name in NAMES:
-        got = pose_from_msg(rig.observer.frames[name][-1].pose)
-        np.testing.assert_allclose(got, saved.robots[name].placement, atol=1e-9)
-    assert rig.observer.probabilities[saved.reference] == 1.0
-    assert rig.observer.probabilities[other] == saved.robots[other].probability
 
 
 def test_a_restarted_merger_rebuilds_the_map_from_the_latched_partial_maps(rig: Rig) -> None:

@@ -22,7 +22,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
-from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
+from test_link_graph import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.simulation import LaserModel, SimulatedRobot, simulate_robots

@@ -4,7 +4,7 @@ optimised pose, fused map by map, and fused again only from the first map that c
 from __future__ import annotations
 
 import numpy as np
-from test_joint_merging import line_units
+from test_consistency import line_units
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.merging import MergeConfig, global_map

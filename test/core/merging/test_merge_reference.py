@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from test_joint_merging import drives, stranger_keyframes
+from test_joint import drives, stranger_keyframes
 
 from multi_robot_mapper.core.merging import MergeConfig
 from multi_robot_mapper.core.merging.joint import merge_joint

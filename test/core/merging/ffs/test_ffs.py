@@ -1,27 +1,23 @@
-"""Force Field Simulation (core/merging/ffs): resampling, regions of interest, the force field,
-Algorithm 1 on synthetic geometry with a known answer, and the 'ffs' merging method."""
+"""Force Field Simulation (core/merging/ffs): the force field, the chain springs and
+Algorithm 1 on synthetic geometry with a known answer (core/merging/ffs/simulation.py; the
+name test_simulation.py is core/simulation.py's), and the config. Resampling and regions of
+interest: `test_bodies.py`; the 'ffs' merging method: `test_method.py`."""
 
 from __future__ import annotations
-
-import dataclasses
-from typing import Any
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_merging import SIMULATED_WORLD_JOIN_PROBABILITY
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.config import ConfigError
 from multi_robot_mapper.core.merging.ffs import (
     FfsConfig,
-    facing_sensor,
     make_bodies,
-    resample,
     run_ffs,
 )
-from multi_robot_mapper.core.merging.ffs.bodies import corner_points, placed
+from multi_robot_mapper.core.merging.ffs.bodies import placed
 from multi_robot_mapper.core.merging.ffs.simulation import ChainSprings, force_field
 
 # A 4 m x 3 m room with an L-shaped cabinet: corners in every direction.
@@ -44,27 +40,6 @@ def room_bodies(config: FfsConfig):
     return make_bodies(sets, config.spacing, config.roi_radius, config.roi_mass)
 
 
-def test_segments_are_resampled_at_the_spacing_with_their_direction() -> None:
-    points, directions, owner = resample(np.array([[0.0, 0.0, 1.0, 0.0], [0, 0, 0, 0.25]]), 0.1)
-    assert np.bincount(owner).tolist() == [11, 4]  # ends included; 0.25 m in 3 equal steps
-    assert np.allclose(points[:11, 0], np.linspace(0.0, 1.0, 11)) and np.allclose(points[:11, 1], 0)
-    assert np.allclose(np.diff(points[11:, 1]), 0.25 / 3)
-    assert np.allclose(directions[:11], [1.0, 0.0]) and np.allclose(directions[11:], [0.0, 1.0])
-
-
-def test_regions_of_interest_are_the_room_corners() -> None:
-    square = np.array([[0, 0, 2, 0], [2, 0, 2, 2], [2, 2, 0, 2], [0, 2, 0, 0]], dtype=float)
-    points, _, owner = resample(square, 0.05)
-    inside = corner_points(square, points, owner, 0.06)
-    corners = np.array([[0, 0], [2, 0], [2, 2], [0, 2]], dtype=float)
-    near = np.hypot(*(points[:, None] - corners[None]).transpose(2, 0, 1)).min(axis=1) <= 0.06
-    assert np.array_equal(inside, near) and inside.sum() >= 8
-    # Two walls at 45 deg make no corner (FFS 3.4: 80-100 deg only).
-    slanted = np.array([[0, 0, 2, 0], [0, 0, 1.4, 1.4]], dtype=float)
-    p, _, o = resample(slanted, 0.05)
-    assert not corner_points(slanted, p, o, 0.06).any()
-
-
 def test_orthogonal_walls_do_not_attract_and_parallel_ones_pull_equally() -> None:
     config = FfsConfig()
     cross = make_bodies(
@@ -83,20 +58,6 @@ def test_orthogonal_walls_do_not_attract_and_parallel_ones_pull_equally() -> Non
     alone = make_bodies([ROOM], 0.1, 0.05, 3.0)  # one body feels no force from itself
     points, directions = placed(alone, np.zeros((1, 3)))
     assert force_field(points, directions, alone, np.zeros((1, 2)), 0.1, 3.0).pairs == 0
-
-
-def test_walls_face_their_sensor_and_back_to_back_faces_do_not_attract() -> None:
-    # A wall 2 m ahead, given either way round, runs with the sensor on its left.
-    wall = np.array([[2.0, 1.0, 2.0, -1.0], [2.0, -1.0, 2.0, 1.0]])
-    assert np.allclose(facing_sensor(wall), [[2.0, -1.0, 2.0, 1.0]] * 2)
-    # The two faces of a 0.1 m thick wall, seen from the rooms on either side: no force.
-    config = FfsConfig()
-    faces = [facing_sensor(np.array([[-1.0, 0.0, 1.0, 0.0]]) - [0, y, 0, y]) for y in (1, -1)]
-    bodies = make_bodies(faces, 0.1, 0.0, 1.0)
-    poses = np.array([[0.0, 1.0, 0.0], [0.0, -1.1, 0.0]])  # sensors 1 m either side
-    points, directions = placed(bodies, poses)
-    field = force_field(points, directions, bodies, poses[:, :2], 0.1, config.cutoff)
-    assert field.pairs > 0 and np.allclose(field.force, 0.0) and field.potential == 0.0
 
 
 def test_ffs_brings_perturbed_views_of_a_room_back() -> None:
@@ -210,109 +171,3 @@ def test_the_config_cools_down_and_says_so_when_it_would_not() -> None:
         FfsConfig(sigma_start=0.05, sigma_end=0.1)
     with pytest.raises(ConfigError, match="spacing"):
         FfsConfig(spacing=0.0)
-
-
-@pytest.fixture(scope="module")
-def office_recordings() -> dict[str, list[Any]]:
-    """Two simulated office robots' scans (every 4th), with their true poses."""
-    from multi_robot_mapper.core.pipeline import TimedLaserScan
-    from multi_robot_mapper.core.simulation import LaserModel, simulate_robots
-
-    runs = simulate_robots("office", 2, LaserModel(), seed=0, duration=20.0, overlap=0.45)
-    return {
-        f"robot{k + 1}": [
-            TimedLaserScan(float(t), scan, tuple(pose))
-            for t, scan, pose in zip(run.stamps, run.scans, run.T_world_laser, strict=True)
-        ][::4]
-        for k, run in enumerate(runs)
-    }
-
-
-def test_method_ffs_merges_simulated_robots_where_the_truth_has_them(
-    office_recordings: dict[str, list[Any]],
-) -> None:
-    # Two office robots mapped offline without odometry, merged by 'ffs': the joint graph
-    # places them, FFS moves every body; both robots' trajectories stay on the truth.
-    from multi_robot_mapper.core.extraction_config import ExtractionConfig
-    from multi_robot_mapper.core.merging import MergeConfig
-    from multi_robot_mapper.core.pipeline import run_offline
-
-    recordings = office_recordings
-    merging = MergeConfig(join_probability=SIMULATED_WORLD_JOIN_PROBABILITY)
-    out = run_offline(recordings, "ffs", ExtractionConfig(), merging=merging)
-    assert all(out.robot_frames[r] is not None for r in recordings), out.robot_frames
-    assert out.stats["merge_stats"]["ffs_iterations"] > 0
-    truth = {
-        r: {round(s.stamp, 6): s.reference_pose for s in scans} for r, scans in recordings.items()
-    }
-    stamps, poses = out.trajectories["robot1"]
-    reference = np.array([truth["robot1"][round(float(s), 6)] for s in stamps])
-    T_world_map = se2.rigid_fit(poses, reference)
-    for robot in recordings:
-        stamps, poses = out.trajectories[robot]
-        true_xy = np.array([truth[robot][round(float(s), 6)][:2] for s in stamps])
-        placed_xy = se2.transform_points(T_world_map, poses[:, :2])
-        rmse = float(np.sqrt(np.mean(np.sum((placed_xy - true_xy) ** 2, axis=1))))
-        assert rmse < 0.05, (robot, rmse)
-
-
-def test_ffs_updates_resume_where_the_last_one_stopped(
-    office_recordings: dict[str, list[Any]],
-) -> None:
-    # An update cut short (3 iterations) leaves its poses and cooling to the next, which goes
-    # on cooling from there; once settled, an update with nothing new settles at once, and
-    # one with something new starts afresh from the joint graph.
-    from multi_robot_mapper.core.extraction_config import ExtractionConfig
-    from multi_robot_mapper.core.merging import MergeConfig
-    from multi_robot_mapper.core.merging.ffs.method import FfsState, merge_ffs
-    from multi_robot_mapper.core.merging.joint import merge_joint
-    from multi_robot_mapper.core.pipeline import run_offline
-
-    local = run_offline(office_recordings, "local", ExtractionConfig())
-    plain = MergeConfig(join_probability=SIMULATED_WORLD_JOIN_PROBABILITY)
-    short = dataclasses.replace(plain, ffs=FfsConfig(max_iterations=3))
-    first = merge_ffs(local.keyframes, short, budget=0.0)
-    state = first.refinement
-    assert isinstance(state, FfsState) and set(state.keyframes) == set(first.robots)
-    # Cut short, its bodies are mid-anneal: the result keeps the joint graph's placement.
-    joint = merge_joint(local.keyframes, short, budget=0.0)
-    assert first.stats["ffs_converged"] == 0 and not state.settled
-    for robot in first.robots:
-        assert np.allclose(first.keyframe_poses[robot], joint.keyframe_poses[robot]), robot
-    assert state.sigma == pytest.approx(short.ffs.sigma_start - 3 * short.ffs.sigma_step)
-    second = merge_ffs(local.keyframes, short, previous=first, budget=0.0)
-    assert isinstance(second.refinement, FfsState)
-    assert second.refinement.sigma == pytest.approx(state.sigma - 3 * short.ffs.sigma_step)
-    settled = merge_ffs(local.keyframes, plain, budget=0.0)
-    assert settled.stats["ffs_converged"] == 1
-    again = merge_ffs(local.keyframes, plain, previous=settled, budget=0.0)
-    assert again.stats["ffs_converged"] == 1 and again.stats["ffs_iterations"] == 1
-    for robot in again.robots:
-        moved = again.keyframe_poses[robot] - settled.keyframe_poses[robot]
-        assert np.abs(moved).max() < 1e-3, robot
-    fewer = {robot: frames[:-1] for robot, frames in local.keyframes.items()}
-    fresh = merge_ffs(fewer, plain, previous=settled, budget=0.0)
-    cooling = (FfsConfig().sigma_start - FfsConfig().sigma_end) / FfsConfig().sigma_step
-    assert fresh.stats["ffs_iterations"] >= cooling
-
-
-def test_a_warm_start_carries_each_keyframe_as_the_last_simulation_corrected_it() -> None:
-    from multi_robot_mapper.core.merging.ffs.method import FfsState, warm_started
-
-    before = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.1], [2.0, 0.5, 0.2]])
-    # What FFS did to each held keyframe, in its own frame.
-    fixes = np.array([[0.01, -0.02, 0.01], [0.03, 0.0, -0.02], [-0.01, 0.02, 0.005]])
-    after = se2.compose_each(before, fixes)
-    state = FfsState({"a": np.array([0, 1, 2])}, {"a": before}, {"a": after}, 0.05, 0.6, False)
-    # Since, the graph re-placed robot a as a whole (T_move) and added its keyframe 3; robot b
-    # is new.
-    T_move = se2.matrix_from_pose(4.0, -2.0, 0.7)
-    moved = np.array([se2.pose_from_matrix(T_move @ se2.matrix_from_pose(*p)) for p in before])
-    start = np.vstack([moved, [[3.0, 1.0, 0.3]], [[5.0, 5.0, 1.0]]])
-    owners = [("a", 0), ("a", 1), ("a", 2), ("a", 3), ("b", 0)]
-    index = {"a": np.array([0, 1, 2, 3]), "b": np.array([0])}
-    warm = warm_started(state, owners, index, start)
-    expected = [se2.pose_from_matrix(T_move @ se2.matrix_from_pose(*p)) for p in after]
-    assert np.allclose(warm[:3], expected)  # each moved with its robot, its correction kept
-    assert np.allclose(warm[3], se2.compose(start[3], fixes[2]))  # 3 takes 2's, its nearest
-    assert np.allclose(warm[4], start[4])
