@@ -56,15 +56,18 @@ class SavedMapServices:
         return written
 
     def autosave(self) -> None:
-        """After a merge that left no place unmatched: save the map (``save_on_shutdown``)
-        when the robots placed changed or the last save is :data:`AUTOSAVE_PERIOD` old; a
-        failed save is a warning, the map is kept."""
+        """After a merge: save the map (``save_on_shutdown``) when the robots placed changed
+        or the last save is :data:`AUTOSAVE_PERIOD` old; a failed save is a warning, the map is
+        kept. An update that left places unmatched may lack placements it is about to make
+        (a robot placed before and not yet matched again): it is saved only when it places
+        every robot the last save did and more, so that a restart never finds fewer."""
         if not self.config.save_on_shutdown:
             return
-        if matches_pending(self.result):
-            return  # an update that left places unmatched may lack placements it will make
+        placed = _placed(self.result)
+        if matches_pending(self.result) and not placed > self._saved_placed:
+            return
         recent = time.monotonic() - self._saved_at < AUTOSAVE_PERIOD
-        if recent and _placed(self.result) == self._saved_placed:
+        if recent and placed == self._saved_placed:
             return
         try:
             self.save_map()

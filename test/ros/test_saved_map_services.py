@@ -4,8 +4,10 @@ it merges publishes the saved placements at once after a restart."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -15,6 +17,8 @@ from multi_robot_mapper.io.messages import (
     pose_from_msg,
 )
 from multi_robot_mapper.io.saved_map import read_saved_map
+from multi_robot_mapper.ros.merger_config import MapMergerConfig
+from multi_robot_mapper.ros.saved_map_services import SavedMapServices
 
 pytestmark = pytest.mark.ros
 
@@ -103,3 +107,34 @@ def test_the_merger_saves_as_it_merges_and_a_restart_publishes_the_saved_placeme
         np.testing.assert_allclose(got, saved.robots[name].placement, atol=1e-9)
     assert rig.observer.probabilities[saved.reference] == 1.0
     assert rig.observer.probabilities[other] == saved.robots[other].probability
+
+
+class _Saves(SavedMapServices):
+    """The autosave rule alone: a merger's result by hand, each save counted, not written."""
+
+    def __init__(self) -> None:
+        self.config = MapMergerConfig(save_on_shutdown=True)
+        self.result = None
+        self.saved: list[frozenset[str]] = []
+
+    def save_map(self, path: str | None = None) -> str:
+        self.saved.append(frozenset(p for p, pose in self.result.placements.items() if pose))
+        self._saved_placed, self._saved_at = self.saved[-1], time.monotonic()
+        return ""
+
+    def merged(self, placed: str, pending: int) -> None:
+        poses = {name: (0.0, 0.0, 0.0) if name in placed else None for name in "abc"}
+        self.result = SimpleNamespace(placements=poses, stats={"matches_pending": pending})
+        self.autosave()
+
+
+def test_an_update_with_places_pending_is_saved_only_when_it_places_more_than_the_file() -> None:
+    merger = _Saves()
+    merger.merged("a", pending=2)  # the first placement, places still pending: saved
+    merger.merged("ab", pending=1)  # one more robot placed: saved at once
+    merger.merged("a", pending=1)  # b not matched again yet: a restart must not lose it
+    merger.merged("ac", pending=1)  # c placed but b missing: not more than the file
+    merger.merged("ab", pending=1)  # as the file, within the period: nothing new
+    assert merger.saved == [frozenset("a"), frozenset("ab")]
+    merger.merged("a", pending=0)  # a whole merge that withdrew b: saved (its placements are final)
+    assert merger.saved[-1] == frozenset("a")
