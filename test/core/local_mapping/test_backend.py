@@ -91,16 +91,6 @@ def test_a_killed_worker_is_replaced_and_given_every_keyframe_again(drive, inlin
         hosted.stop_worker()
 
 
-def test_the_back_end_moves_to_a_worker_only_before_the_first_keyframe(drive) -> None:  # type: ignore[no-untyped-def]
-    stamps, scans = drive
-    mapper = LocalMapper()
-    _map(mapper, stamps[:3], scans[:3])
-    worker = WorkerProcess("test back end")
-    with pytest.raises(ValueError, match="before any keyframe"):
-        mapper.start_worker(worker)
-    worker.shutdown()
-
-
 def test_a_stop_does_not_wait_for_the_keyframe_in_the_worker(drive) -> None:  # type: ignore[no-untyped-def]
     stamps, scans = drive
     mapper = LocalMapper(backend=False)

@@ -18,10 +18,7 @@ from multi_robot_mapper.core.matching import (
     integrate,
 )
 from multi_robot_mapper.core.matching.confidence import is_right
-from multi_robot_mapper.core.matching.ranking import CandidateChoice, distinct_candidates
-from multi_robot_mapper.core.matching.scoring import refusal
 from multi_robot_mapper.core.scan import LaserScanData
-from multi_robot_mapper.core.segment_map import SegmentMap
 from multi_robot_mapper.core.simulation import LaserModel, simulate_scan
 from multi_robot_mapper.core.worlds import ROUTES, WORLDS
 
@@ -147,19 +144,6 @@ def test_without_refinement_the_answer_is_a_generated_hypothesis() -> None:
     rough = integrate(ROOM, moved, config)
     dx, dy, dtheta = se2.pose_from_matrix(se2.invert(T_1_2) @ rough.matrix)
     assert np.hypot(dx, dy) < 0.1 and abs(dtheta) < np.radians(1.0)
-
-
-def test_distinct_candidates_are_apart() -> None:
-    transforms = np.array(
-        [[0.0, 0.0, 0.0], [0.01, 0.05, 0.0], [0.0, 1.0, 0.0], [np.pi, 0.0, 0.0], [0.0, 1.1, 0.0]]
-    )
-    values = np.array([5.0, 4.0, 3.0, 2.0, 1.0])
-    choice = CandidateChoice(
-        CONFIG.candidate_pool, 10, CONFIG.candidate_separation, CONFIG.candidate_angle_separation
-    )
-    empty = SegmentMap.of(np.zeros((0, 4)))
-    picked = distinct_candidates(empty, empty, transforms, values, choice, refusal(CONFIG))
-    assert list(picked) == [0, 2, 3]
 
 
 def test_the_config_fields_are_documented_with_units_and_bounds() -> None:
