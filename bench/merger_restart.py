@@ -34,6 +34,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
+import shutil  # noqa: E402
 import signal  # noqa: E402
 import subprocess  # noqa: E402
 import tempfile  # noqa: E402
@@ -160,12 +161,19 @@ class Merger:
             ]
         )
         self.log_dir, self.domain, self.starts = log_dir, domain, 0
+        self.map_file = map_file
         self.nodes: NodeProcesses | None = None
 
     def start(self) -> None:
         self.starts += 1
         name = f"map_merger_{self.starts}"
         self.nodes = NodeProcesses({name: self.command}, self.domain, self.log_dir)
+
+    def keep_file(self) -> None:
+        """A copy of the map file as the stopped merger left it (``global_map_<n>.json``,
+        n the merger's start), for what a restart found."""
+        if self.map_file.is_file():
+            shutil.copy(self.map_file, self.log_dir / f"global_map_{self.starts}.json")
 
     def end(self, how: str) -> None:
         assert self.nodes is not None
@@ -191,6 +199,7 @@ def cycle(
     placed = sorted(before)
     driving = player.running()
     merger.end(how)
+    merger.keep_file()
     frames.clear()
     started = time.monotonic()
     merger.start()

@@ -79,7 +79,6 @@ from multi_robot_mapper.core.merging.occupancy import OccupancyGrid, merge_with_
 from multi_robot_mapper.io.inputs import InputError, MapLimits, pose_from_checked_msg
 from multi_robot_mapper.io.map_updates import SNAPSHOT, UPDATE
 from multi_robot_mapper.io.messages import piece_of_frame, pose_stamped
-from multi_robot_mapper.io.saved_map import SavedMapError
 from multi_robot_mapper.ros import diagnostics
 from multi_robot_mapper.ros.boundary import CallbackGuard, Rejections
 from multi_robot_mapper.ros.entry import run_node
@@ -489,11 +488,7 @@ class MapMerger(SavedMapServices, Node):
 
     def destroy_node(self) -> None:
         if self.config.save_on_shutdown:
-            try:
-                path = self.save_map()
-                self.get_logger().info(f"map saved to {path} on shutdown")
-            except SavedMapError as exc:
-                self.get_logger().error(f"map not saved on shutdown: {exc}")
+            self.save_on_exit()
         self._worker.shutdown()
         super().destroy_node()
 

@@ -75,6 +75,25 @@ class SavedMapServices:
             self.get_logger().warning(f"map not saved: {exc}")
             self._saved_at = time.monotonic()  # not retried at every merge
 
+    def save_on_exit(self) -> None:
+        """The map saved on shutdown (``save_on_shutdown``), unless the last update left
+        places unmatched and placed fewer robots than the file holds: then the file, of the
+        last save, keeps them for the next start (each robot's map comes back from its latched
+        snapshot)."""
+        placed = _placed(self.result)
+        if matches_pending(self.result) and not placed >= self._saved_placed:
+            self.get_logger().warning(
+                f"map not saved on shutdown: the last update left places unmatched and placed "
+                f"{len(placed)} of the {len(self._saved_placed)} robots {self.config.map_file} "
+                "holds; that file is kept"
+            )
+            return
+        try:
+            path = self.save_map()
+            self.get_logger().info(f"map saved to {path} on shutdown")
+        except SavedMapError as exc:
+            self.get_logger().error(f"map not saved on shutdown: {exc}")
+
     def load_map(self, path: str | None = None) -> list[str]:
         """Read a saved map (default ``map_file``) and merge its robots with the live ones;
         returns the robots loaded. Raises :class:`SavedMapError`.
@@ -89,6 +108,7 @@ class SavedMapServices:
             restored = self.result is None
             if restored:
                 self.result = result_of_saved(saved)  # its reference stays the map frame
+                self._saved_placed = _placed(self.result)  # what the file holds
             self._merged_versions = {}
             inputs = merge_inputs(self.robots)
         if restored and self.result is not None:

@@ -102,6 +102,7 @@ def test_the_merger_saves_as_it_merges_and_a_restart_publishes_the_saved_placeme
     assert rig.spin_until(lambda: all(rig.observer.frames[n] for n in NAMES), 10.0)
     assert rig.spin_until(lambda: len(rig.observer.probabilities) == len(NAMES), 10.0)
     assert merger.merges == 0
+    assert merger._saved_placed == frozenset(NAMES)  # what the file holds: kept till replaced
     for name in NAMES:
         got = pose_from_msg(rig.observer.frames[name][-1].pose)
         np.testing.assert_allclose(got, saved.robots[name].placement, atol=1e-9)
@@ -116,11 +117,15 @@ class _Saves(SavedMapServices):
         self.config = MapMergerConfig(save_on_shutdown=True)
         self.result = None
         self.saved: list[frozenset[str]] = []
+        self.logged: list[str] = []
 
     def save_map(self, path: str | None = None) -> str:
         self.saved.append(frozenset(p for p, pose in self.result.placements.items() if pose))
         self._saved_placed, self._saved_at = self.saved[-1], time.monotonic()
         return ""
+
+    def get_logger(self) -> SimpleNamespace:
+        return SimpleNamespace(warning=self.logged.append, info=self.logged.append)
 
     def merged(self, placed: str, pending: int) -> None:
         poses = {name: (0.0, 0.0, 0.0) if name in placed else None for name in "abc"}
@@ -138,3 +143,16 @@ def test_an_update_with_places_pending_is_saved_only_when_it_places_more_than_th
     assert merger.saved == [frozenset("a"), frozenset("ab")]
     merger.merged("a", pending=0)  # a whole merge that withdrew b: saved (its placements are final)
     assert merger.saved[-1] == frozenset("a")
+
+
+def test_a_restart_never_saves_fewer_placements_than_the_file_it_loaded_while_places_wait() -> None:
+    merger = _Saves()
+    merger._saved_placed = frozenset("abc")  # as load_map leaves it: the file's robots
+    merger.merged("ab", pending=3)  # c not matched again yet
+    assert merger.saved == []
+    merger.save_on_exit()  # stopped now: the file keeps c
+    assert merger.saved == [] and "that file is kept" in merger.logged[-1]
+    merger.merged("abc", pending=1)  # as many as the file: saved on exit, not before
+    assert merger.saved == []
+    merger.save_on_exit()
+    assert merger.saved == [frozenset("abc")]
