@@ -100,6 +100,7 @@ from multi_robot_mapper.ros.merger_state import (
     after_new_session,
     matches_pending,
     merge_inputs,
+    older_than_loaded,
     received_map,
     robot_statuses,
     store_partial_map,
@@ -277,6 +278,9 @@ class MapMerger(SavedMapServices, Node):
                     self._ask_snapshot(state)
                 return
             state.stream.commit(applied)
+            if older_than_loaded(state, contents):
+                self._ask_snapshot(state)  # the loaded map stays until a newer one comes
+                return
             kept = store_partial_map(
                 self.robots, name, contents, self._clock_ns(), self.config.keep_sessions
             )

@@ -63,6 +63,7 @@ class RobotState:
     stream: MapStream = dataclasses.field(default_factory=MapStream)
     request_publisher: Publisher | None = None  # asks the robot for a snapshot
     requested_ns: int | None = None  # node clock when a snapshot was last asked for
+    loaded: bool = False  # the map held came from a saved file, no newer one since
 
     @property
     def keyframes(self) -> int:
@@ -161,7 +162,23 @@ def store_partial_map(
     state.map_frame = contents.frame_id or state.map_frame
     state.heard_ns = heard_ns
     state.version += 1
+    state.loaded = False
     return kept
+
+
+def older_than_loaded(state: RobotState, contents: PartialMapContents) -> bool:
+    """Is ``contents`` a map of the session loaded from a file, but older than the loaded
+    one? (A robot's latched snapshot, made before the file was saved: merged, its smaller map
+    would withdraw placements the file's map holds.) The loaded map then stays until a newer
+    one of the session comes."""
+    return (
+        state.loaded
+        and contents.session is not None
+        and contents.session == state.session
+        and contents.stamp is not None
+        and state.map_stamp is not None
+        and stamp_key(contents.stamp) < stamp_key(state.map_stamp)
+    )
 
 
 def keep_session(
@@ -284,6 +301,7 @@ def _fill(state: RobotState, entry: SavedRobot) -> None:
     state.all_keyframes = []  # a saved map keeps no keyframes: merged as one rigid map
     state.session = entry.session
     state.map_frame = entry.map_frame
+    state.loaded = True
     state.map_stamp = (
         None
         if entry.map_stamp is None

@@ -5,9 +5,10 @@ Two robots drive the office (as in the demo). robot1 drives its whole stretch an
 (its node destroyed: no latched map left to give) before the merger stops; robot2 keeps
 driving while no merger runs, so its latched snapshot is older than the updates that went by.
 The merger saves on shutdown and loads at start-up: robot1 comes back from the file, robot2
-from its latched snapshot, then a snapshot it asks for on ``partial_map_request`` at the first
-update it cannot apply; then it follows robot2's updates. (How long that takes, with the
-merger as a process killed with SIGKILL, is ``bench/merger_restart.py``'s figure.)
+too until a snapshot newer than the file's map comes: its latched one is older (set aside), so
+the merger asks for one on ``partial_map_request``; then it follows robot2's updates. (How long
+that takes, with the merger as a process killed with SIGKILL, is ``bench/merger_restart.py``'s
+figure.)
 """
 
 from __future__ import annotations
@@ -172,9 +173,9 @@ def test_a_restarted_merger_gets_back_every_robots_map_and_placement(
         assert spin_until(team.executor, lambda: team.follows("robot2"), 30.0)
         assert spin_until(team.executor, team.merged, 60.0), merger.result
 
-        # robot2 came back through its latched snapshot, then a fresh one it was asked for.
+        # robot2 came back through a fresh snapshot it was asked for: its latched one, older
+        # than the map the file held of its session, was set aside (the file's map kept).
         mapper, state = team.mappers["robot2"], merger.robots["robot2"]
-        assert merger.rejections.of("robot2").get("update_gap", 0) >= 1
         assert mapper.snapshot_requests >= 1 and state.stream.snapshots >= 2
         # Nothing lost: every keyframe robot2 sent, at the pose sent; robot1's map unchanged;
         # no robot taken for a new session.

@@ -9,6 +9,7 @@ from multi_robot_mapper.io.messages import PartialMapContents, stamp_from_second
 from multi_robot_mapper.ros.merger_state import (
     RobotState,
     merge_inputs,
+    older_than_loaded,
     restore_saved_map,
     result_of_saved,
     saved_map_of,
@@ -103,3 +104,15 @@ def test_restoring_keeps_newer_live_maps_and_turns_other_sessions_into_earlier_o
     assert len(live["a"].segments) == 9  # the live map of the same session stays
     assert len(live["b"].segments) == 4 and live["b"].session == 7.0
     assert live["b_session1"].session == 2.0 and live["b_session1"].session_of == "b"
+
+
+def test_a_snapshot_older_than_the_loaded_map_of_its_session_leaves_the_loaded_map() -> None:
+    robots, result = merged_two()  # a: session 1.0, its map of t = 9.0
+    fresh: dict[str, RobotState] = {}
+    restore_saved_map(fresh, saved_map_of(robots, result, "map"), 2)
+    state = fresh["a"]
+    assert older_than_loaded(state, contents(1.0, 1, 2, 3.0))  # the latched snapshot of t = 3
+    assert not older_than_loaded(state, contents(1.0, 4, 8, 9.5))  # newer: replaces it
+    assert not older_than_loaded(state, contents(7.0, 1, 2, 8.0))  # another session
+    store_partial_map(fresh, "a", contents(1.0, 4, 8, 9.5), 1, 2)
+    assert not older_than_loaded(state, contents(1.0, 1, 2, 3.0))  # live maps: as they come
