@@ -13,6 +13,7 @@ import sys
 import threading
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from multi_robot_mapper.cli.interrupts import (
     InterruptLatch,
@@ -20,6 +21,9 @@ from multi_robot_mapper.cli.interrupts import (
     interrupt_received,
     raise_if_interrupted,
 )
+
+if TYPE_CHECKING:  # for annotations only: the commands import what they need as they run
+    from multi_robot_mapper.cli.demo import LiveOutcome
 
 DESCRIPTION = (
     "Multi-robot 2-D mapping from laser scans without odometry: bags in, one merged map out."
@@ -43,27 +47,12 @@ USER_ERRORS = (
 )
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
+def _print_scans(live: LiveOutcome) -> None:
+    """The demo's scans: published, received by the robot_mappers, dropped and why."""
     import numpy as np
 
-    from multi_robot_mapper.cli.common import check_limits, check_output
-    from multi_robot_mapper.cli.demo import DemoScenario, run_demo
     from multi_robot_mapper.ros.robot_mapper import SCAN_QUEUE_DEPTH
 
-    check_limits(args, "seed", "speed")
-    # Checked before the run, not after it; a folder from an earlier demo is written over
-    # (make demo runs again into demo_output).
-    check_output(Path(args.out), kind="folder", overwrite=True)
-    scenario = DemoScenario(seed=args.seed, speed=args.speed)
-    print(
-        f"mrm demo: {scenario.robots} simulated robots in the {scenario.world} world, "
-        f"{scenario.duration:g} s each, starting {scenario.stagger:g} s apart, played live at "
-        f"{scenario.speed:g}x the laser's rate (40 Hz, 1081 beams) into robot_mapper and "
-        "map_merger nodes ...",
-        flush=True,
-    )
-    result = run_demo(Path(args.out), scenario)
-    live = result.live
     sent = sum(live.play.published.values())
     received = sum(live.scans_received.values())
     late = np.asarray(live.play.late_s) * 1e3
@@ -83,6 +72,26 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             "machine could not keep up; they count as unposed below; --speed 0.5 plays at half "
             "the pace)"
         )
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from multi_robot_mapper.cli.common import check_limits, check_output
+    from multi_robot_mapper.cli.demo import DemoScenario, run_demo
+
+    check_limits(args, "seed", "speed")
+    # Checked before the run, not after it; a folder from an earlier demo is written over
+    # (make demo runs again into demo_output).
+    check_output(Path(args.out), kind="folder", overwrite=True)
+    scenario = DemoScenario(seed=args.seed, speed=args.speed)
+    print(
+        f"mrm demo: {scenario.robots} simulated robots in the {scenario.world} world, "
+        f"{scenario.duration:g} s each, starting {scenario.stagger:g} s apart, played live at "
+        f"{scenario.speed:g}x the laser's rate (40 Hz, 1081 beams) into robot_mapper and "
+        "map_merger nodes ...",
+        flush=True,
+    )
+    result = run_demo(Path(args.out), scenario)
+    _print_scans(result.live)
     print()
     print(result.table)
     print()
@@ -96,7 +105,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     wrong = [r for r in result.merged if r not in result.metrics.merged_robots]
     print(
         f"\n{merged} of {len(result.robots)} robots merged live"
-        + ("" if live.settled else " (the last maps were still being merged at the end)")
+        + ("" if result.live.settled else " (the last maps were still being merged at the end)")
         + f"; {result.wall_s:.0f} s in all"
     )
     if wrong:

@@ -198,41 +198,46 @@ class Observer(Node):
             DiagnosticArray, "/diagnostics", self._on_diagnostics, QoSProfile(depth=50)
         )
         for robot in robots:
+            self._watch(robot, poses, partial_maps)
+
+    def _watch(self, robot: str, poses: bool, partial_maps: bool) -> None:
+        """Subscribe to what the merger publishes of ``robot`` and, when asked, to its
+        own poses and partial maps."""
+        self.create_subscription(
+            PoseStamped,
+            f"/robot_frames/{robot}",
+            lambda msg, r=robot: self._on_frame(r, msg),
+            LATCHED_QOS,
+        )
+        self.create_subscription(
+            Float64,
+            f"/robot_frames/{robot}/probability",
+            lambda msg, r=robot: self.probabilities.__setitem__(r, float(msg.data)),
+            LATCHED_QOS,
+        )
+        if poses:
             self.create_subscription(
                 PoseStamped,
-                f"/robot_frames/{robot}",
-                lambda msg, r=robot: self._on_frame(r, msg),
+                f"/{robot}/pose",
+                lambda msg, r=robot: self.poses[r].append(
+                    (seconds_from_stamp(msg.header.stamp), pose_from_msg(msg.pose))
+                ),
+                POSE_QOS,
+            )
+        if partial_maps:
+            self._streams[robot] = MapStream()
+            self.create_subscription(
+                MarkerArray,
+                f"/{robot}/partial_map",
+                lambda msg, r=robot: self._on_partial_map(r, msg, SNAPSHOT),
                 LATCHED_QOS,
             )
             self.create_subscription(
-                Float64,
-                f"/robot_frames/{robot}/probability",
-                lambda msg, r=robot: self.probabilities.__setitem__(r, float(msg.data)),
-                LATCHED_QOS,
+                MarkerArray,
+                f"/{robot}/partial_map_updates",
+                lambda msg, r=robot: self._on_partial_map(r, msg, UPDATE),
+                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
             )
-            if poses:
-                self.create_subscription(
-                    PoseStamped,
-                    f"/{robot}/pose",
-                    lambda msg, r=robot: self.poses[r].append(
-                        (seconds_from_stamp(msg.header.stamp), pose_from_msg(msg.pose))
-                    ),
-                    POSE_QOS,
-                )
-            if partial_maps:
-                self._streams[robot] = MapStream()
-                self.create_subscription(
-                    MarkerArray,
-                    f"/{robot}/partial_map",
-                    lambda msg, r=robot: self._on_partial_map(r, msg, SNAPSHOT),
-                    LATCHED_QOS,
-                )
-                self.create_subscription(
-                    MarkerArray,
-                    f"/{robot}/partial_map_updates",
-                    lambda msg, r=robot: self._on_partial_map(r, msg, UPDATE),
-                    QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
-                )
 
     def _on_global_map(self, msg: MarkerArray) -> None:
         view = global_map_view(msg, time.monotonic())

@@ -173,6 +173,11 @@ class RobotMapper(Node):
         self._snapshot_asked = False
         self._snapshot_ns: int | None = None  # node clock at the last snapshot
         self.updates_published = 0
+        self._connect()
+        on_config_change(self, lambda: self.config, self._apply_config)
+
+    def _connect(self) -> None:
+        """The node's topics and timers (the module doc lists them)."""
         self._segments_pub = self.create_publisher(Marker, "scan_segments", 10)
         self._pose_pub = self.create_publisher(PoseStamped, "pose", POSE_QOS)
         self._map_pub = self.create_publisher(MarkerArray, "partial_map", PARTIAL_MAP_QOS)
@@ -195,7 +200,6 @@ class RobotMapper(Node):
         self._diagnostics_timer = self.create_timer(
             self.config.diagnostics_period, self.guard("diagnostics", self.publish_diagnostics)
         )
-        on_config_change(self, lambda: self.config, self._apply_config)
 
     @property
     def map_frame(self) -> str:
