@@ -34,6 +34,22 @@ class OrderedMerge:
     elapsed_s: float
 
 
+def _fused(
+    segments: FloatArray,
+    owner: IntArray,
+    T_map_i: FloatArray,
+    segments_i: FloatArray,
+    i: int,
+    config: MergeConfig,
+) -> tuple[FloatArray, IntArray]:
+    """The global map so far fused with map ``i`` placed by ``T_map_i`` (Amigoni Alg. 5)."""
+    moved = se2.transform_segments(T_map_i, segments_i)
+    owned = np.full(len(moved), i, dtype=np.int64)
+    return fuse_maps(
+        segments, owner, moved, owned, pair_tolerance(config.integrate), config.fusion_tolerance
+    )
+
+
 def _ordered_result(
     method: str,
     count: int,
@@ -71,15 +87,7 @@ def merge_sequential(maps: Sequence[FloatArray], config: MergeConfig | None = No
         if not result.valid:
             continue
         placed[i] = result.matrix
-        moved = se2.transform_segments(placed[i], clean[i])
-        segments, owner = fuse_maps(
-            segments,
-            owner,
-            moved,
-            np.full(len(moved), i, dtype=np.int64),
-            pair_tolerance(config.integrate),
-            config.fusion_tolerance,
-        )
+        segments, owner = _fused(segments, owner, placed[i], clean[i], i, config)
     return _ordered_result("sequential", len(clean), placed, links, segments, owner, started)
 
 
@@ -161,14 +169,6 @@ def merge_pivot(maps: Sequence[FloatArray], config: MergeConfig | None = None) -
         if not result.valid:
             continue
         placed[i] = placed[pivot] @ result.matrix  # t_1,i = t_1,pivot t_pivot,i
-        moved = se2.transform_segments(placed[i], clean[i])
-        segments, owner = fuse_maps(
-            segments,
-            owner,
-            moved,
-            np.full(len(moved), i, dtype=np.int64),
-            pair_tolerance(config.integrate),
-            config.fusion_tolerance,
-        )
+        segments, owner = _fused(segments, owner, placed[i], clean[i], i, config)
         pivot = i
     return _ordered_result("pivot", len(clean), placed, links, segments, owner, started)
