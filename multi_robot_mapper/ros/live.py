@@ -206,20 +206,20 @@ class Observer(Node):
         self.create_subscription(
             PoseStamped,
             f"/robot_frames/{robot}",
-            lambda msg, r=robot: self._on_frame(r, msg),
+            lambda msg: self._on_frame(robot, msg),
             LATCHED_QOS,
         )
         self.create_subscription(
             Float64,
             f"/robot_frames/{robot}/probability",
-            lambda msg, r=robot: self.probabilities.__setitem__(r, float(msg.data)),
+            lambda msg: self.probabilities.__setitem__(robot, float(msg.data)),
             LATCHED_QOS,
         )
         if poses:
             self.create_subscription(
                 PoseStamped,
                 f"/{robot}/pose",
-                lambda msg, r=robot: self.poses[r].append(
+                lambda msg: self.poses[robot].append(
                     (seconds_from_stamp(msg.header.stamp), pose_from_msg(msg.pose))
                 ),
                 POSE_QOS,
@@ -229,13 +229,13 @@ class Observer(Node):
             self.create_subscription(
                 MarkerArray,
                 f"/{robot}/partial_map",
-                lambda msg, r=robot: self._on_partial_map(r, msg, SNAPSHOT),
+                lambda msg: self._on_partial_map(robot, msg, SNAPSHOT),
                 LATCHED_QOS,
             )
             self.create_subscription(
                 MarkerArray,
                 f"/{robot}/partial_map_updates",
-                lambda msg, r=robot: self._on_partial_map(r, msg, UPDATE),
+                lambda msg: self._on_partial_map(robot, msg, UPDATE),
                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
             )
 

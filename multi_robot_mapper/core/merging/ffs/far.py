@@ -228,11 +228,7 @@ def joint_step(
     flat[u, v] = sums
     flat[v, u] = sums
     full = flat.reshape(6, 6, count, count)  # [u, v, owner, other]
-    between = full[:3, 3:].transpose(2, 0, 3, 1).reshape(3 * count, 3 * count)
-    matrix = between + between.T
     own = full[:3, :3].sum(axis=3) + full[3:, 3:].sum(axis=2)  # (3, 3, K) on the diagonal
-    index = np.arange(count)
-    matrix.reshape(count, 3, count, 3)[index, :, index, :] += own.transpose(2, 0, 1)
     gradient = np.zeros(3 * count)
     for x, body in enumerate((pulls.owner, pulls.other)):
         for c in range(3):
@@ -243,6 +239,11 @@ def joint_step(
         blocks = blocks + np.eye(3)[None] * (_DAMPING * diagonal + _FLOOR)[:, None, :]
         step = -np.linalg.solve(blocks, gradient.reshape(count, 3, 1))[:, :, 0]
         return np.where(free[:, None], step, 0.0)
+    # The joint system only when it is solved: the blocks between bodies, then their own.
+    between = full[:3, 3:].transpose(2, 0, 3, 1).reshape(3 * count, 3 * count)
+    matrix = between + between.T
+    index = np.arange(count)
+    matrix.reshape(count, 3, count, 3)[index, :, index, :] += own.transpose(2, 0, 1)
     moving = np.repeat(free, 3)
     system = matrix[np.ix_(moving, moving)]
     system += np.diag(_DAMPING * np.diag(system) + _FLOOR)
