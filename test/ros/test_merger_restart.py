@@ -174,9 +174,11 @@ def test_a_restarted_merger_gets_back_every_robots_map_and_placement(
         assert spin_until(team.executor, team.merged, 60.0), merger.result
 
         # robot2 came back through a fresh snapshot it was asked for: its latched one, older
-        # than the map the file held of its session, was set aside (the file's map kept).
+        # than the map the file held of its session, was set aside (the file's map kept), or
+        # never came: an update can reach the merger first (a gap: a snapshot asked for), and
+        # the fresh snapshot then replaces the latched one before its subscription matches.
         mapper, state = team.mappers["robot2"], merger.robots["robot2"]
-        assert mapper.snapshot_requests >= 1 and state.stream.snapshots >= 2
+        assert mapper.snapshot_requests >= 1 and state.stream.snapshots >= 1
         # Nothing lost: every keyframe robot2 sent, at the pose sent; robot1's map unchanged;
         # no robot taken for a new session.
         sent = mapper.planner.sent
