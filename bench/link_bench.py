@@ -162,8 +162,9 @@ def main() -> int:
 def updates(cases: list[tuple[str, int]], args: argparse.Namespace, config: MergeConfig) -> None:
     """The node's regime: every ``--every`` seconds of log, the keyframes made so far (at
     their final poses in their pieces) merged with the previous update, place matching within
-    ``update_budget``; then updates with nothing new until no match is pending. Per case: the
-    updates' times (median, 90th percentile, largest), their count, and what the last placed."""
+    ``update_budget``; then updates with nothing new until no match or verdict is pending. Per
+    case: the updates' times (median, 90th percentile, largest), their count, and what the
+    last placed."""
     from multi_robot_mapper.core.merging.joint import merge_joint
 
     for name, k in cases:
@@ -186,7 +187,10 @@ def updates(cases: list[tuple[str, int]], args: argparse.Namespace, config: Merg
             began = time.perf_counter()
             result = merge_joint(shown, config, previous=result)
             times.append(time.perf_counter() - began)
-            if clock >= stop and result.stats["matches_pending"] == 0:
+            if (
+                clock >= stop
+                and not result.stats["matches_pending"] + result.stats["verdicts_pending"]
+            ):
                 break
         keyframes = sum(len(frames) for frames in local.keyframes.values())
         spread = np.percentile(times, [50, 90, 100])

@@ -212,10 +212,10 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
     """The node's regime on a reference-built cut: the robots drive at once (each run's time
     counted from its own first scan), and every ``every`` seconds the keyframes made so far
     are merged with the previous update within ``update_budget``; then updates with nothing
-    new until no match is pending. One line: updates, their time (median, 90th and 95th
-    percentiles, largest), the largest part not spent matching, the updates until every robot
-    was placed (and stayed so), robots placed at the end, keyframes; then the CPU seconds per
-    update (median, p90, p95, max) and each stage's median time."""
+    new until no match and no verdict is pending. One line: updates, their time (median, 90th
+    and 95th percentiles, largest), the largest part not spent matching, the updates until
+    every robot was placed (and stayed so), robots placed at the end, keyframes; then the CPU
+    seconds per update (median, p90, p95, max) and each stage's median time."""
     from multi_robot_mapper.core.merging.joint import merge_joint
 
     path = carmen_log(name)
@@ -249,7 +249,7 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
             placed_since = None
         elif placed_since is None:
             placed_since = len(times)
-        if clock >= stop and result.stats["matches_pending"] == 0:
+        if clock >= stop and not result.stats["matches_pending"] + result.stats["verdicts_pending"]:
             break
     spread = np.percentile(times, [50, 90, 95, 100])
     count = sum(len(k) for k in keyframes.values())

@@ -98,8 +98,8 @@ from multi_robot_mapper.ros.merger_state import (
     MergeInputs,
     RobotState,
     after_new_session,
-    matches_pending,
     merge_inputs,
+    merge_pending,
     older_than_loaded,
     received_map,
     robot_statuses,
@@ -335,7 +335,7 @@ class MapMerger(SavedMapServices, Node):
             sessions = len(self._new_sessions)
         merged = False
         # A merge update matches places within its time budget: while some wait, merge again.
-        pending = matches_pending(self.result)
+        pending = merge_pending(self.result)
         if inputs.maps and (inputs.versions != self._merged_versions or pending):
             reference = config.merge.reference
             if reference and reference not in inputs.maps:
@@ -426,11 +426,12 @@ class MapMerger(SavedMapServices, Node):
 
     def up_to_date(self) -> bool:
         """Every partial map received so far is in the last merge (and there was one), and
-        that merge left no place unmatched (an update matches places within its budget)."""
+        that merge left no place unmatched and no pair unjudged (an update works within its
+        budget)."""
         with self._lock:
             versions = merge_inputs(self.robots).versions
         result = self.result
-        pending = matches_pending(result)
+        pending = merge_pending(result)
         return bool(versions) and versions == self._merged_versions and not pending
 
     def _merge_without_new_maps(

@@ -310,10 +310,13 @@ def _fill(state: RobotState, entry: SavedRobot) -> None:
     state.version += 1
 
 
-def matches_pending(result: MergeResult | None) -> bool:
-    """Did the merge update that gave ``result`` leave places unmatched (its time budget
-    spent)? Then the next update goes on matching, and its placements are not final."""
-    return result is not None and result.stats.get("matches_pending", 0) > 0
+def merge_pending(result: MergeResult | None) -> bool:
+    """Did the merge update that gave ``result`` leave places unmatched or pairs of maps
+    unjudged (its time budget spent)? Then the next update goes on, and its placements are
+    not final."""
+    if result is None:
+        return False
+    return result.stats.get("matches_pending", 0) + result.stats.get("verdicts_pending", 0) > 0
 
 
 def result_of_saved(saved: SavedMap) -> MergeResult:

@@ -17,8 +17,8 @@ from multi_robot_mapper.ros.merger_config import MapMergerConfig
 from multi_robot_mapper.ros.merger_state import (
     MergeInputs,
     RobotState,
-    matches_pending,
     merge_inputs,
+    merge_pending,
     restore_saved_map,
     result_of_saved,
     saved_map_of,
@@ -64,7 +64,7 @@ class SavedMapServices:
         if not self.config.save_on_shutdown:
             return
         placed = _placed(self.result)
-        if matches_pending(self.result) and not placed > self._saved_placed:
+        if merge_pending(self.result) and not placed > self._saved_placed:
             return
         recent = time.monotonic() - self._saved_at < AUTOSAVE_PERIOD
         if recent and placed == self._saved_placed:
@@ -81,7 +81,7 @@ class SavedMapServices:
         last save, keeps them for the next start (each robot's map comes back from its latched
         snapshot)."""
         placed = _placed(self.result)
-        if matches_pending(self.result) and not placed >= self._saved_placed:
+        if merge_pending(self.result) and not placed >= self._saved_placed:
             self.get_logger().warning(
                 f"map not saved on shutdown: the last update left places unmatched and placed "
                 f"{len(placed)} of the {len(self._saved_placed)} robots {self.config.map_file} "

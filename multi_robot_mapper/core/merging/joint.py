@@ -40,7 +40,7 @@ import dataclasses
 import time
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -56,18 +56,13 @@ from multi_robot_mapper.core.merging.consistency import (
     Accepted,
     PairVerdict,
     accept_pairs,
-    consistent_set,
-    seen_through_near,
 )
-from multi_robot_mapper.core.merging.free_space import MapViews
 from multi_robot_mapper.core.merging.global_map import FusionCache, fuse_keyframes
 from multi_robot_mapper.core.merging.joint_graph import Solution, graph_model, solved
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.motion import robot_reaches
 from multi_robot_mapper.core.merging.pair_evidence import (
-    PairEvidence,
     group_conflict,
-    pair_evidence,
 )
 from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
@@ -76,7 +71,6 @@ from multi_robot_mapper.core.merging.place_matching import (
     MatchRecord,
     Places,
     Targets,
-    cached,
     content_digest,
     match_places,
     target_of,
@@ -84,6 +78,7 @@ from multi_robot_mapper.core.merging.place_matching import (
 from multi_robot_mapper.core.merging.placement_paths import chain_probabilities
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey, units_of
 from multi_robot_mapper.core.merging.unmerged import unmerged_reason
+from multi_robot_mapper.core.merging.verdicts import Judged, judge_pairs
 from multi_robot_mapper.core.se2 import Pose
 
 FloatArray = NDArray[np.float64]
@@ -98,19 +93,19 @@ class JointState:
 
     matches: dict[MatchKey, MatchRecord] = dataclasses.field(default_factory=dict)
     links: list[LinkCandidate] = dataclasses.field(default_factory=list)  # in the graph
-    # Seconds the rest of an update (consistency, graph, fusion) took the last time a map
-    # changed, and every map's content then: what the next update's matching leaves room for.
+    # Seconds the rest of an update (verdicts, graph, fusion) and its tail (graph, fusion)
+    # took the last time a map changed, and every map's content then: what the next update's
+    # matching and verdicts leave room for.
     rest_s: float = 0.0
+    tail_s: float = 0.0
     contents: dict[UnitKey, str] = dataclasses.field(default_factory=dict)
-    # Each pair's verdict, keyed by what it was made from: most updates change one robot's
-    # map, and the pairs without it (21 of 28 with 8 robots) keep their verdicts.
-    verdicts: dict[Any, PairVerdict] = dataclasses.field(default_factory=dict)
+    # Each pair's verdict and what it was made from (verdicts.judge_pairs).
+    judged: Judged = dataclasses.field(default_factory=Judged)
     # The graph's solution and what it was solved from: an update that brought no change to
     # the maps joined or their links (the node's retries) gets the same poses.
     solution: tuple[Any, Solution] | None = None
-    # Each map's intra-map edges and each set's walls in free space, per content.
+    # Each map's intra-map edges, per content.
     intra: OrderedDict[Any, Any] = dataclasses.field(default_factory=OrderedDict)
-    seen: OrderedDict[Any, tuple[float, float]] = dataclasses.field(default_factory=OrderedDict)
     # Each map as a place-matching target, and its places, per content (place_matching).
     targets: Targets = dataclasses.field(default_factory=Targets)
     places: Places = dataclasses.field(default_factory=Places)
@@ -143,17 +138,27 @@ def merge_joint(
         previous.state if previous is not None and isinstance(previous.state, JointState) else None
     )
     new_state = _next_state(state)
+    budget = config.update_budget if budget is None else budget
     new_state.matches, counts = match_places(
         units,
         config,
         state.matches if state is not None else {},
-        _matching_budget(config.update_budget if budget is None else budget, state),
+        _matching_budget(budget, state),
         (new_state.targets, new_state.places),
     )
-    matches = new_state.matches
     matched = time.perf_counter()
     model = model if model is not None else installed_model()
-    verdicts = _verdicts(units, matches, config, model, state, new_state)
+    deadline = started + budget - (state.tail_s if state is not None else 0.0) if budget else None
+    verdicts, new_state.judged = judge_pairs(
+        units,
+        new_state.matches,
+        config,
+        model,
+        new_state.targets,
+        state.judged if state is not None else None,
+        deadline,
+    )
+    counts["verdicts_pending"] = new_state.judged.pending
     accepted = _accepted_pairs(units, verdicts, config, model, new_state.targets)
     checked = time.perf_counter()
     last = None if previous is None else previous.reference
@@ -221,7 +226,7 @@ def _next_state(state: JointState | None) -> JointState:
     new_state = JointState()
     if state is not None:
         new_state.targets, new_state.places = state.targets, state.places
-        new_state.intra, new_state.seen = state.intra, state.seen
+        new_state.intra = state.intra
         new_state.fusion = state.fusion
     return new_state
 
@@ -240,10 +245,12 @@ def _finish_update(
     consistency, the graph and the fusion ended)."""
     started, matched, checked, optimised, finished = times
     contents = {key: content_digest(unit) for key, unit in units.items()}
-    rest = finished - matched
+    rest, tail = finished - matched, finished - checked
     if state is not None and state.contents == contents:
-        rest = state.rest_s  # nothing changed: this update says nothing of a changing one
-    new_state.links, new_state.rest_s, new_state.contents = solution.accepted, rest, contents
+        # nothing changed: this update says nothing of a changing one
+        rest, tail = state.rest_s, state.tail_s
+    new_state.links, new_state.contents = solution.accepted, contents
+    new_state.rest_s, new_state.tail_s = rest, tail
     result.state = new_state
     result.timings = {
         "matching_s": matched - started,
@@ -256,86 +263,19 @@ def _finish_update(
 
 def _matching_budget(budget: float | None, state: JointState | None) -> float | None:
     """Seconds of place matching in an update of ``budget`` seconds (0 or None: no limit):
-    room is left for the rest of the update (consistency, graph, fusion) as long as it took
-    the last time a map changed (``JointState.rest_s``), so that an update takes about
-    ``budget`` in all; at least one match is made."""
+    room is left for the rest of the update (verdicts, graph, fusion) as long as it took the
+    last time a map changed (``JointState.rest_s``), so that an update takes about ``budget``
+    in all, but at least half of what the graph and fusion leave (``tail_s``: the verdicts
+    wait their turn too, :func:`~core.merging.verdicts.judge_pairs`); at least one match is
+    made."""
     if not budget:
         return budget
-    rest = 0.0 if state is None else state.rest_s
-    return max(budget - rest, 1e-6)
+    if state is None:
+        return budget
+    return max(budget - state.rest_s, 0.5 * (budget - state.tail_s), 1e-6)
 
 
-# --- links ----------------------------------------------------------------------------------
-
-
-def _verdicts(
-    units: Mapping[UnitKey, MapUnit],
-    records: Mapping[MatchKey, MatchRecord],
-    config: MergeConfig,
-    model: LogisticModel,
-    state: JointState | None,
-    new_state: JointState,
-) -> dict[tuple[UnitKey, UnitKey], PairVerdict]:
-    """Every pair of maps' consistent set of links (candidates of keyframes that still
-    exist), weighed (:func:`~core.merging.consistency.consistent_set`); a pair whose maps and
-    candidates are those of the last update keeps its verdict (``state``)."""
-    by_pair: dict[tuple[UnitKey, UnitKey], list[LinkCandidate]] = {}
-    for (source, _, target), record in records.items():
-        if source not in units or target not in units:
-            continue
-        for candidate in record.candidates:
-            if not (
-                _has(units[source], candidate.centre) and _has(units[target], candidate.keyframe)
-            ):
-                continue
-            pair = (min(source, target), max(source, target))
-            by_pair.setdefault(pair, []).append(candidate)
-
-    def views_of(key: UnitKey) -> MapViews | None:
-        return target_of(units[key], config, new_state.targets).views
-
-    def seen_through(links: Sequence[LinkCandidate]) -> tuple[float, float]:
-        # The same set on the same maps from one update to the next: measured once.
-        members = tuple(
-            sorted((c.source, c.centre, c.target, c.keyframe, c.T_keyframe_centre) for c in links)
-        )
-        maps = tuple(sorted({c.source for c in links} | {c.target for c in links}))
-        key = (maps, tuple(content_digest(units[m]) for m in maps), members, config)
-        return cast(
-            tuple[float, float],
-            cached(new_state.seen, key, lambda: seen_through_near(links, units, views_of, config)),
-        )
-
-    def evidence_of(links: Sequence[LinkCandidate], T_first_second: FloatArray) -> PairEvidence:
-        maps = (min(links[0].source, links[0].target), max(links[0].source, links[0].target))
-        targets = {key: target_of(units[key], config, new_state.targets) for key in maps}
-        return pair_evidence(maps, links, T_first_second, units, targets, config)
-
-    digests = {key: content_digest(unit) for key, unit in units.items()}
-    last = state.verdicts if state is not None else {}
-    verdicts: dict[tuple[UnitKey, UnitKey], PairVerdict] = {}
-    for pair, found in by_pair.items():
-        key = (
-            pair,
-            digests[pair[0]],
-            digests[pair[1]],
-            tuple(c.identity() for c in found),
-            config,
-            model,
-        )
-        verdict = last.get(key)
-        if verdict is None:
-            verdict = consistent_set(pair, found, units, config, seen_through, evidence_of, model)
-        verdicts[pair] = new_state.verdicts[key] = verdict
-    return verdicts
-
-
-def _has(unit: MapUnit, keyframe: int) -> bool:
-    row = int(np.searchsorted(unit.index, keyframe))
-    return row < len(unit.index) and int(unit.index[row]) == keyframe
-
-
-# --- the graph ----------------------------------------------------------------------------
+# --- the reference ------------------------------------------------------------------------
 
 
 def _reference(

@@ -213,11 +213,14 @@ def test_what_an_update_keeps_from_the_last_never_changes_its_result() -> None:
 def test_an_update_takes_about_its_budget_in_all() -> None:
     from multi_robot_mapper.core.merging.joint import JointState, _matching_budget
 
-    # The rest of the last update that changed a map took 0.3 s: matching gets the remainder.
-    last = JointState(rest_s=0.3)
+    # The rest of the last update that changed a map took 0.3 s, 0.1 s of it the graph and
+    # the fusion: matching gets the remainder, but at least half of what the graph and fusion
+    # leave (the verdicts wait their turn too), and one match (match_places makes one).
+    last = JointState(rest_s=0.3, tail_s=0.1)
     assert _matching_budget(1.0, last) == pytest.approx(0.7)
+    assert _matching_budget(0.4, last) == pytest.approx(0.15)
     assert _matching_budget(1.0, None) == 1.0  # the first update: nothing known of the rest
-    assert 0.0 < _matching_budget(0.2, last) < 1e-3  # one match (match_places makes one)
+    assert 0.0 < _matching_budget(0.05, last) < 1e-3
     assert _matching_budget(0.0, last) == 0.0 and _matching_budget(None, last) is None
     # An update with nothing new keeps the estimate of the last one that changed a map.
     _, corridors = drives("corridors", 2)
@@ -229,8 +232,12 @@ def test_an_update_takes_about_its_budget_in_all() -> None:
     assert first.state.rest_s == pytest.approx(
         first.timings["total_s"] - first.timings["matching_s"], abs=1e-3
     )
+    assert first.state.tail_s == pytest.approx(
+        first.timings["graph_s"] + first.timings["fusion_s"], abs=1e-3
+    )
     again = merge_joint(keyframes, CONFIG, previous=first, budget=0.0)
     assert isinstance(again.state, JointState) and again.state.rest_s == first.state.rest_s
+    assert again.state.tail_s == first.state.tail_s
 
 
 def test_robots_whose_overlap_ends_one_map_and_starts_the_next_are_merged() -> None:

@@ -58,7 +58,9 @@ def test_two_mergers_in_one_process_share_nothing() -> None:
         one.places.index[k] is not two.places.index[k]
         for k in one.places.index.keys() & two.places.index.keys()
     )
-    kept = ("targets", "places", "intra", "seen", "verdicts", "matches")
+    kept = ("targets", "places", "intra", "judged", "matches")
     for name in kept:
         assert getattr(one, name) is not getattr(two, name), name
+    for name in ("by_key", "latest", "seen", "evidence"):
+        assert getattr(one.judged, name) is not getattr(two.judged, name), name
     assert one.fusion is not two.fusion
