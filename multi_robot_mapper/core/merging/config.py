@@ -289,9 +289,11 @@ class MergeConfig:
     update_budget: float = param(
         1.0,
         unit="s",
-        doc="seconds a merge update may take in the node (a replay matches everything): "
-        "place matching gets what the rest of the last update left, the places not matched "
-        "wait for the next update, new places first; 0: no limit",
+        doc="seconds a merge update may take in the node (a replay matches and judges "
+        "everything): place matching, then the verdicts on pairs of maps, get what the graph "
+        "and fusion of the last update left; places not matched and pairs not judged again "
+        "wait for the next update (new places, never-judged pairs first; a waiting pair keeps "
+        "its last verdict); 0: no limit",
         minimum=0.0,
         maximum=3600.0,
         tune="more with more robots or a slow computer; 0: every place matched each update (slow)",
