@@ -57,7 +57,7 @@ from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: 
 from multi_robot_mapper.core.fusion import fuse  # noqa: E402
 from multi_robot_mapper.core.matching import IntegrateConfig  # noqa: E402
 from multi_robot_mapper.core.matching.scoring import pair_tolerance  # noqa: E402
-from multi_robot_mapper.core.merging import MergeConfig, longest, merge  # noqa: E402
+from multi_robot_mapper.core.merging import MergeConfig, MergeResult, longest, merge  # noqa: E402
 from multi_robot_mapper.io.carmen import CarmenScan, carmen_scan_data, read_carmen  # noqa: E402
 
 
@@ -178,13 +178,10 @@ def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> No
             update_floor = live.timings["total_s"] - live.timings["matching_s"]
     assert result.reference is not None
     T_map_world = se2.invert(frames[result.reference])
-    worst = worst_keyframe = 0.0
+    worst, worst_keyframe = worst_placement(result, frames), 0.0
     for robot, pose in result.placements.items():
         if pose is None:
             continue
-        truth = T_map_world @ frames[robot]
-        dx, dy, _ = se2.pose_from_matrix(se2.invert(truth) @ se2.matrix_from_pose(*pose))
-        worst = max(worst, float(np.hypot(dx, dy)))
         for index, placed in zip(
             result.keyframe_index[robot], result.keyframe_poses[robot], strict=True
         ):
@@ -208,6 +205,21 @@ def split_joint(name: str, robots: int, overlap: int, config: MergeConfig) -> No
     )
 
 
+def worst_placement(result: MergeResult, frames: dict[str, np.ndarray]) -> float:
+    """Metres between each placed robot's map frame and where the reference puts it (the
+    merge's reference robot's frame at its reference pose), the worst; 0 when none placed."""
+    if result.reference is None:
+        return 0.0
+    T_map_world = se2.invert(frames[result.reference])
+    worst = 0.0
+    for robot, pose in result.placements.items():
+        if pose is not None:
+            truth = T_map_world @ frames[robot]
+            dx, dy, _ = se2.pose_from_matrix(se2.invert(truth) @ se2.matrix_from_pose(*pose))
+            worst = max(worst, float(np.hypot(dx, dy)))
+    return worst
+
+
 def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every: float) -> None:
     """The node's regime on a reference-built cut: the robots drive at once (each run's time
     counted from its own first scan), and every ``every`` seconds the keyframes made so far
@@ -222,9 +234,9 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
     if not path.is_file():
         print(f"{name}: skipped, {path} not found")
         return
-    _, keyframes = joint_cut(list(read_carmen(path)), robots, overlap)
-    start = {robot: frames[0].stamp for robot, frames in keyframes.items()}
-    stop = max(frames[-1].stamp - start[robot] for robot, frames in keyframes.items())
+    frames, keyframes = joint_cut(list(read_carmen(path)), robots, overlap)
+    start = {robot: kfs[0].stamp for robot, kfs in keyframes.items()}
+    stop = max(kfs[-1].stamp - start[robot] for robot, kfs in keyframes.items())
     times: list[float] = []
     cpus: list[float] = []  # CPU seconds per update: the figure to compare on a loaded machine
     stages: list[list[float]] = []
@@ -232,11 +244,12 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
     placed_since = None
     result = None
     clock = 0.0
+    worst, off = 0.0, 0  # the worst placement of any update, the updates placing one > 0.30 m off
     while True:
         clock = min(clock + every, stop)
         shown = {
-            robot: [kf for kf in frames if kf.stamp - start[robot] <= clock]
-            for robot, frames in keyframes.items()
+            robot: [kf for kf in kfs if kf.stamp - start[robot] <= clock]
+            for robot, kfs in keyframes.items()
         }
         began, cpu = time.perf_counter(), time.process_time()
         result = merge_joint({r: f for r, f in shown.items() if f}, config, previous=result)
@@ -244,6 +257,8 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
         cpus.append(time.process_time() - cpu)
         stages.append([result.timings[f"{stage}_s"] for stage in STAGES])
         rest = max(rest, result.timings["total_s"] - result.timings["matching_s"])
+        error = worst_placement(result, frames)
+        worst, off = max(worst, error), off + (error > 0.30)
         placed = sum(pose is not None for pose in result.placements.values())
         if placed < robots:
             placed_since = None
@@ -262,6 +277,11 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
     print(
         "  CPU s per update (median, p90, p95, max): "
         + ", ".join(f"{v:.2f}" for v in np.percentile(cpus, [50, 90, 95, 100])),
+        flush=True,
+    )
+    print(
+        f"  placements of every update: worst {worst * 100:.1f} cm from the reference; "
+        f"{off} of {len(times)} updates placed a robot more than 0.30 m off",
         flush=True,
     )
     median = np.median(np.array(stages), axis=0)
