@@ -64,3 +64,23 @@ def test_two_mergers_in_one_process_share_nothing() -> None:
     for name in ("by_key", "latest", "seen", "evidence"):
         assert getattr(one.judged, name) is not getattr(two.judged, name), name
     assert one.fusion is not two.fusion
+
+
+def test_an_update_weighs_each_join_of_groups_once_per_maps_and_placements(monkeypatch) -> None:
+    # A join of groups is weighed with its walls in free space on every map of both groups
+    # (group_conflict); an update that changed nothing the join is made of takes the weight
+    # the last update measured, and gives the same merge.
+    from test_verdicts import three_robots
+
+    from multi_robot_mapper.core.merging import joint
+
+    keyframes, first = three_robots()
+    assert state_of(first).conflicts, "three robots in one group: joins were weighed"
+
+    def never(*_: object) -> float:
+        raise AssertionError("a join weighed again on the same maps and placements")
+
+    monkeypatch.setattr(joint, "group_conflict", never)
+    again = merge_joint(keyframes, CONFIG, previous=first, budget=0.0)
+    assert state_of(again).conflicts is state_of(first).conflicts
+    assert again.placements == first.placements
