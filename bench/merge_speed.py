@@ -38,6 +38,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
+import cProfile  # noqa: E402
 import dataclasses  # noqa: E402
 import time  # noqa: E402
 
@@ -220,14 +221,22 @@ def worst_placement(result: MergeResult, frames: dict[str, np.ndarray]) -> float
     return worst
 
 
-def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every: float) -> None:
+def live_joint(
+    name: str,
+    robots: int,
+    overlap: int,
+    config: MergeConfig,
+    every: float,
+    profile: str | None = None,
+) -> None:
     """The node's regime on a reference-built cut: the robots drive at once (each run's time
     counted from its own first scan), and every ``every`` seconds the keyframes made so far
     are merged with the previous update within ``update_budget``; then updates with nothing
     new until no match and no verdict is pending. One line: updates, their time (median, 90th
     and 95th percentiles, largest), the largest part not spent matching, the updates until
     every robot was placed (and stayed so), robots placed at the end, keyframes; then the CPU
-    seconds per update (median, p90, p95, max) and each stage's median time."""
+    seconds per update (median, p90, p95, max) and each stage's median time. ``profile``: a
+    file for cProfile's statistics of every update (``python -m pstats FILE``)."""
     from multi_robot_mapper.core.merging.joint import merge_joint
 
     path = carmen_log(name)
@@ -245,6 +254,7 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
     result = None
     clock = 0.0
     worst, off = 0.0, 0  # the worst placement of any update, the updates placing one > 0.30 m off
+    profiler = cProfile.Profile() if profile else None
     while True:
         clock = min(clock + every, stop)
         shown = {
@@ -252,7 +262,11 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
             for robot, kfs in keyframes.items()
         }
         began, cpu = time.perf_counter(), time.process_time()
+        if profiler is not None:
+            profiler.enable()
         result = merge_joint({r: f for r, f in shown.items() if f}, config, previous=result)
+        if profiler is not None:
+            profiler.disable()
         times.append(time.perf_counter() - began)
         cpus.append(time.process_time() - cpu)
         stages.append([result.timings[f"{stage}_s"] for stage in STAGES])
@@ -266,6 +280,8 @@ def live_joint(name: str, robots: int, overlap: int, config: MergeConfig, every:
             placed_since = len(times)
         if clock >= stop and not result.stats["matches_pending"] + result.stats["verdicts_pending"]:
             break
+    if profiler is not None and profile:
+        profiler.dump_stats(profile)
     spread = np.percentile(times, [50, 90, 95, 100])
     count = sum(len(k) for k in keyframes.values())
     print(
@@ -344,6 +360,9 @@ def main() -> None:
         "median | p90 | max (s) | largest part not matching (s) | updates until all placed | "
         "placed | keyframes |",
     )
+    parser.add_argument(
+        "--profile", metavar="FILE", help="with --live: cProfile statistics of every update"
+    )
     parser.add_argument("--logs", nargs="*", default=["intel", "aces", "fhw", "csail"])
     parser.add_argument(
         "--no-views",
@@ -357,7 +376,7 @@ def main() -> None:
         for name in args.logs:
             for robots in args.split:
                 if args.joint and args.live:
-                    live_joint(name, robots, args.overlap, base, args.live)
+                    live_joint(name, robots, args.overlap, base, args.live, args.profile)
                 elif args.joint:
                     split_joint(name, robots, args.overlap, base)
                 else:
