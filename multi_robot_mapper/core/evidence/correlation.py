@@ -141,12 +141,20 @@ class _Grid:
     def nearest(self, raster: FloatArray, points: FloatArray) -> FloatArray:
         """``raster`` at the points' nearest cells (0 outside the grid), a block of points at
         a time (as :meth:`bilinear`)."""
-        out = np.zeros(len(points))
+        out = np.empty(len(points))
         for start in range(0, len(points), _READ_BLOCK):
             block = slice(start, start + _READ_BLOCK)
-            u = np.rint(self.coordinates(points[block])).astype(np.int64)
-            inside = (u[0] >= 0) & (u[1] >= 0) & (u[0] < self.shape[0]) & (u[1] < self.shape[1])
-            out[block][inside] = raster[u[0, inside], u[1, inside]]
+            out[block] = self.nearest_at(raster, self.coordinates(points[block]))
+        return out
+
+    def nearest_at(self, raster: FloatArray, u: FloatArray) -> FloatArray:
+        """``raster`` at the nearest cells of the (2, P) fractional cell indices ``u`` (0
+        outside the grid)."""
+        cells = np.rint(u).astype(np.int64)
+        inside = (cells[0] >= 0) & (cells[1] >= 0)
+        inside &= (cells[0] < self.shape[0]) & (cells[1] < self.shape[1])
+        out = np.zeros(u.shape[1])
+        out[inside] = raster[cells[0, inside], cells[1, inside]]
         return out
 
     def bilinear(self, layers: FloatArray, points: FloatArray) -> FloatArray:
@@ -482,15 +490,18 @@ def score_bound(
     grid, highest = rasters_a.grid, rasters_a.highest
     flat = highest.reshape(-1, highest.shape[2])
     read = np.empty((flat.shape[1], len(points)))
+    free = np.empty(len(points))  # a's free space at each point's nearest cell
     for start in range(0, len(points), _READ_BLOCK):
         block = slice(start, start + _READ_BLOCK)
-        low = np.floor(grid.coordinates(points[block])).astype(np.int64) + 1  # into highest
+        u = grid.coordinates(points[block])
+        low = np.floor(u).astype(np.int64) + 1  # into highest
         inside = (low[0] >= 0) & (low[1] >= 0)
         inside &= (low[0] < highest.shape[0]) & (low[1] < highest.shape[1])
         index = np.where(inside, low[0] * highest.shape[1] + low[1], 0)
         read[:, block] = (np.take(flat, index, axis=0) * inside[:, None]).T
+        free[block] = grid.nearest_at(rasters_a.free, u)
     matched = _matched_metres(read.reshape(_CHANNELS, len(rows), -1), b, rows[:, 0], scale)
-    through = grid.nearest(rasters_a.free, points).reshape(len(rows), -1) @ b.weight
+    through = free.reshape(len(rows), -1) @ b.weight
     # The bilinear shares sum to 1 and the channel weights are >= 0, up to rounding.
     slack = 1e-9 * (np.abs(matched) + free_space_weight * np.abs(through) + 1.0)
     return np.asarray(matched - free_space_weight * through + slack)
@@ -531,6 +542,10 @@ def _matched_metres(read: FloatArray, b: Drawing, theta: FloatArray, scale: floa
     a 49 m patch, placed 11 m off at P 0.992)."""
     k = np.arange(_CHANNELS)[:, None] * (np.pi / _CHANNELS)
     double = 2.0 * (b.direction[None, :] - k)  # (C, P)
+    if len(theta) > 1 and bool(np.all(theta == theta[0])):
+        # One rotation for every placement (a placement's slides): the weights once, (C, 1,
+        # P), broadcast over the placements (the same numbers, without N copies of them).
+        theta = theta[:1]
     c, s = np.cos(2.0 * theta), np.sin(2.0 * theta)  # (N,)
     weights = (
         1.0

@@ -61,9 +61,7 @@ from multi_robot_mapper.core.merging.global_map import FusionCache, fuse_keyfram
 from multi_robot_mapper.core.merging.joint_graph import Solution, graph_model, solved
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.motion import robot_reaches
-from multi_robot_mapper.core.merging.pair_evidence import (
-    group_conflict,
-)
+from multi_robot_mapper.core.merging.pair_evidence import group_conflict
 from multi_robot_mapper.core.merging.pairwise import Link, MapSignature, PairRecord
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.place_matching import (
