@@ -75,7 +75,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from multi_robot_mapper.core.local_mapping import Keyframe
 from multi_robot_mapper.core.merging import MergeResult
-from multi_robot_mapper.core.merging.occupancy import OccupancyGrid, merge_with_grid
+from multi_robot_mapper.core.merging.occupancy import (
+    OccupancyGrid,
+    merge_keeping_state,
+    merge_with_grid,
+)
 from multi_robot_mapper.io.inputs import InputError, MapLimits, pose_from_checked_msg
 from multi_robot_mapper.io.map_updates import SNAPSHOT, UPDATE
 from multi_robot_mapper.io.messages import piece_of_frame, pose_stamped
@@ -485,11 +489,12 @@ class MapMerger(SavedMapServices, Node):
         self, keyframes: dict[str, list[Keyframe]], config: MapMergerConfig
     ) -> tuple[MergeResult, OccupancyGrid | None]:
         """:func:`merge_with_grid` with the previous result, in the worker process when
-        ``merge_worker`` is on (this thread waits without holding the interpreter lock)."""
+        ``merge_worker`` is on (this thread waits without holding the interpreter lock; the
+        merge's state stays there between merges: :func:`merge_keeping_state`)."""
         job = (keyframes, config.merge, config.grid, self.result, config.method)
         if not config.merge_worker:
             return merge_with_grid(*job)
-        return self._worker.run(merge_with_grid, *job)
+        return self._worker.run_with_state(merge_keeping_state, *job)
 
     def destroy_node(self) -> None:
         if self.config.save_on_shutdown:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -180,3 +181,31 @@ def test_where_the_robots_drove_is_free_even_where_no_laser_looked() -> None:
     assert all(cell_at(with_path, x, y) == FREE for x, y in on_path)
     assert cell_at(with_path, 10.0, 0.5) == FREE and cell_at(with_path, 10.0, 1.0) == OCCUPIED
     assert with_path.height == 22  # the walls and one cell beyond: nothing outside
+
+
+def test_a_merge_worker_keeps_the_state_and_answers_without_it() -> None:
+    # map_merger's worker (merge_keeping_state): the merge's state (60 MB at 800 keyframes)
+    # stays in the worker; the answer carries its serial number, and the next job with that
+    # result gets the state back (nothing changed: no place searched again, the same merge).
+    # A result naming another state (a worker started again) is merged afresh.
+    import pickle
+
+    from test_merge_reuse import CONFIG as MERGE
+    from test_merge_reuse import corridor_maps
+
+    from multi_robot_mapper.core.merging.joint import JointState
+    from multi_robot_mapper.core.merging.occupancy import StateInWorker, merge_keeping_state
+
+    keyframes, grid, kept = corridor_maps(), GridConfig(enabled=False), {}
+    merge = dataclasses.replace(MERGE, update_budget=0.0)  # every place matched: the known answer
+    first, none = merge_keeping_state(kept, keyframes, merge, grid)
+    assert none is None and first.state == StateInWorker(1)
+    assert isinstance(kept["state"], JointState) and first.stats["matches_computed"] > 0
+    assert len(pickle.dumps(first)) < len(pickle.dumps(kept["state"]))
+    again, _ = merge_keeping_state(kept, keyframes, merge, grid, first)
+    assert again.state == StateInWorker(2) and again.stats["matches_computed"] == 0
+    assert again.placements == first.placements
+    stranger = dataclasses.replace(first, state=StateInWorker(7))
+    afresh, _ = merge_keeping_state(kept, keyframes, merge, grid, stranger)
+    assert afresh.stats["matches_computed"] == first.stats["matches_computed"]
+    assert afresh.placements == first.placements
