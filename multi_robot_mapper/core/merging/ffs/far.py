@@ -278,9 +278,10 @@ def centres_and_radii(bodies: Bodies, points: FloatArray) -> tuple[FloatArray, F
 
 def bounded_move(
     poses: FloatArray, step: FloatArray, centres: FloatArray, radii: FloatArray, sigma: float
-) -> FloatArray:
+) -> tuple[FloatArray, FloatArray]:
     """Move ``poses`` in place by ``step`` (x, y, θ about ``centres``), each body at most σ and
-    turned at most σ at its radius of gyration; each body's relocation (m)."""
+    turned at most σ at its radius of gyration; each body's relocation (m) and its centre after
+    the move (the turn about the centre keeps it: only the shift moves it)."""
     shift = step[:, :2].copy()
     length = np.hypot(*shift.T)
     shift *= (np.minimum(length, sigma) / np.maximum(length, 1e-12))[:, None]
@@ -290,7 +291,7 @@ def bounded_move(
     poses[:, 0] = centres[:, 0] + c * arm[:, 0] - s * arm[:, 1] + shift[:, 0]
     poses[:, 1] = centres[:, 1] + s * arm[:, 0] + c * arm[:, 1] + shift[:, 1]
     poses[:, 2] = se2.wrap_angle(poses[:, 2] + turn)
-    return np.asarray(np.hypot(*shift.T) + np.abs(turn) * radii)
+    return np.asarray(np.hypot(*shift.T) + np.abs(turn) * radii), centres + shift
 
 
 def _net_motion(
@@ -360,11 +361,11 @@ def run_ffs_far(
         # Each body on its own while σ is wider than _JOINT_WIDTH (module doc).
         alone = sigma > _JOINT_WIDTH
         step = joint_step(pulls, points, centres, free, alone) * share
-        moved = bounded_move(poses, step, centres, radii, sigma)
+        moved, after = bounded_move(poses, step, centres, radii, sigma)
         relocation = float(moved[free].max()) if free.any() else 0.0
         relocations.append(relocation)
         cooled = sigma <= config.sigma_end
-        track.append((centres_and_radii(level, placed(level, poses)[0])[0], poses[:, 2].copy()))
+        track.append((after, poses[:, 2].copy()))
         if cooled:
             relocation = max(relocation, _net_motion(track, poses, radii, free))
         sigma = max(config.sigma_end, sigma * config.dt_factor)  # Sec. 3.2, geometric
