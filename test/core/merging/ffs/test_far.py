@@ -5,6 +5,8 @@ a body left in a wrong minimum (core/merging/ffs/reseat.py): `test_reseat.py`.""
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,8 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.merging.ffs import FfsConfig, make_bodies
 from multi_robot_mapper.core.merging.ffs.bodies import placed
 from multi_robot_mapper.core.merging.ffs.far import (
+    _SETTLE,
+    _net_motion,
     centres_and_radii,
     coarser,
     joint_step,
@@ -116,6 +120,24 @@ def test_the_papers_distortion_comes_back_from_afar(seed: int) -> None:
     degrees = np.degrees(np.abs(se2.wrap_angle(result.poses[:, 2] - VIEWS[:, 2]))).max()
     assert result.converged and result.iterations == len(result.potentials)
     assert metres <= 0.01 and degrees <= 0.5, (metres, degrees)
+
+
+def test_a_body_creeping_below_the_stop_per_iteration_is_not_settled() -> None:
+    # 0.3 mm per iteration passes the per-iteration stop (0.5 mm), not the net motion over
+    # _SETTLE iterations; a body cycling by 0.3 mm about one place does (far.py's _SETTLE).
+    config = FfsConfig()
+    free = np.array([False, True])
+    radii = np.ones(2)
+    headings = np.zeros(2)
+    creeping = deque(maxlen=_SETTLE + 1)
+    cycling = deque(maxlen=_SETTLE + 1)
+    for k in range(_SETTLE + 1):
+        creeping.append((np.array([[0.0, 0.0], [0.0003 * k, 0.0]]), headings))
+        cycling.append((np.array([[0.0, 0.0], [0.0003 * (k % 2), 0.0]]), headings))
+        if k < _SETTLE:
+            assert _net_motion(creeping, np.zeros((2, 3)), radii, free) == np.inf
+    assert _net_motion(creeping, np.zeros((2, 3)), radii, free) >= config.stop_relocation
+    assert _net_motion(cycling, np.zeros((2, 3)), radii, free) < config.stop_relocation
 
 
 def test_fewer_points_are_pulled_on_a_smaller_budget() -> None:
