@@ -55,3 +55,24 @@ def test_ctrl_c_ends_the_spin_without_interrupting_the_main_thread(monkeypatch) 
     assert time.monotonic() - started < 8.0
     assert interrupted == []
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_a_shutdown_the_other_thread_made_first_is_no_error(monkeypatch) -> None:
+    # Ctrl-C: the signal's thread and the main thread (once the spin ends) both shut the
+    # context down, and rclpy.try_shutdown checks, then shuts down: the second may find it
+    # shut down already (RCLError, a traceback in a fresh-clone `mrm run` test). That is the
+    # shutdown asked for; the same error while the context still runs is raised.
+    import rclpy
+    from rclpy._rclpy_pybind11 import RCLError
+
+    from multi_robot_mapper.ros import entry
+
+    def already_shut(*_: object) -> None:
+        raise RCLError("failed to shutdown: rcl_shutdown already called on the given context")
+
+    monkeypatch.setattr(rclpy, "try_shutdown", already_shut)
+    monkeypatch.setattr(rclpy, "ok", lambda *_: False)
+    entry._try_shutdown()  # no error
+    monkeypatch.setattr(rclpy, "ok", lambda *_: True)
+    with pytest.raises(RCLError):
+        entry._try_shutdown()
