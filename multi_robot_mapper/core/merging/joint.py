@@ -125,21 +125,19 @@ def merge_joint(
     model: LogisticModel | None = None,
 ) -> MergeResult:
     """Merge the robots' keyframe maps (module doc). ``budget``: seconds the update may take
-    (default ``config.update_budget``; 0 or None with a config of 0: every place is matched);
-    place matching gets what the rest of the last update left (:func:`_matching_budget`).
-    ``reference`` (or ``config.reference``) names the robot whose map frame is ``map``; by
-    default the previous update's is kept while it is in the largest group. ``model``: the
-    join model (default the installed one, :func:`~core.evidence.model.installed_model`)."""
+    (default ``config.update_budget``; 0 or None with a config of 0: every place matched, every
+    pair judged): matching, then the verdicts, get what the rest of the last update left
+    (:func:`_matching_budget`, :func:`~core.merging.verdicts.judge_pairs`). ``reference`` (or
+    ``config.reference``) names the robot whose map frame is ``map`` (default: the previous
+    update's while it is in the largest group). ``model``: the join model (default
+    :func:`~core.evidence.model.installed_model`)."""
     config = config if config is not None else MergeConfig()
     started = time.perf_counter()
     robots = sorted(str(r) for r in keyframes)
-    chosen = reference if reference is not None else (config.reference or None)
-    if chosen is not None and chosen not in robots:
-        raise ValueError(f"reference robot {chosen!r} has no map; robots: {', '.join(robots)}")
+    chosen = _chosen_reference(reference if reference is not None else config.reference, robots)
     units = units_of(keyframes)
-    state = (
-        previous.state if previous is not None and isinstance(previous.state, JointState) else None
-    )
+    kept = previous.state if previous is not None else None
+    state = kept if isinstance(kept, JointState) else None
     new_state = _next_state(state)
     budget = config.update_budget if budget is None else budget
     new_state.matches, counts = match_places(
@@ -152,15 +150,7 @@ def merge_joint(
     matched = time.perf_counter()
     model = model if model is not None else installed_model()
     deadline = started + budget - (state.tail_s if state is not None else 0.0) if budget else None
-    verdicts, new_state.judged = judge_pairs(
-        units,
-        new_state.matches,
-        config,
-        model,
-        new_state.targets,
-        state.judged if state is not None else None,
-        deadline,
-    )
+    verdicts = _judged(units, config, model, state, new_state, deadline)
     counts["verdicts_pending"] = new_state.judged.pending
     accepted = _accepted_pairs(units, verdicts, config, model, new_state)
     checked = time.perf_counter()
@@ -185,6 +175,30 @@ def merge_joint(
     _finish_update(result, units, solution, state, new_state, times)
     result.stats.update(counts)
     return result
+
+
+def _chosen_reference(reference: str | None, robots: Sequence[str]) -> str | None:
+    """The reference robot asked for ("" or None: none), which must have a map."""
+    if reference and reference not in robots:
+        raise ValueError(f"reference robot {reference!r} has no map; robots: {', '.join(robots)}")
+    return reference or None
+
+
+def _judged(
+    units: Mapping[UnitKey, MapUnit],
+    config: MergeConfig,
+    model: LogisticModel,
+    state: JointState | None,
+    new_state: JointState,
+    deadline: float | None,
+) -> dict[tuple[UnitKey, UnitKey], PairVerdict]:
+    """Every pair's verdict (:func:`~core.merging.verdicts.judge_pairs`, until ``deadline``),
+    what they leave to the next update kept in ``new_state.judged``."""
+    last = state.judged if state is not None else None
+    verdicts, new_state.judged = judge_pairs(
+        units, new_state.matches, config, model, new_state.targets, last, deadline
+    )
+    return verdicts
 
 
 def _accepted_pairs(
