@@ -58,9 +58,10 @@ class SavedMapServices:
     def autosave(self) -> None:
         """After a merge: save the map (``save_on_shutdown``) when the robots placed changed
         or the last save is :data:`AUTOSAVE_PERIOD` old; a failed save is a warning, the map is
-        kept. An update that left places unmatched may lack placements it is about to make
-        (a robot placed before and not yet matched again): it is saved only when it places
-        every robot the last save did and more, so that a restart never finds fewer."""
+        kept. An update that left work pending (places unmatched, pairs unjudged) may lack
+        placements it is about to make (a robot placed before and not yet matched again): it
+        is saved only when it places every robot the last save did and more, so that a restart
+        never finds fewer."""
         if not self.config.save_on_shutdown:
             return
         placed = _placed(self.result)
@@ -77,13 +78,13 @@ class SavedMapServices:
 
     def save_on_exit(self) -> None:
         """The map saved on shutdown (``save_on_shutdown``), unless the last update left
-        places unmatched and placed fewer robots than the file holds: then the file, of the
-        last save, keeps them for the next start (each robot's map comes back from its latched
-        snapshot)."""
+        work pending (places unmatched, pairs unjudged) and placed fewer robots than the file
+        holds: then the file, of the last save, keeps them for the next start (each robot's map
+        comes back from its latched snapshot)."""
         placed = _placed(self.result)
         if merge_pending(self.result) and not placed >= self._saved_placed:
             self.get_logger().warning(
-                f"map not saved on shutdown: the last update left places unmatched and placed "
+                f"map not saved on shutdown: the last update left work pending and placed "
                 f"{len(placed)} of the {len(self._saved_placed)} robots {self.config.map_file} "
                 "holds; that file is kept"
             )

@@ -11,7 +11,6 @@ Targets and places of the maps seen most recently are cached per map content.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
@@ -99,9 +98,8 @@ def target_of(unit: MapUnit, config: MergeConfig, kept: Targets) -> Target:
 
 
 def content_digest(unit: MapUnit) -> str:
-    """A digest of a map's keyframe poses and segments."""
-    # The segments' digest is the map's own, made once per unit (its signature reads it too).
-    return hashlib.sha1(unit.poses.tobytes() + unit.segment_map.digest.encode()).hexdigest()
+    """A digest of a map's keyframe poses and segments (:attr:`MapUnit.content`)."""
+    return unit.content
 
 
 def places_of_unit(unit: MapUnit, config: MergeConfig, kept: Places) -> list[Place]:

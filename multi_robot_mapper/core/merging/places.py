@@ -62,6 +62,12 @@ class MapUnit:
         """``segments`` as a map, made once per unit: its lines, length and digest."""
         return SegmentMap.of(self.segments)
 
+    @functools.cached_property
+    def content(self) -> str:
+        """A digest of the keyframe poses and segments, made once per unit: what the merge's
+        caches are keyed on (every stage of an update reads it)."""
+        return hashlib.sha1(self.poses.tobytes() + self.segment_map.digest.encode()).hexdigest()
+
     @property
     def length(self) -> float:
         """Total wall length (m)."""
