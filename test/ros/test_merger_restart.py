@@ -86,6 +86,11 @@ class Team:
             "save_on_shutdown": True,
             "load_on_start": True,
             "merge.join_probability": SIMULATED_WORLD_JOIN_PROBABILITY,
+            # Every place matched and every pair judged at each merge: which places of which
+            # map versions a budgeted merge matched depended on the machine's load, and on a
+            # loaded run robot2's join was not found in the time allowed (this test is of the
+            # restart, not of the budget: test_verdicts.py, test_place_matching.py).
+            "merge.update_budget": 0.0,
         }
         self.merger = MapMerger(
             context=self.context,
