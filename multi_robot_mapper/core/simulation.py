@@ -151,7 +151,11 @@ def raycast_fans(
     start = np.clip(first, 0, beams).ravel()
     stop = np.clip(last + 1, 0, beams).ravel()
     ranges = np.full((count, beams), np.inf)
-    seen = stop > start  # ranges_index takes no empty ranges
+    # ranges_index takes no empty ranges; a wall farther than max_range from the laser is hit
+    # by no beam (t >= that distance), so its beams are not solved (a global map's far walls
+    # were most of the pairs; 1e-9 of slack for the rounding of the two distances).
+    within = point_segment_distance(x, y, walls[:, 0], walls[:, 1], walls[:, 2], walls[:, 3])
+    seen = (stop > start) & np.tile(within <= max_range + 1e-9, 2).ravel()
     if not seen.any():
         return ranges
     beam, owner, _ = ranges_index(start[seen], stop[seen])

@@ -18,6 +18,7 @@ viewpoints are moved by its placement ``T_map_robot`` first. Cell ``(row, col)``
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -289,29 +290,57 @@ def _mark_free(
     radius = min(view_range, float(np.max(reach, initial=0.0)))
     if radius <= 0.0 or len(views.poses) == 0:
         return
-    height, width = cells.shape
     # The same disc of cell offsets around every viewpoint, its distances and bearings
-    # computed once: each viewpoint stands at its cell's centre (at most half a cell off).
+    # computed once and sorted by distance: each viewpoint stands at its cell's centre (at
+    # most half a cell off), and a chunk of views tests only the cells nearer than the
+    # farthest wall any of them sees (a room's view needs a room's disc, not a corridor's).
     half = math.ceil(radius / resolution)
     offsets = np.arange(-half, half + 1, dtype=np.int64)
     d_col, d_row = (a.ravel() for a in np.meshgrid(offsets, offsets))
     distance = np.hypot(d_col, d_row) * resolution
-    disc = distance <= radius
-    d_col, d_row, distance = d_col[disc], d_row[disc], distance[disc]
+    nearest_first = np.argsort(distance, kind="stable")
+    nearest_first = nearest_first[distance[nearest_first] <= radius]
+    d_col, d_row, distance = d_col[nearest_first], d_row[nearest_first], distance[nearest_first]
     direction = np.arctan2(d_row, d_col)
-    for start in range(0, len(views.poses), _VIEW_CHUNK):
-        poses = views.poses[start : start + _VIEW_CHUNK]
-        limits = reach[start : start + _VIEW_CHUNK]
-        bearing = se2.wrap_angle(direction[None, :] - poses[:, 2, None])
-        beam = np.rint((bearing - views.angle_min) / views.angle_increment).astype(np.int64)
-        in_field = (beam >= 0) & (beam < limits.shape[1])
-        wall = np.take_along_axis(limits, np.where(in_field, beam, 0), axis=1)
-        view, cell = np.nonzero(in_field & (distance[None, :] < wall))
-        home_col, home_row = _cell_of(poses[:, :2], origin, resolution)
-        column = home_col[view] + d_col[cell]
-        row = home_row[view] + d_row[cell]
-        inside = (column >= 0) & (column < width) & (row >= 0) & (row < height)
-        cells[row[inside], column[inside]] = FREE
+    farthest = np.max(reach, axis=1, initial=0.0)
+    by_reach = np.argsort(farthest, kind="stable")  # views of alike reach share a chunk
+    for start in range(0, len(by_reach), _VIEW_CHUNK):
+        chunk = by_reach[start : start + _VIEW_CHUNK]
+        cells_in_reach = int(np.searchsorted(distance, np.max(farthest[chunk]), side="left"))
+        _mark_chunk(
+            cells,
+            (origin, resolution),
+            views.poses[chunk],
+            reach[chunk],
+            (d_col[:cells_in_reach], d_row[:cells_in_reach], distance[:cells_in_reach]),
+            (direction[:cells_in_reach], views.angle_min, views.angle_increment),
+        )
+
+
+def _mark_chunk(
+    cells: CellArray,
+    frame: tuple[tuple[float, float], float],
+    poses: FloatArray,
+    limits: FloatArray,
+    disc: tuple[NDArray[np.int64], NDArray[np.int64], FloatArray],
+    bearings: tuple[FloatArray, float, float],
+) -> None:
+    """:func:`_mark_free` for a few views (``poses``, their free ``limits`` per bearing) over
+    the ``disc`` of cell offsets and distances around each (``bearings``: each offset's
+    direction, the views' first bearing and step)."""
+    (origin, resolution), (d_col, d_row, distance) = frame, disc
+    direction, angle_min, angle_increment = bearings
+    height, width = cells.shape
+    bearing = se2.wrap_angle(direction[None, :] - poses[:, 2, None])
+    beam = np.rint((bearing - angle_min) / angle_increment).astype(np.int64)
+    in_field = (beam >= 0) & (beam < limits.shape[1])
+    wall = np.take_along_axis(limits, np.where(in_field, beam, 0), axis=1)
+    view, cell = np.nonzero(in_field & (distance[None, :] < wall))
+    home_col, home_row = _cell_of(poses[:, :2], origin, resolution)
+    column = home_col[view] + d_col[cell]
+    row = home_row[view] + d_row[cell]
+    inside = (column >= 0) & (column < width) & (row >= 0) & (row < height)
+    cells[row[inside], column[inside]] = FREE
 
 
 def merge_with_grid(
@@ -329,6 +358,17 @@ def merge_with_grid(
     if not grid.enabled:
         return result, None
     return result, global_grid(result, {}, {}, grid, config)
+
+
+def _shown_digest(result: MergeResult, grid: GridConfig, config: MergeConfig) -> str:
+    """What a merge's :func:`global_grid` is made of (its global map, every merged keyframe's
+    pose, the configs), as a digest."""
+    digest = hashlib.sha1(repr((grid, config)).encode())
+    digest.update(np.ascontiguousarray(result.segments, dtype=np.float64).tobytes())
+    for robot in sorted(result.keyframe_poses):
+        digest.update(robot.encode())
+        digest.update(np.ascontiguousarray(result.keyframe_poses[robot]).tobytes())
+    return digest.hexdigest()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -357,7 +397,15 @@ def merge_keeping_state(
         serial = previous.state.serial
         state = kept.get("state") if kept.get("serial") == serial else None
         previous = dataclasses.replace(previous, state=state)
-    result, occupancy = merge_with_grid(keyframes, config, grid, previous, method)
+    result = merge_method(method)(keyframes, config, previous=previous)
+    occupancy = None
+    if grid.enabled:
+        # An update that moved nothing (places or verdicts still pending, a retry) shows the
+        # same grid: made again it cost 1-2 s at 1000 keyframes (issue 50).
+        shown = _shown_digest(result, grid, config)
+        if kept.get("grid_of") != shown:
+            kept["grid"], kept["grid_of"] = global_grid(result, {}, {}, grid, config), shown
+        occupancy = kept["grid"]
     kept["serial"] = kept.get("serial", 0) + 1
     kept["state"] = result.state
     return dataclasses.replace(result, state=StateInWorker(kept["serial"])), occupancy

@@ -209,3 +209,26 @@ def test_a_merge_worker_keeps_the_state_and_answers_without_it() -> None:
     afresh, _ = merge_keeping_state(kept, keyframes, merge, grid, stranger)
     assert afresh.stats["matches_computed"] == first.stats["matches_computed"]
     assert afresh.placements == first.placements
+
+
+def test_a_merge_worker_makes_the_grid_again_only_when_what_it_shows_changed() -> None:
+    # An update that moved nothing (places or verdicts pending, a retry) answers the grid it
+    # made last (1-2 s at 1000 keyframes); a map that changed gets its own grid, the one
+    # global_grid makes of that merge.
+    from test_merge_reuse import CONFIG as MERGE
+    from test_merge_reuse import corridor_maps
+
+    from multi_robot_mapper.core.merging.occupancy import merge_keeping_state
+
+    keyframes, grid, kept = corridor_maps(), GridConfig(resolution=0.1), {}
+    merge = dataclasses.replace(MERGE, update_budget=0.0)
+    first, first_grid = merge_keeping_state(kept, keyframes, merge, grid)
+    again, again_grid = merge_keeping_state(kept, keyframes, merge, grid, first)
+    assert first_grid is not None and again_grid is first_grid
+    robot = sorted(keyframes)[0]
+    shorter = {**keyframes, robot: list(keyframes[robot])[:-1]}
+    changed, changed_grid = merge_keeping_state(kept, shorter, merge, grid, again)
+    assert changed_grid is not None and changed_grid is not first_grid
+    made = global_grid(dataclasses.replace(changed, state=None), {}, {}, grid, merge)
+    assert np.array_equal(changed_grid.cells, made.cells) and changed_grid.origin == made.origin
+    assert not np.array_equal(changed_grid.cells, first_grid.cells)
