@@ -42,6 +42,7 @@ import cProfile  # noqa: E402
 import dataclasses  # noqa: E402
 import pickle  # noqa: E402
 import time  # noqa: E402
+from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -229,6 +230,7 @@ def live_joint(
     config: MergeConfig,
     every: float,
     profile: str | None = None,
+    grid: bool = False,
 ) -> None:
     """The node's regime on a reference-built cut: the robots drive at once (each run's time
     counted from its own first scan), and every ``every`` seconds the keyframes made so far
@@ -237,8 +239,10 @@ def live_joint(
     and 95th percentiles, largest), the largest part not spent matching, the updates until
     every robot was placed (and stayed so), robots placed at the end, keyframes; then the CPU
     seconds per update (median, p90, p95, max) and each stage's median time. ``profile``: a
-    file for cProfile's statistics of every update (``python -m pstats FILE``)."""
-    from multi_robot_mapper.core.merging.joint import merge_joint
+    file for cProfile's statistics of every update (``python -m pstats FILE``). ``grid``: each
+    update as ``map_merger``'s worker makes it, the global occupancy grid included
+    (:func:`~multi_robot_mapper.core.merging.occupancy.merge_keeping_state`, the default
+    ``grid.*``): its time is the stage "grid"."""
 
     path = carmen_log(name)
     if not path.is_file():
@@ -256,6 +260,7 @@ def live_joint(
     clock = 0.0
     worst, off = 0.0, 0  # the worst placement of any update, the updates placing one > 0.30 m off
     profiler = cProfile.Profile() if profile else None
+    kept: dict[str, Any] | None = {} if grid else None  # the worker's own dict
     while True:
         clock = min(clock + every, stop)
         shown = {
@@ -265,12 +270,13 @@ def live_joint(
         began, cpu = time.perf_counter(), time.process_time()
         if profiler is not None:
             profiler.enable()
-        result = merge_joint({r: f for r, f in shown.items() if f}, config, previous=result)
+        result = _live_update({r: f for r, f in shown.items() if f}, config, result, kept)
         if profiler is not None:
             profiler.disable()
         times.append(time.perf_counter() - began)
         cpus.append(time.process_time() - cpu)
         stages.append([result.timings[f"{stage}_s"] for stage in STAGES])
+        stages[-1].append(times[-1] - result.timings["total_s"])  # the grid, when made
         rest = max(rest, result.timings["total_s"] - result.timings["matching_s"])
         error = worst_placement(result, frames)
         worst, off = max(worst, error), off + (error > 0.30)
@@ -303,6 +309,7 @@ def live_joint(
     )
     assert result is not None
     light = dataclasses.replace(result, state=None)
+    result = result if kept is None else dataclasses.replace(result, state=kept["state"])
     print(
         f"  the last result pickled: {len(pickle.dumps(result, protocol=5)) / 1e6:.1f} MB with "
         f"its state, {len(pickle.dumps(light, protocol=5)) / 1e6:.2f} MB without (what crosses "
@@ -312,12 +319,29 @@ def live_joint(
     median = np.median(np.array(stages), axis=0)
     print(
         "  median per stage (s): "
-        + ", ".join(f"{stage} {m:.3f}" for stage, m in zip(STAGES, median, strict=True)),
+        + ", ".join(f"{stage} {m:.3f}" for stage, m in zip((*STAGES, "grid"), median, strict=True)),
         flush=True,
     )
 
 
 STAGES = ("matching", "consistency", "graph", "fusion")
+
+
+def _live_update(
+    keyframes: dict[str, list[Any]],
+    config: MergeConfig,
+    previous: MergeResult | None,
+    kept: dict[str, Any] | None,
+) -> MergeResult:
+    """One update of :func:`live_joint`: ``merge_joint`` alone, or with ``kept`` (a worker's
+    dict) the merge and its grid as ``map_merger``'s worker makes them."""
+    from multi_robot_mapper.core.merging.joint import merge_joint
+    from multi_robot_mapper.core.merging.occupancy import GridConfig, merge_keeping_state
+
+    if kept is None:
+        return merge_joint(keyframes, config, previous=previous)
+    result, _ = merge_keeping_state(kept, keyframes, config, GridConfig(), previous)
+    return result
 
 
 def overlapping(frames: dict[str, np.ndarray], maps: dict[str, np.ndarray], shared: float) -> int:
@@ -372,6 +396,12 @@ def main() -> None:
     parser.add_argument(
         "--profile", metavar="FILE", help="with --live: cProfile statistics of every update"
     )
+    parser.add_argument(
+        "--grid",
+        action="store_true",
+        help="with --live: each update as map_merger's worker makes it, with the global "
+        "occupancy grid (its time: the stage 'grid')",
+    )
     parser.add_argument("--logs", nargs="*", default=["intel", "aces", "fhw", "csail"])
     parser.add_argument(
         "--no-views",
@@ -385,7 +415,7 @@ def main() -> None:
         for name in args.logs:
             for robots in args.split:
                 if args.joint and args.live:
-                    live_joint(name, robots, args.overlap, base, args.live, args.profile)
+                    live_joint(name, robots, args.overlap, base, args.live, args.profile, args.grid)
                 elif args.joint:
                     split_joint(name, robots, args.overlap, base)
                 else:
