@@ -167,34 +167,40 @@ def wall_pulls(
     """Every point's pull towards each other body's nearest wall in reach (module doc);
     ``points``, ``directions`` placed in ``map``, ``cell`` the points' spacing."""
     # Every point is a wall to pull towards; every stride-th one is pulled (module doc).
-    sources = np.arange(0, len(points), max(1, -(-len(points) // pulled)))
+    stride = max(1, -(-len(points) // pulled))
+    sources = np.arange(0, len(points), stride)
     pairs = cKDTree(points[sources]).sparse_distance_matrix(
         cKDTree(points), cutoff * sigma, output_type="ndarray"
     )
-    i, j = sources[pairs["i"]], pairs["j"].astype(np.int64)
-    cos = np.einsum("ij,ij->i", directions[i], directions[j])
+    # Columns gathered once per pair (x and y apart: no (M, 2) row gathers); a pulled point
+    # is known by its rank among the sources, so the (point, body) keys span sources × bodies.
+    rank, j = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    i = rank * stride
+    px, py, dx, dy = (np.ascontiguousarray(c) for c in (*points.T, *directions.T))
+    dxj, dyj = dx[j], dy[j]
     # Faces (bodies module): walls seen from opposite sides do not pull (Eq. 2's cosine).
-    keep = (bodies.body[i] != bodies.body[j]) & (cos > 0.0)
-    i, j, cos = i[keep], j[keep], cos[keep]
-    gap = points[j] - points[i]
+    keep = (bodies.body[i] != bodies.body[j]) & (dx[i] * dxj + dy[i] * dyj > 0.0)
+    rank, i, j, dxj, dyj = rank[keep], i[keep], j[keep], dxj[keep], dyj[keep]
+    pxj, pyj = px[j], py[j]
+    gx, gy = pxj - px[i], pyj - py[i]
     # The soft nearest of the other body's points: weights over a point spacing, summed per
     # (point, body) key; gaps are < cutoff * sigma < 2 * cutoff * cell, no underflow.
-    near = bodies.masses[j] * np.exp(-np.einsum("ij,ij->i", gap, gap) / (2.0 * cell**2))
-    key = i * bodies.count + bodies.body[j]
-    total = np.bincount(key, near, len(points) * bodies.count)
+    near = bodies.masses[j] * np.exp(-(gx * gx + gy * gy) / (2.0 * cell**2))
+    key = rank * bodies.count + bodies.body[j]
+    total = np.bincount(key, near, len(sources) * bodies.count)
     keys = np.flatnonzero(total > 0.0)
     share = near / total[key]
-    rank = np.zeros(len(total), dtype=np.int64)
-    rank[keys] = np.arange(len(keys))
-    group = rank[key]
-    mean = [np.bincount(group, share * v, len(keys)) for v in (*points[j].T, *directions[j].T)]
+    order = np.zeros(len(total), dtype=np.int64)
+    order[keys] = np.arange(len(keys))
+    group = order[key]
+    mean = [np.bincount(group, share * v, len(keys)) for v in (pxj, pyj, dxj, dyj)]
     foot = np.column_stack(mean[:2]).astype(np.float64)
     tangent = np.column_stack(mean[2:]).astype(np.float64)
     tangent /= np.maximum(np.hypot(*tangent.T), 1e-12)[:, None]
     normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
-    point = keys // bodies.count
-    distance = np.einsum("ij,ij->i", normal, points[point] - foot)
-    face = np.einsum("ij,ij->i", directions[point], tangent)
+    point = (keys // bodies.count) * stride
+    distance = normal[:, 0] * (px[point] - foot[:, 0]) + normal[:, 1] * (py[point] - foot[:, 1])
+    face = dx[point] * tangent[:, 0] + dy[point] * tangent[:, 1]
     weight = bodies.masses[point] * face * np.exp(-(distance**2) / (2.0 * sigma**2))
     return _Pulls(point, bodies.body[point], keys % bodies.count, normal, foot, weight, len(pairs))
 
