@@ -124,11 +124,24 @@ def fan_scores(
     field = _field(points[others], directions[others], level.masses[others], lo, shape)
     cells = np.floor((turned - lo) / _CELL).astype(np.int64)  # (T, P, 2)
     step = round(_SHIFT_STEP / _CELL)
-    dx = np.clip(cells[..., 0][..., None, None] + step * fan.shifts[:, None], 0, shape[0] - 1)
-    dy = np.clip(cells[..., 1][..., None, None] + step * fan.shifts[None, :], 0, shape[1] - 1)
-    values = field[:, dx, dy]  # (4, T, P, S, S)
-    weight = shares.transpose(2, 0, 1) * level.masses[own][None, None, :]
-    return np.asarray(np.einsum("ctpab,ctp->tab", values, weight))
+    # The window holds every shifted cell (reach), so a cell's flat index is exact; a face
+    # has a share in two channels only (max(0, cos) is 0 in the others), so two look-ups per
+    # point and pose, not four.
+    offset = step * (fan.shifts[:, None] * shape[1] + fan.shifts[None, :])  # (S, S)
+    base = (cells[..., 0] * shape[1] + cells[..., 1])[..., None, None] + offset
+    flat = field.reshape(-1)
+    area = shape[0] * shape[1]
+    masses = level.masses[own][None, :]
+    first = np.argmax(shares, axis=2)  # (T, P): the channel nearest the face, then its
+    left, right = (first + 3) % 4, (first + 1) % 4  # neighbour on the face's side
+    pick = np.take_along_axis(shares, np.stack([left, right], axis=2), axis=2)
+    second = np.where(pick[..., 0] > pick[..., 1], left, right)
+    scores = np.zeros((len(fan.turns), len(fan.shifts), len(fan.shifts)))
+    for channel in (first, second):
+        weight = np.take_along_axis(shares, channel[..., None], axis=2)[..., 0] * masses
+        values = flat[(channel * area)[..., None, None] + base]  # (T, P, S, S)
+        scores += np.einsum("tpab,tp->tab", values, weight)
+    return scores
 
 
 def reseat(
