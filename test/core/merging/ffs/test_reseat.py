@@ -8,7 +8,19 @@ from test_far import VIEWS, building_bodies
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.merging.ffs import FfsConfig
-from multi_robot_mapper.core.merging.ffs.reseat import BODY_FAN, reseat, run_ffs_reseated
+from multi_robot_mapper.core.merging.ffs.bodies import placed
+from multi_robot_mapper.core.merging.ffs.far import coarser
+from multi_robot_mapper.core.merging.ffs.reseat import (
+    _CELL,
+    _SHIFT_STEP,
+    _WIDTH,
+    BODY_FAN,
+    _channels,
+    _field,
+    fan_scores,
+    reseat,
+    run_ffs_reseated,
+)
 
 # View 3 turned 25 deg about its sensor and moved 12 cm: further than a narrow field reaches.
 TURNED = VIEWS.copy()
@@ -42,3 +54,34 @@ def test_the_run_with_reseating_brings_the_turned_body_back() -> None:
     degrees = np.degrees(np.abs(se2.wrap_angle(result.poses[:, 2] - VIEWS[:, 2]))).max()
     assert result.iterations == len(result.potentials)
     assert metres <= 0.01 and degrees <= 0.5, (metres, degrees)
+
+
+def test_fan_scores_are_the_four_channel_potential_at_every_pose() -> None:
+    """Two look-ups per point (the channels a face has a share in) give the potential summed
+    over all four channels, the module's definition, at every turn and shift of the fan."""
+    level = coarser(building_bodies(FfsConfig()), _SHIFT_STEP)
+    points, directions = placed(level, TURNED)
+    own = level.body == 3
+    centre = TURNED[3, :2].copy()
+    scores = fan_scores(level, (points, directions), own, centre, BODY_FAN)
+    arm = points[own] - centre
+    cos, sin = np.cos(BODY_FAN.turns), np.sin(BODY_FAN.turns)
+    rotations = [np.array([[c, -s], [s, c]]) for c, s in zip(cos, sin, strict=True)]
+    every = np.vstack([arm @ rotation.T + centre for rotation in rotations])
+    # The same window and cells as fan_scores': the fan's reach about every turned point.
+    reach = 4 * _SHIFT_STEP + 3.0 * _WIDTH
+    lo = every.min(axis=0) - reach
+    size = np.ceil((every.max(axis=0) + reach - lo) / _CELL).astype(int) + 1
+    field = _field(points[~own], directions[~own], level.masses[~own], lo, (size[0], size[1]))
+    expected = np.zeros_like(scores)
+    for t, rotation in enumerate(rotations):
+        turned = arm @ rotation.T + centre
+        shares = _channels(directions[own] @ rotation.T) * level.masses[own][:, None]
+        for a, dx in enumerate(BODY_FAN.shifts):
+            for b, dy in enumerate(BODY_FAN.shifts):
+                cells = np.floor((turned - lo) / _CELL).astype(int) + 3 * np.array([dx, dy])
+                expected[t, a, b] = np.sum(field[:, cells[:, 0], cells[:, 1]].T * shares)
+    assert np.unravel_index(np.argmax(scores), scores.shape) == np.unravel_index(
+        np.argmax(expected), expected.shape
+    )
+    assert np.allclose(scores, expected, rtol=1e-9)
