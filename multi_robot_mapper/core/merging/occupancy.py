@@ -392,7 +392,8 @@ def merge_keeping_state(
     :class:`StateInWorker` in its place. The state (places, targets with their rasters, the
     fusion: 60 MB at 800 keyframes, issue 50) then never crosses the pipe, where it cost a
     pickling each way per update. ``previous`` gets the kept state back when it names it; any
-    other (a map loaded from a file, a worker started again) is merged without one, afresh."""
+    other (a map loaded from a file, a worker started again) is merged without one, afresh.
+    The grid is kept too, and made again only when what it shows changed."""
     if previous is not None and isinstance(previous.state, StateInWorker):
         serial = previous.state.serial
         state = kept.get("state") if kept.get("serial") == serial else None
