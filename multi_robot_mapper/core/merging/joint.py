@@ -70,7 +70,6 @@ from multi_robot_mapper.core.merging.place_matching import (
     Places,
     Targets,
     cached,
-    content_digest,
     match_places,
     target_of,
 )
@@ -214,7 +213,7 @@ def _accepted_pairs(
     groups' maps, their content and placements: ``JointState.conflicts``)."""
     reaches = robot_reaches(units, config.max_speed)
     kept = new_state.targets
-    digests = {key: content_digest(unit) for key, unit in units.items()}
+    digests = {key: unit.content for key, unit in units.items()}
 
     def placed(group: Mapping[UnitKey, FloatArray]) -> tuple[Any, ...]:
         return tuple(sorted((k, digests[k], np.asarray(T).tobytes()) for k, T in group.items()))
@@ -271,7 +270,7 @@ def _finish_update(
     kept in ``result``, with the update's timings (``times``: when it started, matching,
     consistency, the graph and the fusion ended)."""
     started, matched, checked, optimised, finished = times
-    contents = {key: content_digest(unit) for key, unit in units.items()}
+    contents = {key: unit.content for key, unit in units.items()}
     rest, tail = finished - matched, finished - checked
     if state is not None and state.contents == contents:
         # nothing changed: this update says nothing of a changing one

@@ -19,7 +19,7 @@ from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.merging.consistency import Accepted, placement
 from multi_robot_mapper.core.merging.joint_graph_config import JointGraphConfig
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
-from multi_robot_mapper.core.merging.place_matching import cached, content_digest
+from multi_robot_mapper.core.merging.place_matching import cached
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
 from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
 
@@ -53,7 +53,7 @@ def solved(
     where the graph is the same; with what it was solved from. ``intra``: each map's edges
     kept per content, from one update to the next; ``model``: :func:`graph_model`."""
     key = (
-        tuple((k, content_digest(units[k])) for k in sorted(group)),
+        tuple((k, units[k].content) for k in sorted(group)),
         ref_unit,
         tuple(tuple(c.identity() for c in verdict.links) for verdict in accepted.pairs),
         tuple((k, tuple((o, v.pair) for o, v in accepted.tree[k])) for k in sorted(accepted.tree)),

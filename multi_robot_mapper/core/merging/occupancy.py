@@ -349,15 +349,24 @@ def merge_with_grid(
     grid: GridConfig,
     previous: MergeResult | None = None,
     method: str = "pivot",
+    kept: dict[str, Any] | None = None,
 ) -> tuple[MergeResult, OccupancyGrid | None]:
     """One merge update by ``method`` ('pivot': :func:`merge_joint`, within
     ``config.update_budget``; 'ffs': the same, then Force Field Simulation) and, when
     ``grid.enabled``, the :func:`global_grid` of its result: what ``map_merger`` computes in
-    its worker process after each change of a partial map."""
+    its worker process after each change of a partial map. ``kept``: where the last grid and
+    what it showed are kept between updates; an update that moved nothing (places or verdicts
+    still pending, a retry) answers that grid (made again it cost 1-2 s at 1000 keyframes,
+    issue 50)."""
     result = merge_method(method)(keyframes, config, previous=previous)
     if not grid.enabled:
         return result, None
-    return result, global_grid(result, {}, {}, grid, config)
+    if kept is None:
+        return result, global_grid(result, {}, {}, grid, config)
+    shown = _shown_digest(result, grid, config)
+    if kept.get("grid_of") != shown:
+        kept["grid"], kept["grid_of"] = global_grid(result, {}, {}, grid, config), shown
+    return result, kept["grid"]
 
 
 def _shown_digest(result: MergeResult, grid: GridConfig, config: MergeConfig) -> str:
@@ -398,15 +407,7 @@ def merge_keeping_state(
         serial = previous.state.serial
         state = kept.get("state") if kept.get("serial") == serial else None
         previous = dataclasses.replace(previous, state=state)
-    result = merge_method(method)(keyframes, config, previous=previous)
-    occupancy = None
-    if grid.enabled:
-        # An update that moved nothing (places or verdicts still pending, a retry) shows the
-        # same grid: made again it cost 1-2 s at 1000 keyframes (issue 50).
-        shown = _shown_digest(result, grid, config)
-        if kept.get("grid_of") != shown:
-            kept["grid"], kept["grid_of"] = global_grid(result, {}, {}, grid, config), shown
-        occupancy = kept["grid"]
+    result, occupancy = merge_with_grid(keyframes, config, grid, previous, method, kept)
     kept["serial"] = kept.get("serial", 0) + 1
     kept["state"] = result.state
     return dataclasses.replace(result, state=StateInWorker(kept["serial"])), occupancy

@@ -97,15 +97,10 @@ def target_of(unit: MapUnit, config: MergeConfig, kept: Targets) -> Target:
     return cast(Target, cached(kept, key, lambda: Target.of(unit, config, kept.views)))
 
 
-def content_digest(unit: MapUnit) -> str:
-    """A digest of a map's keyframe poses and segments (:attr:`MapUnit.content`)."""
-    return unit.content
-
-
 def places_of_unit(unit: MapUnit, config: MergeConfig, kept: Places) -> list[Place]:
     """``unit``'s places, made once per content (``kept``); of a map that changed, the places
     whose inputs did not change are taken from ``kept.index`` (:func:`places.places_of`)."""
-    key = (unit.key, content_digest(unit), config)
+    key = (unit.key, unit.content, config)
     found = cached(kept, key, lambda: places_of(unit, config, kept.index))
     # The places used most recently: KEPT_PLACES of them, the longest unused dropped first.
     while len(kept.index) > KEPT_PLACES:

@@ -46,7 +46,6 @@ from multi_robot_mapper.core.merging.place_matching import (
     MatchRecord,
     Targets,
     cached,
-    content_digest,
     target_of,
 )
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
@@ -164,7 +163,7 @@ class _Weigher:
         judged: Judged,
     ) -> None:
         self.units, self.config, self.targets, self.judged = units, config, targets, judged
-        self.digests = {key: content_digest(unit) for key, unit in units.items()}
+        self.digests = {key: unit.content for key, unit in units.items()}
 
     def _set_key(self, links: Sequence[LinkCandidate]) -> tuple[Any, ...]:
         members = tuple(
