@@ -95,15 +95,20 @@ _QUARTER_TURN = np.array([[0.0, -1.0], [1.0, 0.0]])
 class PoseGraph:
     """Keyframe poses optimised with gtsam's ISAM2."""
 
-    def __init__(self, robust_scale: float = 1.0, kernel: str = "huber") -> None:
+    def __init__(
+        self, robust_scale: float = 1.0, kernel: str = "huber", relinearize: float = 0.01
+    ) -> None:
         """``kernel`` of the robust edges: ``"huber"`` (convex: a closure correcting metres of
         drift still pulls from where the drift left the keyframes) or ``"dcs"`` (Dynamic
         Covariance Scaling, Agarwal et al. 2013: an edge whose error is far beyond
-        ``robust_scale`` squared Mahalanobis units is scaled down towards nothing)."""
+        ``robust_scale`` squared Mahalanobis units is scaled down towards nothing).
+        ``relinearize``: ISAM2's threshold (m and rad of a keyframe's step) for linearising
+        it again; the estimate's error from the optimum is of its second order."""
         if kernel not in _KERNELS:
             raise ValueError(f"kernel {kernel!r}: choose one of {', '.join(_KERNELS)}")
         self.robust_scale = robust_scale
         self.kernel = kernel
+        self.relinearize = relinearize
         self.edges: dict[int, Edge] = {}  # edge id -> edge
         self.bounds: dict[int, ReachBound] = {}  # edge id -> bound (ids shared with edges)
         self._anchors: dict[int, Pose] = {}  # key -> prior pose (each piece's first keyframe)
@@ -119,10 +124,9 @@ class PoseGraph:
         self._pending_edges: list[int] = []
         self._removed: list[int] = []  # ISAM2 factor indices to remove at the next update
 
-    @staticmethod
-    def _params() -> gtsam.ISAM2Params:
+    def _params(self) -> gtsam.ISAM2Params:
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(0.01)
+        params.setRelinearizeThreshold(self.relinearize)
         params.relinearizeSkip = 1
         return params
 
@@ -225,33 +229,65 @@ class PoseGraph:
     def optimize(self, iterations: int = 1) -> None:
         """Bring the estimate up to date with every node and edge added since the last call
         (ISAM2: one incremental step, plus ``iterations - 1`` relinearising steps)."""
+        self._update_pending()
+        for _ in range(iterations - 1):
+            self._isam.update()
+        self._read_estimate()
+
+    def settle(self, max_steps: int = 20) -> int:
+        """:meth:`optimize`, then relinearising steps until one relinearises no keyframe (every
+        linearisation point within the threshold of the estimate: the estimate is the
+        optimum's, up to that threshold's second-order error) or ``max_steps`` were taken. For
+        a graph kept between merge updates, where an update moves some keyframes by metres
+        (a new closure) and most not at all. Returns the steps taken."""
+        self._update_pending()
+        steps = 1
+        while steps < max_steps and self._isam.update().getVariablesRelinearized() > 0:
+            steps += 1
+        self._read_estimate()
+        return steps
+
+    def _update_pending(self) -> None:
+        """One ISAM2 step with every node and edge added (and edge removed) since the last."""
         result = self._isam.update(self._batch(), self._new_values, self._removed)
         indices = result.getNewFactorsIndices()
         # New factors get their indices in insertion order: the anchors first, then the edges.
         offset = len(self._pending_anchors)
         for position, edge_id in enumerate(self._pending_edges):
             self._factor_index[edge_id] = int(indices[offset + position])
-        for _ in range(iterations - 1):
-            self._isam.update()
         self._new_values = gtsam.Values()
         self._pending_edges, self._pending_anchors, self._removed = [], [], []
+
+    def _read_estimate(self) -> None:
         values = self._isam.calculateEstimate()
         for key in self._estimate:
             pose = values.atPose2(key)
             self._estimate[key] = (float(pose.x()), float(pose.y()), float(pose.theta()))
 
-    def solve(self, max_iterations: int = 50) -> int:
-        """Optimise the whole graph in one batch (Levenberg-Marquardt from the current
-        estimate), for a graph built at once from a rough start rather than grown keyframe by
-        keyframe; the incremental solver restarts from the result. Returns the iterations."""
+    def objective(self) -> float:
+        """The graph's cost at the estimate: half the sum of its edges' squared whitened
+        errors, under their robust kernels, and the anchors' (gtsam's ``error``)."""
+        return float(self._whole_graph().error(self._values()))
+
+    def _whole_graph(self) -> gtsam.NonlinearFactorGraph:
         graph = gtsam.NonlinearFactorGraph()
         for key, pose in self._anchors.items():
             graph.push_back(self._anchor_factor(key, pose))
         for edge_id in (*self.edges, *self.bounds):
             graph.push_back(self._factor_of(edge_id))
-        initial = gtsam.Values()
+        return graph
+
+    def _values(self) -> gtsam.Values:
+        values = gtsam.Values()
         for key, pose in self._estimate.items():
-            initial.insert(key, gtsam.Pose2(*pose))
+            values.insert(key, gtsam.Pose2(*pose))
+        return values
+
+    def solve(self, max_iterations: int = 50) -> int:
+        """Optimise the whole graph in one batch (Levenberg-Marquardt from the current
+        estimate), for a graph built at once from a rough start rather than grown keyframe by
+        keyframe; the incremental solver restarts from the result. Returns the iterations."""
+        graph, initial = self._whole_graph(), self._values()
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(max_iterations)
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)

@@ -59,6 +59,7 @@ from multi_robot_mapper.core.merging.consistency import (
 )
 from multi_robot_mapper.core.merging.global_map import FusionCache, fuse_keyframes
 from multi_robot_mapper.core.merging.joint_graph import Solution, graph_model, solved
+from multi_robot_mapper.core.merging.kept_graph import GraphSlot
 from multi_robot_mapper.core.merging.link_graph import MergeResult
 from multi_robot_mapper.core.merging.motion import robot_reaches
 from multi_robot_mapper.core.merging.pair_evidence import group_conflict
@@ -104,6 +105,8 @@ class JointState:
     solution: tuple[Any, Solution] | None = None
     # Each map's intra-map edges, per content.
     intra: OrderedDict[Any, Any] = dataclasses.field(default_factory=OrderedDict)
+    # The last update's graph, solved, to be brought up to date (ISAM2, kept_graph).
+    graph: GraphSlot = dataclasses.field(default_factory=GraphSlot)
     # Each join of groups' walls in free space, per the groups' maps, content and placements:
     # an update that added a place match elsewhere weighs the same joins again (issue 50:
     # 1.4 s of each such update with 8 robots placed).
@@ -163,6 +166,7 @@ def merge_joint(
         graph_model(config.graph),
         state.solution if state is not None else None,
         new_state.intra,
+        new_state.graph,
     )
     solution = new_state.solution[1]
     optimised = time.perf_counter()
@@ -253,6 +257,7 @@ def _next_state(state: JointState | None) -> JointState:
     if state is not None:
         new_state.targets, new_state.places = state.targets, state.places
         new_state.intra, new_state.conflicts = state.intra, state.conflicts
+        new_state.graph = state.graph
         new_state.fusion = state.fusion
     return new_state
 

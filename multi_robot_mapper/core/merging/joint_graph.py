@@ -2,7 +2,8 @@
 joint`, step 4): every keyframe of those maps a node, edges between a map's keyframes from its
 published poses, every accepted link between maps under the DCS robust kernel; solved in one
 batch (gtsam, :class:`~multi_robot_mapper.core.pose_graph.PoseGraph`) from the maps placed
-rigidly along the accepted pairs."""
+rigidly along the accepted pairs, then kept and brought up to date from one update to the next
+(:mod:`~multi_robot_mapper.core.merging.kept_graph`)."""
 
 from __future__ import annotations
 
@@ -18,10 +19,10 @@ from numpy.typing import NDArray
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.merging.consistency import Accepted, placement
 from multi_robot_mapper.core.merging.joint_graph_config import JointGraphConfig
+from multi_robot_mapper.core.merging.kept_graph import GraphSlot, GraphSpec, KeptGraph, NamedEdge
 from multi_robot_mapper.core.merging.place_links import LinkCandidate
 from multi_robot_mapper.core.merging.place_matching import cached
 from multi_robot_mapper.core.merging.places import MapUnit, UnitKey
-from multi_robot_mapper.core.pose_graph import Edge, PoseGraph
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -48,10 +49,12 @@ def solved(
     model: GraphModel,
     last: tuple[Any, Solution] | None,
     intra: OrderedDict[Any, Any],
+    slot: GraphSlot | None = None,
 ) -> tuple[Any, Solution]:
     """:func:`_solve`, or ``last`` (the last update's solution and what it was solved from)
     where the graph is the same; with what it was solved from. ``intra``: each map's edges
-    kept per content, from one update to the next; ``model``: :func:`graph_model`."""
+    kept per content, from one update to the next; ``model``: :func:`graph_model`; ``slot``:
+    where the graph is kept from one update to the next (None: solved afresh)."""
     key = (
         tuple((k, units[k].content) for k in sorted(group)),
         ref_unit,
@@ -61,7 +64,7 @@ def solved(
     )
     if last is not None and last[0] == key:
         return last
-    return key, _solve(units, group, ref_unit, accepted, model, intra)
+    return key, _solve(units, group, ref_unit, accepted, model, intra, slot)
 
 
 def _solve(
@@ -71,74 +74,101 @@ def _solve(
     accepted: Accepted,
     model: GraphModel,
     intra: OrderedDict[Any, Any],
+    slot: GraphSlot | None,
 ) -> Solution:
-    """The graph of every keyframe of the maps joined to ``ref_unit``, solved (module doc)
-    from the maps placed rigidly along the accepted pairs: never from the previous update's
-    poses, so that the merge is a function of its inputs and matches (a merger started again
-    on the same maps puts every robot in the same place)."""
+    """The graph of every keyframe of the maps joined to ``ref_unit`` (module doc), solved:
+    the last update's graph in ``slot`` brought up to date where it can be
+    (:class:`~multi_robot_mapper.core.merging.kept_graph.KeptGraph`), else from the maps
+    placed rigidly along the accepted pairs. Either reaches the optimum of the same factors
+    (the kept graph to within ISAM2's relinearisation threshold), so that a merger started
+    again on the same maps puts every robot in the same place."""
     if ref_unit is None:
         return Solution({}, {}, [])
     rigid = _rigid_placements(ref_unit, accepted, units, set(group))
     order = list(rigid)
-    offsets: dict[UnitKey, int] = {}
-    total = 0
-    for key in order:
-        offsets[key] = total
-        total += len(units[key].index)
-    graph = PoseGraph(robust_scale=model.link_robust_scale, kernel="dcs")
-    for key in order:
-        unit = units[key]
-        start = [se2.pose_from_matrix(rigid[key] @ se2.matrix_from_pose(*p)) for p in unit.poses]
-        for row, placed in enumerate(start):
-            anchored = key == ref_unit and row == 0
-            x, y, theta = (float(v) for v in placed)
-            graph.add_node(offsets[key] + row, (x, y, theta), anchored=anchored)
-        for edge in _intra_edges(unit, offsets[key], model.edges, intra):
-            graph.add_edge(edge)
-    accepted_links = _add_links(graph, accepted, units, offsets)
-    iterations = graph.solve() if accepted_links else 0
-    estimate = graph.poses()
-    poses = {
-        key: np.array([estimate[offsets[key] + row] for row in range(len(units[key].index))])
-        for key in order
-    }
+    spec, links = _spec(units, order, rigid, accepted, model, intra)
+    estimate, iterations = spec.start, 0
+    if links:
+        kept = _brought_up_to_date(slot.kept if slot is not None else None, spec)
+        if slot is not None:
+            slot.kept = kept
+        estimate, iterations = kept.poses(spec.nodes), kept.iterations
+    bounds = np.cumsum([0] + [len(units[key].index) for key in order])
+    poses = {key: estimate[bounds[i] : bounds[i + 1]] for i, key in enumerate(order)}
     frames = {key: se2.rigid_fit(units[key].poses, poses[key]) for key in order}
     # ``map`` is the reference map's frame exactly: its fitted frame is the identity.
     T_fix = se2.invert(frames[ref_unit])
+    fix = np.array(se2.pose_from_matrix(T_fix))
     for key in order:
         frames[key] = np.eye(3) if key == ref_unit else T_fix @ frames[key]
-        poses[key] = np.array(
-            [se2.pose_from_matrix(T_fix @ se2.matrix_from_pose(*p)) for p in poses[key]]
-        )
-    return Solution(poses, frames, order, accepted_links, total, len(graph.edges), iterations)
+        poses[key] = se2.compose_each(np.broadcast_to(fix, poses[key].shape), poses[key])
+    return Solution(poses, frames, order, links, len(spec.nodes), len(spec.edges), iterations)
 
 
-def _add_links(
-    graph: PoseGraph,
-    accepted: Accepted,
+def _brought_up_to_date(kept: KeptGraph | None, spec: GraphSpec) -> KeptGraph:
+    """``kept`` brought up to ``spec`` where it carries it, else ``spec``'s graph solved from
+    its rigid start (also where gtsam fails on the increment: an update half taken leaves
+    the kept graph unusable, never the merge)."""
+    if kept is not None and kept.carries(spec):
+        try:
+            kept.update(spec)
+            return kept
+        except RuntimeError:  # gtsam's (an indeterminate system, a missing key)
+            pass
+    return KeptGraph(spec)
+
+
+def _spec(
     units: Mapping[UnitKey, MapUnit],
-    offsets: Mapping[UnitKey, int],
-) -> list[LinkCandidate]:
-    """Every accepted link between two maps in the graph (``offsets``: each map's first
-    node) added to it as a robust edge; the links added."""
-    accepted_links: list[LinkCandidate] = []
-    placed_units = set(offsets)
-    for verdict in accepted.pairs:
-        for candidate in verdict.links:
-            if candidate.source not in placed_units or candidate.target not in placed_units:
-                continue
-            target, source = units[candidate.target], units[candidate.source]
-            graph.add_edge(
-                Edge(
-                    offsets[candidate.target] + target.row(candidate.keyframe),
-                    offsets[candidate.source] + source.row(candidate.centre),
-                    candidate.T_keyframe_centre,
-                    candidate.information,
-                    robust=True,
-                )
+    order: list[UnitKey],
+    rigid: Mapping[UnitKey, FloatArray],
+    accepted: Accepted,
+    model: GraphModel,
+    intra: OrderedDict[Any, Any],
+) -> tuple[GraphSpec, list[LinkCandidate]]:
+    """The graph of the maps ``order`` (the reference first, its first keyframe anchored),
+    placed rigidly (``rigid``), with their edges and the accepted links between them; the
+    links."""
+    nodes = [(key, int(index)) for key in order for index in units[key].index]
+    published = np.vstack([units[key].poses for key in order]).reshape(-1, 3)
+    start = np.vstack(
+        [
+            se2.compose_each(
+                np.broadcast_to(se2.pose_from_matrix(rigid[key]), units[key].poses.shape),
+                units[key].poses,
             )
-            accepted_links.append(candidate)
-    return accepted_links
+            for key in order
+        ]
+    ).reshape(-1, 3)
+    edges = [edge for key in order for edge in _intra_edges(units[key], model.edges, intra)]
+    links = _links(accepted, units, set(order))
+    edges += [_link_edge(candidate, units) for candidate in links]
+    spec = GraphSpec(nodes, start, published, nodes[0], edges, model.link_robust_scale)
+    return spec, links
+
+
+def _links(
+    accepted: Accepted, units: Mapping[UnitKey, MapUnit], placed: set[UnitKey]
+) -> list[LinkCandidate]:
+    """Every accepted link between two maps of ``placed``."""
+    return [
+        candidate
+        for verdict in accepted.pairs
+        for candidate in verdict.links
+        if candidate.source in placed and candidate.target in placed
+    ]
+
+
+def _link_edge(candidate: LinkCandidate, units: Mapping[UnitKey, MapUnit]) -> NamedEdge:
+    """A link between two maps as a robust edge from its keyframe to its place's centre."""
+    x, y, theta = (float(v) for v in candidate.T_keyframe_centre)
+    return NamedEdge(
+        (candidate.target, int(candidate.keyframe)),
+        (candidate.source, int(candidate.centre)),
+        (x, y, theta),
+        candidate.information,
+        robust=True,
+    )
 
 
 def _rigid_placements(
@@ -193,21 +223,23 @@ def graph_model(graph: JointGraphConfig) -> GraphModel:
     return GraphModel(graph.link_robust_scale, edges)
 
 
-def _intra_edges(
-    unit: MapUnit, offset: int, model: _EdgeModel, kept: OrderedDict[Any, Any]
-) -> list[Edge]:
+def _intra_edges(unit: MapUnit, model: _EdgeModel, kept: OrderedDict[Any, Any]) -> list[NamedEdge]:
     """The edges between keyframes of one map (:func:`_intra_pairs`), from their published
     poses, with a standard deviation growing with the distance between them (``model``); the
     same map seen again (most maps, most updates) reuses them."""
     content = hashlib.sha1(unit.poses.tobytes()).hexdigest()
     key = (unit.key, content, model)
-    pairs, relative, information = cast(
-        tuple[IntArray, FloatArray, FloatArray],
-        cached(kept, key, lambda: _intra_arrays(unit, model)),
-    )
+    return cast(list[NamedEdge], cached(kept, key, lambda: _intra_named(unit, model)))
+
+
+def _intra_named(unit: MapUnit, model: _EdgeModel) -> list[NamedEdge]:
+    pairs, relative, information = _intra_arrays(unit, model)
+    index = unit.index.tolist()
     return [
-        Edge(offset + int(a), offset + int(b), (x, y, t), info, robust=False)
-        for (a, b), (x, y, t), info in zip(pairs, relative.tolist(), information, strict=True)
+        NamedEdge((unit.key, index[a]), (unit.key, index[b]), (x, y, t), info, robust=False)
+        for (a, b), (x, y, t), info in zip(
+            pairs.tolist(), relative.tolist(), information, strict=True
+        )
     ]
 
 
