@@ -60,6 +60,7 @@ from multi_robot_mapper.core.merging.ffs import (  # noqa: E402
     make_bodies,
     run_ffs,
 )
+from multi_robot_mapper.core.merging.ffs.escape import run_ffs_escaped  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.far import run_ffs_far, start_width  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.method import (  # noqa: E402
     body_chunks,
@@ -140,6 +141,11 @@ def main() -> None:
         action="store_true",
         help="FFS from afar alone, without re-seating the bodies left in a wrong minimum",
     )
+    parser.add_argument(
+        "--no-escape",
+        action="store_true",
+        help="re-seating without the weak groups' escape pass (run_ffs_reseated, main's e86cff3)",
+    )
     parser.add_argument("--figure", default=str(FIGURES / "ffs_reconvergence.png"))
     args = parser.parse_args()
     if not carmen_log(args.log).is_file():
@@ -172,7 +178,15 @@ def reconvergence(
     bodies = make_bodies(sets, config.spacing, config.roi_radius, config.roi_mass)
     fixed = np.zeros(len(sets), dtype=bool)
     fixed[0] = True
-    simulate = run_ffs if args.published else run_ffs_far if args.no_reseat else run_ffs_reseated
+    simulate = (
+        run_ffs
+        if args.published
+        else run_ffs_far
+        if args.no_reseat
+        else run_ffs_reseated
+        if args.no_escape
+        else run_ffs_escaped
+    )
     if not args.published and "sigma_start" not in args.set_names:
         # The distortion's width, never narrower than the config's start (0.10 m, the paper's
         # 15 cm): from +-2 cm / +-1 deg a field starting at 4 cm left intel 4/10, from 0.10 m 10/10.

@@ -29,6 +29,7 @@ import numpy as np  # noqa: E402
 from bench.ffs_bench import distorted, keyframe_scans  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.merging.ffs import FfsConfig, make_bodies  # noqa: E402
+from multi_robot_mapper.core.merging.ffs.escape import run_ffs_escaped  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.far import run_ffs_far, start_width  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.reseat import run_ffs_reseated  # noqa: E402
 
@@ -52,6 +53,7 @@ def main() -> None:
     parser.add_argument("--seeds", default="0", help="comma-separated seeds; '': R0 only")
     parser.add_argument("--distortion", default="0.30,20", help="METRES,DEGREES (uniform +-)")
     parser.add_argument("--no-reseat", action="store_true", help="FFS from afar alone")
+    parser.add_argument("--no-escape", action="store_true", help="without the escape pass")
     args = parser.parse_args()
     shift, turn = (float(v) for v in args.distortion.split(","))
     sets, reference, _ = keyframe_scans(args.log, 60)
@@ -61,7 +63,9 @@ def main() -> None:
     config = dataclasses.replace(config, sigma_start=max(width, config.sigma_start))
     fixed = np.zeros(len(sets), dtype=bool)
     fixed[0] = True
-    simulate = run_ffs_far if args.no_reseat else run_ffs_reseated
+    simulate = (
+        run_ffs_far if args.no_reseat else run_ffs_reseated if args.no_escape else run_ffs_escaped
+    )
     cpu = time.process_time()
     r0 = simulate(bodies, reference, config, fixed=fixed)
     print(f"R0: {r0.iterations} iterations, {_ms(cpu, r0.iterations)} CPU ms per iteration")
