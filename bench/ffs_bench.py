@@ -11,7 +11,8 @@ the frame). FFS is :func:`run_ffs_far` (issue 51: a field as wide as the distort
 width ``start_width(T, R, bodies)``, about 0.55 m at the paper's distortion, at least the
 config's 0.10 m, cooled to 4 cm),
 R0 and every seed alike, followed by re-seating the bodies left in a wrong minimum
-(:func:`run_ffs_reseated`; ``--no-reseat``: the far run alone, the figures of 7092657);
+(:func:`run_ffs_reseated`; ``--no-reseat``: the far run alone, the figures of 7092657) and the
+weak groups' escape pass (:func:`run_ffs_escaped`; ``--no-escape``: without it, e86cff3's);
 ``--r0-sigma S`` starts R0's run at S instead of the seeds' width; ``--published`` runs the
 published step the merger uses (:func:`run_ffs`, σ from 0.10 m) instead, the figures before
 issue 51. Then every other body is moved by uniform +-0.30 m and +-20 deg (``--distortion

@@ -7,7 +7,8 @@ reference poses.
         [--no-reseat]
 
 The same problem as ``bench.ffs_bench`` (the log's first 60 keyframes, the first body fixed, σ
-from ``start_width``, :func:`run_ffs_reseated` or with ``--no-reseat`` :func:`run_ffs_far`),
+from ``start_width``, :func:`run_ffs_escaped`, with ``--no-escape`` :func:`run_ffs_reseated`, with
+``--no-reseat`` :func:`run_ffs_far`),
 the same seeds; where ``bench.ffs_bench`` prints how far the worst body is, this prints every
 body that is off, so that a slide along a corridor (offsets along one axis) or a run of bodies
 (consecutive indices) shows. Prints CPU ms per iteration too.
