@@ -46,6 +46,7 @@ from multi_robot_mapper.core.merging.ffs.reseat import (
     Fan,
     fan_scores,
     run_ffs_reseated,
+    seated,
 )
 from multi_robot_mapper.core.merging.ffs.simulation import FfsResult
 
@@ -133,21 +134,6 @@ def fan_peaks(
         shift = _SHIFT_STEP * ESCAPE_FAN.shifts[[a, b]]
         out.append((float(ESCAPE_FAN.turns[t]), float(shift[0]), float(shift[1])))
     return out
-
-
-def seated(
-    poses: FloatArray, unit: IntArray, about: int, peak: tuple[float, float, float]
-) -> FloatArray:
-    """``poses`` with ``unit``'s bodies turned rigidly about ``about``'s sensor and shifted as
-    ``peak`` says."""
-    moved = np.array(poses, dtype=np.float64)
-    turn, dx, dy = peak
-    c, s = np.cos(turn), np.sin(turn)
-    arm = poses[unit, :2] - poses[about, :2]
-    moved[unit, 0] = poses[about, 0] + c * arm[:, 0] - s * arm[:, 1] + dx
-    moved[unit, 1] = poses[about, 1] + s * arm[:, 0] + c * arm[:, 1] + dy
-    moved[unit, 2] += turn
-    return moved
 
 
 def units(group: IntArray, measured: Depth) -> list[IntArray]:

@@ -165,14 +165,25 @@ def reseat(
         t, a, b = np.unravel_index(int(np.argmax(scores)), scores.shape)
         if scores[t, a, b] <= (1.0 + _GAIN) * scores[middle]:
             continue
-        c, s = np.cos(fan.turns[t]), np.sin(fan.turns[t])
-        arm = moved[members, :2] - centre
         shift = _SHIFT_STEP * np.array([fan.shifts[a], fan.shifts[b]], dtype=np.float64)
-        moved[members, 0] = centre[0] + c * arm[:, 0] - s * arm[:, 1] + shift[0]
-        moved[members, 1] = centre[1] + s * arm[:, 0] + c * arm[:, 1] + shift[1]
-        moved[members, 2] += fan.turns[t]
+        moved = seated(moved, members, first, (fan.turns[t], shift[0], shift[1]))
         count += 1
     return moved, count
+
+
+def seated(
+    poses: FloatArray, unit: IntArray, about: int, peak: tuple[float, float, float]
+) -> FloatArray:
+    """``poses`` with ``unit``'s bodies turned rigidly about ``about``'s sensor and shifted as
+    ``peak`` (turn (rad), shift x, shift y (m)) says: a pose of a fan."""
+    moved = np.array(poses, dtype=np.float64)
+    turn, dx, dy = peak
+    c, s = np.cos(turn), np.sin(turn)
+    arm = poses[unit, :2] - poses[about, :2]
+    moved[unit, 0] = poses[about, 0] + c * arm[:, 0] - s * arm[:, 1] + dx
+    moved[unit, 1] = poses[about, 1] + s * arm[:, 0] + c * arm[:, 1] + dy
+    moved[unit, 2] += turn
+    return moved
 
 
 def run_ffs_reseated(

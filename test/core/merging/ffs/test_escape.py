@@ -10,8 +10,8 @@ from test_far import VIEWS, building_bodies
 
 from multi_robot_mapper.core import se2
 from multi_robot_mapper.core.merging.ffs import FfsConfig
-from multi_robot_mapper.core.merging.ffs.escape import depth, run_ffs_escaped, seated, weak_groups
-from multi_robot_mapper.core.merging.ffs.reseat import run_ffs_reseated
+from multi_robot_mapper.core.merging.ffs.escape import depth, run_ffs_escaped, weak_groups
+from multi_robot_mapper.core.merging.ffs.reseat import run_ffs_reseated, seated
 
 CONFIG = FfsConfig(sigma_start=0.15, time_budget=0.0, max_iterations=300)
 FIXED = np.arange(len(VIEWS)) == 0
