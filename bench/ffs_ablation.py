@@ -5,7 +5,8 @@ moves the joint graph's placement, and where the field's own minimum lies.
         [--variant "chain_stiffness=0" --variant "chain_stiffness=0.3 sigma_start=0.1" ...]
         [--from-reference] [--work bench_output/ffs_ablation] [--fresh]
 
-Each case ``LOG_K`` is the log cut into K robots (``mrm import-carmen``, the bag cached under
+Each case ``LOG_K`` is the log cut into K robots (``mrm import-carmen``; ``bag_NAME_K``: the shared
+dense bag NAME, every scan, cut by ``mrm import-bag``; the bag cached under
 ``WORK/bags`` as ``bench/merge_table.py`` does), mapped by the local mapper and merged by the
 joint graph once, both with the default configs (cached as ``WORK/CASE.pkl``; ``--fresh``
 rebuilds it, as it must after a change to local mapping or merging). Then, for every
@@ -38,7 +39,14 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from bench.harness import CARMEN, OUTPUT, carmen_log, imported_bag  # noqa: E402
+from bench.harness import (  # noqa: E402
+    BAGS,
+    CARMEN,
+    OUTPUT,
+    carmen_log,
+    imported_bag,
+    imported_dense_bag,
+)
 from multi_robot_mapper.core import se2  # noqa: E402
 from multi_robot_mapper.core.extraction_config import ExtractionConfig  # noqa: E402
 from multi_robot_mapper.core.merging import MergeConfig, MergeResult  # noqa: E402
@@ -60,7 +68,10 @@ def prepared(case: str, work: Path, fresh: bool) -> tuple[OfflineMap, MergeResul
     from multi_robot_mapper.io.bags import read_recordings, reference_poses
 
     log, robots = case.rsplit("_", 1)
-    bag = imported_bag(log, int(robots), work / "bags" / case)
+    if log.startswith("bag_"):  # a shared dense bag, every scan
+        bag = imported_dense_bag(log.removeprefix("bag_"), int(robots), work / "bags" / case)
+    else:
+        bag = imported_bag(log, int(robots), work / "bags" / case)
     inputs: dict[str, list[TimedLaserScan]] = {}
     references: References = {}
     for name, recording in read_recordings(bag).items():
@@ -127,6 +138,13 @@ def at_reference(joint: MergeResult, local: OfflineMap, references: References) 
     return with_keyframes_moved(joint, robots, owners, start_poses, placed)
 
 
+def _present(log: str) -> bool:
+    """Is the case's log there: a CARMEN log, or ``bag_NAME`` a shared dense bag?"""
+    if log.startswith("bag_"):
+        return (BAGS / f"{log.removeprefix('bag_')}.bag").is_file()
+    return carmen_log(log).exists()
+
+
 def variant_config(text: str) -> MergeConfig:
     """MergeConfig with the FFS overrides ``NAME=VALUE ...`` (time_budget 0 unless given)."""
     config = MergeConfig()
@@ -148,23 +166,28 @@ def main() -> int:
     variants = args.variant or [""]
     args.work.mkdir(parents=True, exist_ok=True)
     start = "reference" if args.from_reference else "joint graph"
-    print(f"| case | FFS variant | ATE all at the {start} (m) | after FFS (m) | iterations | s |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    print(
+        f"| case | merged | FFS variant | ATE all at the {start} (m) | after FFS (m) | "
+        "iterations | s |"
+    )
+    print("| --- | --- | --- | --- | --- | --- | --- |")
     for case in args.cases:
-        if not carmen_log(case.rsplit("_", 1)[0]).exists():
-            print(f"{case}: its log is not in {CARMEN}; skipped", file=sys.stderr)
+        if not _present(case.rsplit("_", 1)[0]):
+            print(f"{case}: its log is not in {CARMEN} nor {BAGS}; skipped", file=sys.stderr)
             continue
         local, joint, references = prepared(case, args.work, args.fresh)
         if args.from_reference:
             joint = at_reference(joint, local, references)
         before = ate_all(joint, local, references)
+        merged = sum(len(joint.keyframe_index.get(robot, ())) > 0 for robot in local.robots)
         for text in variants:
             started = time.perf_counter()
             refined = refine_with_ffs(joint, variant_config(text))
             seconds = time.perf_counter() - started
             after = ate_all(refined, local, references)
             print(
-                f"| {case} | {text or 'defaults'} | {before:.4f} | {after:.4f} | "
+                f"| {case} | {merged}/{len(local.robots)} | {text or 'defaults'} | {before:.4f} | "
+                f"{after:.4f} | "
                 f"{refined.stats['ffs_iterations']} | {seconds:.1f} |",
                 flush=True,
             )
