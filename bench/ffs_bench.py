@@ -64,6 +64,7 @@ from multi_robot_mapper.core.merging.ffs import (  # noqa: E402
     make_bodies,
     run_ffs,
 )
+from multi_robot_mapper.core.merging.ffs.bodies import Bodies  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.escape import depth, run_ffs_escaped  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.far import run_ffs_far, start_width  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.method import (  # noqa: E402
@@ -173,6 +174,23 @@ def main() -> None:
     reconvergence(args, sets, reference, raw, config)
 
 
+def experiment_bodies(sets: list[np.ndarray], config: FfsConfig) -> tuple[Bodies, np.ndarray]:
+    """The experiment's bodies (each keyframe's segments, resampled) and which are fixed: the
+    first, which holds the frame."""
+    bodies = make_bodies(sets, config.spacing, config.roi_radius, config.roi_mass)
+    fixed = np.zeros(len(sets), dtype=bool)
+    fixed[0] = True
+    return bodies, fixed
+
+
+def widened(config: FfsConfig, bodies: Bodies, shift: float, turn: float) -> FfsConfig:
+    """``config`` starting at the width of a distortion of +-``shift`` m and +-``turn`` degrees,
+    never narrower than its own start (0.10 m, the paper's 15 cm): from +-2 cm / +-1 deg a field
+    starting at 4 cm left intel 4/10, from 0.10 m 10/10."""
+    width = start_width(shift, np.radians(turn), bodies)
+    return dataclasses.replace(config, sigma_start=max(width, config.sigma_start))
+
+
 def reconvergence(
     args: argparse.Namespace,
     sets: list[np.ndarray],
@@ -182,9 +200,7 @@ def reconvergence(
 ) -> None:
     """R0 from the ``reference`` poses, then FFS from each seed's distortion of it (module doc)."""
     shift, turn = (float(v) for v in args.distortion.split(","))
-    bodies = make_bodies(sets, config.spacing, config.roi_radius, config.roi_mass)
-    fixed = np.zeros(len(sets), dtype=bool)
-    fixed[0] = True
+    bodies, fixed = experiment_bodies(sets, config)
     simulate = (
         run_ffs
         if args.published
@@ -195,10 +211,7 @@ def reconvergence(
         else run_ffs_escaped
     )
     if not args.published and "sigma_start" not in args.set_names:
-        # The distortion's width, never narrower than the config's start (0.10 m, the paper's
-        # 15 cm): from +-2 cm / +-1 deg a field starting at 4 cm left intel 4/10, from 0.10 m 10/10.
-        width = start_width(shift, np.radians(turn), bodies)
-        config = dataclasses.replace(config, sigma_start=max(width, config.sigma_start))
+        config = widened(config, bodies, shift, turn)
     r0_config = config
     if args.r0_sigma > 0.0:
         r0_config = dataclasses.replace(config, sigma_start=args.r0_sigma)

@@ -22,16 +22,15 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
-import dataclasses  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from bench.ffs_bench import distorted, keyframe_scans  # noqa: E402
+from bench.ffs_bench import distorted, experiment_bodies, keyframe_scans, widened  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.merging.ffs import FfsConfig, make_bodies  # noqa: E402
+from multi_robot_mapper.core.merging.ffs import FfsConfig  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.escape import run_ffs_escaped  # noqa: E402
-from multi_robot_mapper.core.merging.ffs.far import run_ffs_far, start_width  # noqa: E402
+from multi_robot_mapper.core.merging.ffs.far import run_ffs_far  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.reseat import run_ffs_reseated  # noqa: E402
 
 
@@ -59,11 +58,8 @@ def main() -> None:
     shift, turn = (float(v) for v in args.distortion.split(","))
     sets, reference, _ = keyframe_scans(args.log, 60)
     config = FfsConfig(time_budget=0.0, max_iterations=1000)
-    bodies = make_bodies(sets, config.spacing, config.roi_radius, config.roi_mass)
-    width = start_width(shift, np.radians(turn), bodies)
-    config = dataclasses.replace(config, sigma_start=max(width, config.sigma_start))
-    fixed = np.zeros(len(sets), dtype=bool)
-    fixed[0] = True
+    bodies, fixed = experiment_bodies(sets, config)
+    config = widened(config, bodies, shift, turn)
     simulate = (
         run_ffs_far if args.no_reseat else run_ffs_reseated if args.no_escape else run_ffs_escaped
     )

@@ -20,16 +20,14 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
-import dataclasses  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from bench.ffs_bench import distorted, keyframe_scans  # noqa: E402
+from bench.ffs_bench import distorted, experiment_bodies, keyframe_scans, widened  # noqa: E402
 from multi_robot_mapper.core import se2  # noqa: E402
-from multi_robot_mapper.core.merging.ffs import FfsConfig, make_bodies  # noqa: E402
+from multi_robot_mapper.core.merging.ffs import FfsConfig  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.bodies import Bodies, placed  # noqa: E402
 from multi_robot_mapper.core.merging.ffs.escape import depth, run_ffs_escaped  # noqa: E402
-from multi_robot_mapper.core.merging.ffs.far import start_width  # noqa: E402
 
 _MARGIN = 0.20  # m nearer than the keyframe's own wall: past a wall's thickness and noise
 _NEAR = 0.30  # m: the robot's own body
@@ -65,11 +63,8 @@ def main() -> None:
     args = parser.parse_args()
     config = FfsConfig(time_budget=0.0, max_iterations=1000)
     sets, reference, _ = keyframe_scans(args.log, 60)
-    bodies = make_bodies(sets, config.spacing, config.roi_radius, config.roi_mass)
-    fixed = np.zeros(len(sets), dtype=bool)
-    fixed[0] = True
-    width = start_width(0.30, np.radians(20.0), bodies)
-    config = dataclasses.replace(config, sigma_start=max(width, config.sigma_start))
+    bodies, fixed = experiment_bodies(sets, config)
+    config = widened(config, bodies, 0.30, 20.0)
     r0 = run_ffs_escaped(bodies, reference, config, fixed=fixed).poses
     r0_depth = depth(bodies, r0, config).total
     print(f"| {args.log} | map | Eq. 5 against R0's | points seen through |")
